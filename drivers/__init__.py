@@ -1,0 +1,1 @@
+"""Device drivers: one sub-package per device family, protocol codecs kept apart from transports."""

@@ -1,0 +1,1 @@
+"""Plate exciter drivers: one interface, Modbus and CAN back ends."""

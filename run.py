@@ -1,0 +1,60 @@
+"""Set-up and entry point for a fresh machine that has only Python.
+
+    python3 run.py demo    # simulate a sweep on the embedded default bench, identify the damper curve
+    python3 run.py test    # run the whole test suite (what CI runs)
+
+Both create (or reuse) a virtual environment in .venv and install the project from pyproject.toml into it,
+so nothing but a Python >= 3.11 interpreter is needed beforehand. Any further arguments are passed on
+(`python3 run.py test -k compoway`, `python3 run.py demo --seed 3`).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import subprocess
+import sys
+import venv
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent
+VENV = ROOT / ".venv"
+BIN = VENV / ("Scripts" if os.name == "nt" else "bin")
+STAMP = VENV / ".installed-from"
+
+
+def _python() -> Path:
+    return BIN / ("python.exe" if os.name == "nt" else "python")
+
+
+def ensure_environment() -> None:
+    """Create .venv and install the project with its test extras, again only when pyproject.toml changed."""
+    if sys.version_info < (3, 11):
+        sys.exit(f"shockbench needs Python >= 3.11, this is {sys.version.split()[0]}")
+    digest = hashlib.sha256((ROOT / "pyproject.toml").read_bytes()).hexdigest()
+    if _python().exists() and STAMP.exists() and STAMP.read_text() == digest:
+        return
+    if not _python().exists():
+        print("creating virtual environment in .venv", flush=True)
+        venv.EnvBuilder(with_pip=True).create(VENV)
+    print("installing shockbench and its dependencies into .venv", flush=True)
+    subprocess.run([str(_python()), "-m", "pip", "install", "-q", "--upgrade", "pip"], check=True)
+    subprocess.run([str(_python()), "-m", "pip", "install", "-q", "-e", f"{ROOT}[test]"], check=True)
+    STAMP.write_text(digest)
+
+
+def main(argv: list[str]) -> int:
+    if not argv or argv[0] not in {"demo", "test"}:
+        print(__doc__)
+        return 2
+    ensure_environment()
+    command, rest = argv[0], argv[1:]
+    if command == "demo":
+        cmd = [str(BIN / "shockbench"), "demo", *rest]
+    else:
+        cmd = [str(_python()), "-m", "pytest", *rest]
+    return subprocess.run(cmd, cwd=ROOT).returncode
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
