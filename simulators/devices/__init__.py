@@ -1,0 +1,1 @@
+"""Simulated devices speaking their real protocols on real transports (ptys, TCP sockets)."""

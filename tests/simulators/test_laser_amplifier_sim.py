@@ -1,0 +1,386 @@
+"""The ZX-L driver against the simulated amplifier over a real pty and real TCP: readings follow the bench
+physics in simulated time, every injected fault gives its typed error and the next read recovers.
+
+Most tests share one server and driver per transport (module scope): pyserial's socket:// close() sleeps
+0.3 s by design, so opening a fresh TCP driver per test would dominate the run time.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+
+from drivers.compowayf import errors
+from drivers.compowayf.amplifier import AmplifierConfig, MeasuredArea, MeasuredValueConfig, ZxlAmplifier
+from drivers.compowayf.codec import build_command, parse_response
+from drivers.compowayf.transport import CompowayFPort, LinkSettings
+from drivers.exciter.sweep import SweepSettings
+from simulators.devices.laser_amplifier import (
+    AmplifierLine,
+    FaultKind,
+    PtyAmplifierServer,
+    SimulatedAmplifier,
+    TcpAmplifierServer,
+)
+from simulators.devices.sensor_heads import ZX_LD40, ZX_LD100, SimulatedHead
+from simulators.plate import PlateOnlyBench
+
+FAST = LinkSettings(timeout_s=0.2, retries=0)
+SWEEP = SweepSettings(start_Hz=1.0, stop_Hz=5.0, amplitude_m=0.004, duration_s=600.0)
+
+
+def _serve(
+    transport: str, amplifiers: dict[int, SimulatedAmplifier]
+) -> PtyAmplifierServer | TcpAmplifierServer:
+    server_cls = PtyAmplifierServer if transport == "pty" else TcpAmplifierServer
+    return server_cls(amplifiers).start()
+
+
+@pytest.fixture
+def bench() -> PlateOnlyBench:
+    return PlateOnlyBench()
+
+
+@pytest.fixture(params=["pty", "tcp"])
+def transport(request: pytest.FixtureRequest) -> str:
+    return str(request.param)
+
+
+@dataclass
+class Rig:
+    bench: PlateOnlyBench
+    server: PtyAmplifierServer | TcpAmplifierServer
+    driver: ZxlAmplifier
+
+
+@pytest.fixture(scope="module", params=["pty", "tcp"])
+def shared_rig(request: pytest.FixtureRequest) -> Iterator[Rig]:
+    """A sweeping plate watched by one noise-free ZX-LD40 on x_r at node 1, served on the transport."""
+    bench = PlateOnlyBench()
+    bench.start_sweep(SWEEP)
+    server = _serve(str(request.param), {1: SimulatedAmplifier.for_channel(bench, "x_r", noise_sigma_m=0.0)})
+    driver = ZxlAmplifier.open(server.device_url(1), link=FAST)
+    yield Rig(bench, server, driver)
+    driver.close()
+    server.stop()
+
+
+@pytest.fixture
+def rig(shared_rig: Rig) -> Iterator[Rig]:
+    """The shared rig, reset after each test: faults cleared, fast link without retries, rate reset."""
+    yield shared_rig
+    shared_rig.server.clear_faults()
+    shared_rig.driver.port.link = FAST
+    shared_rig.driver.reset_read_rate()
+
+
+def test_reading_follows_the_plate_in_simulated_time(rig: Rig) -> None:
+    bench, driver = rig.bench, rig.driver
+    for _ in range(20):
+        bench.clock.advance(0.037)
+        expected_m = bench.position_m("x_r")
+        assert driver.read_position_m() == pytest.approx(expected_m, abs=ZX_LD40.resolution_m / 2 + 1e-12)
+        assert driver.read_counts()[0] % 2000 == 0  # quantised to the 2 µm resolution, in nm counts
+
+
+def test_same_simulated_time_gives_the_same_sample(bench: PlateOnlyBench, transport: str) -> None:
+    amplifier = SimulatedAmplifier.for_channel(bench, "x_r", seed=7)  # with noise
+    with (
+        _serve(transport, {1: amplifier}) as server,
+        ZxlAmplifier.open(server.device_url(1), link=FAST) as driver,
+    ):
+        first = driver.read_counts()[0]
+        assert driver.read_counts()[0] == first
+        bench.clock.advance(0.001)
+        values = {driver.read_counts()[0] for _ in range(3)}
+        assert len(values) == 1
+
+
+def test_services_model_status_echo(rig: Rig) -> None:
+    driver = rig.driver
+    assert driver.read_model() == "ZX-LDA11-N"
+    assert driver.echo("Hello, bench 01!") == "Hello, bench 01!"
+    status = driver.read_status()
+    assert (status.operating_status, status.related_info) == (0, 0)
+
+
+def test_zero_reset_and_cancel(bench: PlateOnlyBench, transport: str) -> None:
+    amplifier = SimulatedAmplifier.for_channel(bench, "x_r", noise_sigma_m=0.0, static_offset_m=0.003)
+    with (
+        _serve(transport, {1: amplifier}) as server,
+        ZxlAmplifier.open(server.device_url(1), link=FAST) as driver,
+    ):
+        assert driver.read_position_m() == pytest.approx(0.003)
+        driver.zero_reset()
+        assert driver.read_position_m() == pytest.approx(0.0, abs=1e-12)
+        assert driver.read_status().related_info & 0b10
+        driver.zero_reset_cancel()
+        assert driver.read_position_m() == pytest.approx(0.003)
+        with pytest.raises(errors.ParameterError):
+            driver.operation_command(0x7E, 0x00)
+
+
+def test_out_of_range_by_geometry_and_head_choice(bench: PlateOnlyBench, transport: str) -> None:
+    near = SimulatedAmplifier.for_channel(bench, "x_s", ZX_LD40, noise_sigma_m=0.0, static_offset_m=0.012)
+    wide = SimulatedAmplifier.for_channel(bench, "x_s", ZX_LD100, noise_sigma_m=0.0, static_offset_m=0.012)
+    with (
+        _serve(transport, {1: near, 2: wide}) as server,
+        CompowayFPort(server.device_url(1), link=FAST) as port,
+    ):
+        with pytest.raises(errors.MeasurementOutOfRangeError, match="node 01"):
+            ZxlAmplifier(port, 1).read_position_m()
+        assert ZxlAmplifier(port, 1).read_status().related_info & 0b01
+        assert ZxlAmplifier(port, 2).read_position_m() == pytest.approx(0.012)
+
+
+def test_multidrop_nodes_share_one_line(bench: PlateOnlyBench, transport: str) -> None:
+    amplifiers = {
+        1: SimulatedAmplifier.for_channel(bench, "x_r", ZX_LD40, noise_sigma_m=0.0),
+        7: SimulatedAmplifier.for_channel(bench, "x_s", ZX_LD100, noise_sigma_m=0.0, static_offset_m=-0.02),
+    }
+    bench.start_sweep(SWEEP)
+    bench.clock.advance(0.3)
+    with _serve(transport, amplifiers) as server, CompowayFPort(server.device_url(1), link=FAST) as port:
+        x_r, x_s, absent = ZxlAmplifier(port, 1), ZxlAmplifier(port, 7), ZxlAmplifier(port, 3)
+        assert x_r.read_position_m() == pytest.approx(bench.position_m("x_r"), abs=1e-6)
+        assert x_s.read_position_m() == pytest.approx(-0.02)
+        with pytest.raises(errors.ResponseTimeoutError, match="node 03"):
+            absent.read_model()
+        assert x_r.read_model() == "ZX-LDA11-N"
+
+
+def test_plain_device_path_on_the_pty(bench: PlateOnlyBench) -> None:
+    amplifier = SimulatedAmplifier.for_channel(bench, "x_r", noise_sigma_m=0.0)
+    with (
+        PtyAmplifierServer({4: amplifier}) as server,
+        ZxlAmplifier.open(f"{server.port_path}?node=4&baudrate=9600", link=FAST) as driver,
+    ):
+        assert driver.read_position_m() == 0.0
+
+
+def test_sample_buffer_read_oldest_first(bench: PlateOnlyBench, transport: str) -> None:
+    config = AmplifierConfig(measured=MeasuredValueConfig(buffer_length=4))
+    amplifier = SimulatedAmplifier.for_channel(bench, "x_r", config=config, noise_sigma_m=0.0)
+    bench.start_sweep(SWEEP)
+    expected_m = []
+    for _ in range(4):
+        bench.clock.advance(0.05)
+        amplifier.sample()
+        expected_m.append(amplifier.head.quantise_m(bench.position_m("x_r")))
+    with (
+        _serve(transport, {1: amplifier}) as server,
+        ZxlAmplifier.open(server.device_url(1), config=config, link=FAST) as driver,
+    ):
+        assert driver.read_samples_m(4) == pytest.approx(expected_m, abs=1e-12)
+        assert driver.read_samples_m(2) == pytest.approx(expected_m[2:], abs=1e-12)
+        assert driver.read_rate().samples == 6
+        with pytest.raises(errors.EndAddressOutOfRangeError):
+            driver.read_variable_area(0xC0, 0x0002, 3)
+
+
+def test_measured_value_in_parameter_area_and_parameter_services(
+    bench: PlateOnlyBench, transport: str
+) -> None:
+    measured = MeasuredValueConfig(area=MeasuredArea.PARAMETER, area_type=0xC100, address=0x0010)
+    config = AmplifierConfig(measured=measured)
+    amplifier = SimulatedAmplifier.for_channel(
+        bench, "x_r", config=config, noise_sigma_m=0.0, static_offset_m=1e-3
+    )
+    with (
+        _serve(transport, {1: amplifier}) as server,
+        ZxlAmplifier.open(server.device_url(1), config=config, link=FAST) as driver,
+    ):
+        assert driver.read_position_m() == pytest.approx(1e-3)
+        driver.write_parameter_area(0xC000, 0x0001, [-5, 123456])
+        assert driver.read_parameter_area(0xC000, 0x0000, 3) == [0, -5, 123456]
+        with pytest.raises(errors.ReadOnlyError):
+            driver.write_parameter_area(0xC100, 0x0010, [1])
+        with pytest.raises(errors.AreaTypeError):
+            driver.read_parameter_area(0xD000, 0x0000, 1)
+        with pytest.raises(errors.StartAddressOutOfRangeError):
+            driver.read_parameter_area(0xC000, 0x0009, 1)
+        with pytest.raises(errors.EndAddressOutOfRangeError):
+            driver.read_parameter_area(0xC000, 0x0002, 2)
+        with pytest.raises(errors.AreaTypeError):
+            driver.read_variable_area(0xC0, 0x0000, 1)
+
+
+@pytest.mark.parametrize(
+    ("text", "end_code"),
+    [
+        (build_command(1, "0101", "C0000000" + "0001")[:-1] + b"\x00", "13"),  # corrupted BCC
+        (build_command(1, "0101", "C0000000" + "0001", sub_address="05"), "16"),
+        (build_command(1, "0101", "C0 ZZ000" + "0001"), "14"),
+        (build_command(1, "0801", "A" * 300), "18"),
+    ],
+)
+def test_amplifier_answers_bad_commands_with_end_codes(
+    bench: PlateOnlyBench, text: bytes, end_code: str
+) -> None:
+    with (
+        PtyAmplifierServer({1: SimulatedAmplifier.for_channel(bench, "x_r")}) as server,
+        CompowayFPort(server.device_url(1), link=FAST) as port,
+    ):
+        response = parse_response(port.exchange(text))
+        assert (response.node, response.end_code) == (1, end_code)
+
+
+# --- faults --------------------------------------------------------------------------------------------
+
+FAULTS = [
+    (FaultKind.NO_REPLY, "", errors.ResponseTimeoutError),
+    (FaultKind.GARBAGE, "", errors.MalformedFrameError),
+    (FaultKind.BAD_BCC, "", errors.BccMismatchError),
+    (FaultKind.OUT_OF_RANGE, "", errors.MeasurementOutOfRangeError),
+    (FaultKind.INCOMPLETE, "", errors.IncompleteResponseError),
+    *[(FaultKind.END_CODE, code, cls) for code, cls in sorted(errors.END_CODE_ERRORS.items())],
+    *[(FaultKind.RESPONSE_CODE, code, cls) for code, cls in sorted(errors.RESPONSE_CODE_ERRORS.items())],
+]
+
+
+@pytest.mark.parametrize(
+    ("kind", "code", "error"), FAULTS, ids=[f"{k}-{c}" if c else str(k) for k, c, _ in FAULTS]
+)
+def test_fault_gives_typed_error_then_clean_recovery(
+    rig: Rig, kind: FaultKind, code: str, error: type[errors.CompowayFError]
+) -> None:
+    bench, server, driver = rig.bench, rig.server, rig.driver
+    bench.clock.advance(0.1)
+    server.inject_fault(kind, code)
+    with pytest.raises(error) as info:
+        driver.read_position_m()
+    assert "\n" not in str(info.value)
+    with pytest.raises(error):  # still there until cleared
+        driver.read_position_m()
+    server.clear_faults()
+    assert driver.read_position_m() == pytest.approx(bench.position_m("x_r"), abs=1e-6)
+
+
+def test_dropped_tcp_connection_is_port_lost_then_reopened(bench: PlateOnlyBench) -> None:
+    with (
+        TcpAmplifierServer({1: SimulatedAmplifier.for_channel(bench, "x_r", noise_sigma_m=0.0)}) as server,
+        ZxlAmplifier.open(server.device_url(1), link=FAST) as driver,
+    ):
+        assert driver.read_position_m() == 0.0
+        server.inject_fault(FaultKind.DROP_CONNECTION, count=1)
+        with pytest.raises(errors.PortLostError, match="port lost"):
+            driver.read_position_m()
+        assert driver.read_position_m() == 0.0
+        assert driver.port.counters.reopens == 1 and server.connections_accepted == 2
+
+
+def test_server_gone_is_port_lost(bench: PlateOnlyBench) -> None:
+    server = TcpAmplifierServer({1: SimulatedAmplifier.for_channel(bench, "x_r")}).start()
+    driver = ZxlAmplifier.open(server.device_url(1), link=LinkSettings(timeout_s=0.2, retries=1))
+    driver.read_counts()
+    server.stop()
+    with pytest.raises(errors.PortLostError, match="re-open failed"):
+        driver.read_counts()
+    driver.close()
+
+
+@pytest.mark.parametrize(
+    ("kind", "code"),
+    [
+        (FaultKind.NO_REPLY, ""),
+        (FaultKind.GARBAGE, ""),
+        (FaultKind.BAD_BCC, ""),
+        (FaultKind.INCOMPLETE, ""),
+        (FaultKind.END_CODE, "13"),
+        (FaultKind.END_CODE, "10"),
+    ],
+)
+def test_retries_hide_a_one_off_fault(rig: Rig, kind: FaultKind, code: str) -> None:
+    bench, server, driver = rig.bench, rig.server, rig.driver
+    driver.port.link = LinkSettings(timeout_s=0.2, retries=2)
+    retries_before = driver.port.counters.retries
+    bench.clock.advance(0.01)
+    server.inject_fault(kind, code, count=1)
+    assert driver.read_position_m() == pytest.approx(bench.position_m("x_r"), abs=1e-6)
+    assert driver.port.counters.retries == retries_before + 1 and driver.read_rate().failures == 0
+
+
+def test_dropped_connection_hidden_by_retry(bench: PlateOnlyBench) -> None:
+    with (
+        TcpAmplifierServer({1: SimulatedAmplifier.for_channel(bench, "x_r", noise_sigma_m=0.0)}) as server,
+        ZxlAmplifier.open(server.device_url(1), link=LinkSettings(timeout_s=0.2, retries=1)) as driver,
+    ):
+        server.inject_fault(FaultKind.DROP_CONNECTION, count=1)
+        assert driver.read_position_m() == 0.0
+        assert driver.port.counters.reopens == 1
+
+
+def test_refusal_is_not_retried_by_the_link(rig: Rig) -> None:
+    server, driver = rig.server, rig.driver
+    driver.port.link = LinkSettings(timeout_s=0.2, retries=2)
+    server.inject_fault(FaultKind.RESPONSE_CODE, "2204", count=2)
+    before = server.commands_received
+    with pytest.raises(errors.NotInRunModeError, match="2204"):
+        driver.read_position_m()
+    assert server.commands_received == before + 1
+    with pytest.raises(errors.NotInRunModeError):
+        driver.read_position_m()
+    driver.read_position_m()
+
+
+def test_fault_for_one_node_only(bench: PlateOnlyBench, transport: str) -> None:
+    amplifiers = {n: SimulatedAmplifier.for_channel(bench, "x_r", noise_sigma_m=0.0) for n in (1, 2)}
+    with _serve(transport, amplifiers) as server, CompowayFPort(server.device_url(1), link=FAST) as port:
+        server.inject_fault(FaultKind.OUT_OF_RANGE, node=2)
+        assert ZxlAmplifier(port, 1).read_position_m() == 0.0
+        with pytest.raises(errors.MeasurementOutOfRangeError):
+            ZxlAmplifier(port, 2).read_position_m()
+        assert math.isnan(ZxlAmplifier(port, 2).read_samples_m(1)[0])
+
+
+def test_fault_arguments_are_checked(bench: PlateOnlyBench) -> None:
+    line = AmplifierLine({1: SimulatedAmplifier.for_channel(bench, "x_r")})
+    with pytest.raises(ValueError):
+        line.inject_fault(FaultKind.END_CODE)
+    with pytest.raises(ValueError):
+        line.inject_fault(FaultKind.RESPONSE_CODE, "22")
+    with pytest.raises(ValueError):
+        line.inject_fault(FaultKind.NO_REPLY, count=0)
+
+
+# --- rate -----------------------------------------------------------------------------------------------
+
+
+def test_read_rate_is_measured_and_sane(rig: Rig) -> None:
+    server, driver = rig.server, rig.driver
+    report = driver.measure_read_rate(50)
+    assert report.reads == 50 and report.samples == 50 and report.failures == 0
+    assert report.reads_per_s > 0 and report.elapsed_s > 0
+    assert 0 < report.mean_latency_s <= report.max_latency_s <= report.elapsed_s
+    assert report.reads_per_s <= 1.0 / report.mean_latency_s * 1.000001  # no faster than back-to-back latency
+    server.inject_fault(FaultKind.NO_REPLY, count=1)
+    report = driver.measure_read_rate(10)
+    assert (report.reads, report.failures) == (9, 1)
+    assert report.max_latency_s < FAST.timeout_s  # failed reads do not count as latency samples
+
+
+# --- heads ----------------------------------------------------------------------------------------------
+
+
+def test_head_range_resolution_sign_and_noise(bench: PlateOnlyBench) -> None:
+    bench.start_sweep(SWEEP)
+    bench.clock.advance(0.1)
+    up_m = bench.position_m("x_r")
+    above = SimulatedHead(ZX_LD40, bench, "x_r", noise_sigma_m=0.0)
+    below = SimulatedHead(ZX_LD40, bench, "x_r", sign=-1, noise_sigma_m=0.0)
+    assert above.measure_m() == pytest.approx(up_m, abs=1e-6) and below.measure_m() == pytest.approx(
+        -up_m, abs=1e-6
+    )
+    assert SimulatedHead(ZX_LD40, bench, "x_s", static_offset_m=0.0101).measure_m() is None
+    assert SimulatedHead(ZX_LD100, bench, "x_s", static_offset_m=-0.0399, noise_sigma_m=0.0).measure_m() == (
+        pytest.approx(-0.0399, abs=8e-6)
+    )
+    noisy = [SimulatedHead(ZX_LD40, bench, "x_s", seed=3) for _ in range(2)]
+    draws = np.array([[head.measure_m() for _ in range(400)] for head in noisy])
+    assert np.array_equal(draws[0], draws[1])  # same seed, same noise
+    assert 0.5e-6 < draws[0].std() < 2e-6  # sigma 1 µm, quantised to 2 µm
+    assert np.allclose(np.round(draws[0] / 2e-6) * 2e-6, draws[0])
