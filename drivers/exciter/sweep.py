@@ -3,10 +3,10 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from enum import Enum
+from enum import StrEnum
 
 
-class SweepLaw(str, Enum):
+class SweepLaw(StrEnum):
     """How the instantaneous frequency moves from start to stop."""
 
     LINEAR = "linear"

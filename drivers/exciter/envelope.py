@@ -1,0 +1,85 @@
+"""The safety envelope: the sweeps a plate exciter driver is allowed to send.
+
+Two layers of limits:
+
+* hard limits — what the plate may ever do on this installation (mechanical rating); they come from the
+  installation, not from a bench recipe;
+* bench limits — what one bench configuration allows (4 mm, 25 Hz by default); a bench may lower them,
+  never raise them above the hard limits (`ExciterConfigError` naming the field and the hard limit).
+
+Every back end checks a sweep with `SafetyEnvelope.check` before anything goes on the wire, so a refused
+sweep leaves the drive untouched.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, fields
+
+from drivers.exciter.errors import EnvelopeViolationError, ExciterConfigError
+from drivers.exciter.sweep import SweepSettings
+
+
+@dataclass(frozen=True)
+class EnvelopeLimits:
+    """Upper bounds of a sweep: zero-to-peak plate amplitude and any frequency of the sweep."""
+
+    max_amplitude_m: float = 0.004
+    max_frequency_Hz: float = 25.0
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
+                raise ExciterConfigError(f"envelope limit {f.name} must be finite and > 0, got {value!r}")
+
+    @classmethod
+    def from_mapping(cls, values: Mapping[str, object]) -> EnvelopeLimits:
+        """Limits from a config table (e.g. a TOML [envelope] section); unknown keys are an error."""
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(values) - known)
+        if unknown:
+            raise ExciterConfigError(f"unknown envelope key(s) {unknown}; expected some of {sorted(known)}")
+        return cls(**values)  # type: ignore[arg-type]
+
+
+DEFAULT_HARD_LIMITS = EnvelopeLimits()
+"""Installation hard limits when none are configured: the plate's rated ±4 mm and 25 Hz."""
+
+
+class SafetyEnvelope:
+    """Bench limits, validated against the hard limits at construction, and the sweep check."""
+
+    def __init__(
+        self, limits: EnvelopeLimits | None = None, hard_limits: EnvelopeLimits = DEFAULT_HARD_LIMITS
+    ) -> None:
+        limits = limits or EnvelopeLimits(
+            min(EnvelopeLimits.max_amplitude_m, hard_limits.max_amplitude_m),
+            min(EnvelopeLimits.max_frequency_Hz, hard_limits.max_frequency_Hz),
+        )
+        for f in fields(EnvelopeLimits):
+            bench, hard = getattr(limits, f.name), getattr(hard_limits, f.name)
+            if bench > hard:
+                raise ExciterConfigError(
+                    f"bench envelope {f.name}={bench!r} is above the hard limit {f.name}={hard!r}"
+                )
+        self.limits = limits
+        self.hard_limits = hard_limits
+
+    def check(self, settings: SweepSettings) -> None:
+        """Raise EnvelopeViolationError (naming the sweep field and the limit) unless the sweep is inside."""
+        lim = self.limits
+        checks = (
+            ("amplitude_m", settings.amplitude_m, "max_amplitude_m", lim.max_amplitude_m),
+            ("start_Hz", settings.start_Hz, "max_frequency_Hz", lim.max_frequency_Hz),
+            ("stop_Hz", settings.stop_Hz, "max_frequency_Hz", lim.max_frequency_Hz),
+        )
+        for field_name, value, limit_name, limit in checks:
+            if not (math.isfinite(value) and value <= limit):  # NaN and inf are outside too
+                raise EnvelopeViolationError(field_name, value, limit_name, limit)
+        if not math.isfinite(settings.duration_s):
+            raise EnvelopeViolationError("duration_s", settings.duration_s, "finite duration", math.inf)
+
+    def __repr__(self) -> str:
+        return f"SafetyEnvelope(limits={self.limits!r}, hard_limits={self.hard_limits!r})"

@@ -1,0 +1,160 @@
+"""Open a plate exciter back end from a URL.
+
+    modbus-tcp://127.0.0.1:5020?unit=1&timeout=1.0
+    modbus-rtu:///dev/ttyUSB1?baudrate=19200&unit=1&parity=N&stopbits=1&bytesize=8&timeout=1.0
+    can://virtual/vcan0            python-can interface 'virtual', channel 'vcan0'
+    can://socketcan/can0?bitrate=500000&timeout=0.5&heartbeat_timeout=0.5
+
+Unknown schemes and query parameters are an ExciterConfigError naming them. `parse_exciter_url` gives the
+typed target without touching any transport; `open_exciter` builds the back end and connects it.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from urllib.parse import parse_qsl, unquote, urlsplit
+
+from drivers.exciter.can_bus import CanExciter
+from drivers.exciter.envelope import SafetyEnvelope
+from drivers.exciter.errors import ExciterConfigError
+from drivers.exciter.interface import DEFAULT_KEEPALIVE_INTERVAL_S, PlateExciter
+from drivers.exciter.modbus import ModbusExciter, ModbusLink, ModbusRtuLink, ModbusTcpLink
+from drivers.exciter.register_map import RegisterMap
+
+DEFAULT_MODBUS_TCP_PORT = 502
+
+
+@dataclass(frozen=True)
+class ModbusTarget:
+    """A Modbus drive: link (TCP or RTU), unit id, reply timeout."""
+
+    link: ModbusLink
+    unit: int = 1
+    timeout_s: float = 1.0
+
+
+@dataclass(frozen=True)
+class CanTarget:
+    """A CAN drive: python-can interface and channel, optional bitrate, reply and heartbeat timeouts."""
+
+    interface: str
+    channel: str
+    bitrate: int | None = None
+    reply_timeout_s: float = 0.5
+    heartbeat_timeout_s: float = 0.5
+
+
+ExciterTarget = ModbusTarget | CanTarget
+
+
+def parse_exciter_url(url: str) -> ExciterTarget:
+    parts = urlsplit(url)
+    query = _Query(url, parse_qsl(parts.query, keep_blank_values=True, strict_parsing=False))
+    if parts.scheme == "modbus-tcp":
+        if not parts.hostname:
+            raise ExciterConfigError(f"{url}: modbus-tcp needs a host")
+        try:
+            port = parts.port or DEFAULT_MODBUS_TCP_PORT
+        except ValueError as exc:
+            raise ExciterConfigError(f"{url}: bad port: {exc}") from exc
+        target: ExciterTarget = ModbusTarget(
+            ModbusTcpLink(parts.hostname, port), query.integer("unit", 1), query.number("timeout", 1.0)
+        )
+    elif parts.scheme == "modbus-rtu":
+        device = unquote(parts.netloc + parts.path)
+        if not device:
+            raise ExciterConfigError(f"{url}: modbus-rtu needs a serial device path")
+        link = ModbusRtuLink(
+            device,
+            baudrate=query.integer("baudrate", 19200),
+            bytesize=query.integer("bytesize", 8),
+            parity=query.choice("parity", "N", ("N", "E", "O")),
+            stopbits=query.integer("stopbits", 1),
+        )
+        target = ModbusTarget(link, query.integer("unit", 1), query.number("timeout", 1.0))
+    elif parts.scheme == "can":
+        interface, channel = parts.netloc, unquote(parts.path.lstrip("/"))
+        if not interface or not channel:
+            raise ExciterConfigError(f"{url}: expected can://<python-can interface>/<channel>")
+        bitrate = query.integer("bitrate", 0) or None
+        target = CanTarget(
+            interface, channel, bitrate, query.number("timeout", 0.5), query.number("heartbeat_timeout", 0.5)
+        )
+    else:
+        raise ExciterConfigError(f"{url}: unknown scheme {parts.scheme!r} (modbus-tcp, modbus-rtu or can)")
+    query.reject_leftovers()
+    return target
+
+
+async def open_exciter(
+    url: str,
+    *,
+    envelope: SafetyEnvelope | None = None,
+    register_map: RegisterMap | None = None,
+    keepalive_interval_s: float | None = DEFAULT_KEEPALIVE_INTERVAL_S,
+    clock: Callable[[], float] = time.monotonic,
+) -> PlateExciter:
+    """Build the back end named by `url` and open it (register_map applies to Modbus only)."""
+    target = parse_exciter_url(url)
+    exciter: PlateExciter
+    if isinstance(target, ModbusTarget):
+        exciter = ModbusExciter(
+            target.link,
+            unit=target.unit,
+            register_map=register_map,
+            timeout_s=target.timeout_s,
+            envelope=envelope,
+            keepalive_interval_s=keepalive_interval_s,
+            clock=clock,
+        )
+    else:
+        exciter = CanExciter(
+            target.interface,
+            target.channel,
+            bus_kwargs={"bitrate": target.bitrate} if target.bitrate else None,
+            reply_timeout_s=target.reply_timeout_s,
+            heartbeat_timeout_s=target.heartbeat_timeout_s,
+            envelope=envelope,
+            keepalive_interval_s=keepalive_interval_s,
+            clock=clock,
+        )
+    await exciter.open()
+    return exciter
+
+
+class _Query:
+    """Query parameters consumed one by one, so that unknown ones can be reported."""
+
+    def __init__(self, url: str, pairs: list[tuple[str, str]]) -> None:
+        self.url = url
+        self.values = dict(pairs)
+
+    def _take(self, name: str) -> str | None:
+        return self.values.pop(name, None)
+
+    def integer(self, name: str, default: int) -> int:
+        raw = self._take(name)
+        try:
+            return default if raw is None else int(raw)
+        except ValueError:
+            raise ExciterConfigError(f"{self.url}: {name} must be an integer, got {raw!r}") from None
+
+    def number(self, name: str, default: float) -> float:
+        raw = self._take(name)
+        try:
+            return default if raw is None else float(raw)
+        except ValueError:
+            raise ExciterConfigError(f"{self.url}: {name} must be a number, got {raw!r}") from None
+
+    def choice(self, name: str, default: str, allowed: tuple[str, ...]) -> str:
+        raw = self._take(name)
+        value = default if raw is None else raw.upper()
+        if value not in allowed:
+            raise ExciterConfigError(f"{self.url}: {name} must be one of {allowed}, got {raw!r}")
+        return value
+
+    def reject_leftovers(self) -> None:
+        if self.values:
+            raise ExciterConfigError(f"{self.url}: unknown parameter(s) {sorted(self.values)}")

@@ -1,0 +1,158 @@
+"""Safety envelope: limits, hard limits, and refusal before anything reaches the drive (Modbus and CAN)."""
+
+from __future__ import annotations
+
+import asyncio
+import math
+import uuid
+
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from drivers.exciter.can_bus import CanExciter
+from drivers.exciter.envelope import DEFAULT_HARD_LIMITS, EnvelopeLimits, SafetyEnvelope
+from drivers.exciter.errors import EnvelopeViolationError, ExciterConfigError, ExciterEncodingError
+from drivers.exciter.modbus import ModbusExciter, ModbusTcpLink
+from drivers.exciter.sweep import SweepLaw, SweepSettings
+from simulators.devices.can_exciter import SimulatedCanExciter
+from simulators.devices.modbus_exciter import SimulatedModbusExciter
+from simulators.plate import PlateOnlyBench
+
+VIOLATIONS = [
+    pytest.param(SweepSettings(amplitude_m=0.0041), "amplitude_m", "max_amplitude_m", id="amplitude"),
+    pytest.param(SweepSettings(start_Hz=26.0, stop_Hz=5.0), "start_Hz", "max_frequency_Hz", id="start"),
+    pytest.param(SweepSettings(stop_Hz=25.01), "stop_Hz", "max_frequency_Hz", id="stop"),
+    pytest.param(SweepSettings(amplitude_m=math.nan), "amplitude_m", "max_amplitude_m", id="nan-amplitude"),
+    pytest.param(SweepSettings(stop_Hz=math.inf), "stop_Hz", "max_frequency_Hz", id="inf-frequency"),
+    pytest.param(
+        SweepSettings(start_Hz=1.0, stop_Hz=30.0, law=SweepLaw.LOGARITHMIC),
+        "stop_Hz",
+        "max_frequency_Hz",
+        id="log-stop",
+    ),
+]
+
+
+def test_default_envelope_accepts_the_bench_standard_sweep() -> None:
+    envelope = SafetyEnvelope()
+    envelope.check(SweepSettings())  # 0-20 Hz, 4 mm
+    envelope.check(SweepSettings(start_Hz=25.0, stop_Hz=25.0, amplitude_m=0.004))
+    assert envelope.limits == EnvelopeLimits(0.004, 25.0)
+
+
+@pytest.mark.parametrize(("settings", "field", "limit_name"), VIOLATIONS)
+def test_violation_names_field_and_limit(settings: SweepSettings, field: str, limit_name: str) -> None:
+    with pytest.raises(EnvelopeViolationError) as info:
+        SafetyEnvelope().check(settings)
+    assert info.value.field == field
+    assert info.value.limit_name == limit_name
+    assert field in str(info.value) and limit_name in str(info.value)
+
+
+def test_bench_may_lower_limits() -> None:
+    envelope = SafetyEnvelope(EnvelopeLimits(max_amplitude_m=0.002, max_frequency_Hz=15.0))
+    with pytest.raises(EnvelopeViolationError, match=r"max_amplitude_m=0\.002"):
+        envelope.check(SweepSettings(stop_Hz=10.0, amplitude_m=0.003))
+    with pytest.raises(EnvelopeViolationError, match=r"max_frequency_Hz=15\.0"):
+        envelope.check(SweepSettings(amplitude_m=0.001))
+
+
+@pytest.mark.parametrize(
+    ("bench", "field"),
+    [
+        (EnvelopeLimits(max_amplitude_m=0.005), "max_amplitude_m"),
+        (EnvelopeLimits(max_frequency_Hz=30.0), "max_frequency_Hz"),
+    ],
+)
+def test_bench_cannot_raise_limits_above_hard_limits(bench: EnvelopeLimits, field: str) -> None:
+    with pytest.raises(ExciterConfigError, match=f"above the hard limit {field}="):
+        SafetyEnvelope(bench)
+
+
+def test_configured_hard_limits_bound_the_bench() -> None:
+    hard = EnvelopeLimits(max_amplitude_m=0.006, max_frequency_Hz=30.0)
+    SafetyEnvelope(EnvelopeLimits(0.006, 30.0), hard).check(SweepSettings(stop_Hz=30.0, amplitude_m=0.006))
+    with pytest.raises(ExciterConfigError, match=r"max_frequency_Hz=30\.0"):
+        SafetyEnvelope(EnvelopeLimits(0.004, 31.0), hard)
+    low_hard = EnvelopeLimits(max_amplitude_m=0.003, max_frequency_Hz=20.0)
+    assert SafetyEnvelope(hard_limits=low_hard).limits == low_hard  # defaults clamp to the hard limits
+    assert EnvelopeLimits(0.004, 25.0) == DEFAULT_HARD_LIMITS
+
+
+def test_limits_from_config_table() -> None:
+    assert EnvelopeLimits.from_mapping({"max_amplitude_m": 0.003}) == EnvelopeLimits(0.003, 25.0)
+    with pytest.raises(ExciterConfigError, match="max_amplitude_mm"):
+        EnvelopeLimits.from_mapping({"max_amplitude_mm": 3})
+    with pytest.raises(ExciterConfigError, match="max_frequency_Hz"):
+        EnvelopeLimits(max_frequency_Hz=-1.0)
+
+
+@given(
+    amplitude_m=st.floats(0.0, 0.01, allow_nan=False),
+    start_Hz=st.floats(0.0, 40.0, allow_nan=False),
+    stop_Hz=st.floats(0.0, 40.0, allow_nan=False),
+)
+def test_check_is_exactly_the_limits(amplitude_m: float, start_Hz: float, stop_Hz: float) -> None:
+    settings = SweepSettings(start_Hz=start_Hz, stop_Hz=stop_Hz, amplitude_m=amplitude_m)
+    inside = amplitude_m <= 0.004 and start_Hz <= 25.0 and stop_Hz <= 25.0
+    if inside:
+        SafetyEnvelope().check(settings)
+    else:
+        with pytest.raises(EnvelopeViolationError):
+            SafetyEnvelope().check(settings)
+
+
+# ---- refusal happens before any traffic, on both back ends ---------------------------------------------
+
+
+@pytest.mark.parametrize(("settings", "field", "limit_name"), VIOLATIONS)
+def test_modbus_sends_nothing_for_a_violation(settings: SweepSettings, field: str, limit_name: str) -> None:
+    async def scenario() -> None:
+        bench = PlateOnlyBench()
+        async with SimulatedModbusExciter(bench) as sim:
+            exciter = ModbusExciter(ModbusTcpLink(sim.host, sim.port), timeout_s=0.5, clock=bench.clock.now_s)
+            async with exciter:
+                with pytest.raises(EnvelopeViolationError):
+                    await exciter.configure_sweep(settings)
+                with pytest.raises(EnvelopeViolationError):  # nor does a start with a refused sweep
+                    exciter._sweep = settings
+                    await exciter.start()
+            assert sim.writes == []
+            assert sim.requests == 0
+            assert sim.drive.commands == []
+
+    asyncio.run(scenario())
+
+
+def test_modbus_value_that_does_not_fit_a_register_is_refused_before_any_write() -> None:
+    async def scenario() -> None:
+        bench = PlateOnlyBench()
+        async with SimulatedModbusExciter(bench) as sim:
+            async with ModbusExciter(ModbusTcpLink(sim.host, sim.port), timeout_s=0.5) as exciter:
+                with pytest.raises(ExciterEncodingError, match="sweep_duration_s"):
+                    await exciter.configure_sweep(SweepSettings(duration_s=5e6))  # > u32 milliseconds
+            assert sim.writes == []
+
+    asyncio.run(scenario())
+
+
+@pytest.mark.parametrize(("settings", "field", "limit_name"), VIOLATIONS)
+def test_can_sends_nothing_for_a_violation(settings: SweepSettings, field: str, limit_name: str) -> None:
+    async def scenario() -> None:
+        bench = PlateOnlyBench()
+        channel = f"envelope-{uuid.uuid4().hex}"
+        with SimulatedCanExciter(bench, channel=channel) as sim:
+            sim.tick()
+            async with CanExciter(
+                "virtual", channel, reply_timeout_s=0.5, clock=bench.clock.now_s
+            ) as exciter:
+                with pytest.raises(EnvelopeViolationError):
+                    await exciter.configure_sweep(settings)
+                await exciter.status()  # a later exchange proves the bus works and flushes it in order
+            names = [name for name, _ in sim.received]
+            assert names == ["EXC_Command"]
+            assert sim.received[0][1]["Command"] == 0  # the status request, nothing else
+            assert sim.drive.commands == []
+
+    asyncio.run(scenario())
