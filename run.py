@@ -29,8 +29,6 @@ def _python() -> Path:
 
 def ensure_environment() -> None:
     """Create .venv and install the project with its test extras, again only when pyproject.toml changed."""
-    if sys.version_info < (3, 11):
-        sys.exit(f"shockbench needs Python >= 3.11, this is {sys.version.split()[0]}")
     digest = hashlib.sha256((ROOT / "pyproject.toml").read_bytes()).hexdigest()
     if _python().exists() and STAMP.exists() and STAMP.read_text() == digest:
         return
@@ -44,6 +42,9 @@ def ensure_environment() -> None:
 
 
 def main(argv: list[str]) -> int:
+    if sys.version_info < (3, 11):  # noqa: UP036 - run.py is the first thing a user runs, maybe with an old Python
+        print(f"shockbench needs Python >= 3.11, this is {sys.version.split()[0]}", file=sys.stderr)
+        return 2
     if not argv or argv[0] not in {"demo", "test"}:
         print(__doc__)
         return 2

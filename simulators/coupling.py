@@ -11,7 +11,7 @@ from __future__ import annotations
 import threading
 import time
 from dataclasses import dataclass, field
-from enum import Enum
+from enum import StrEnum
 from typing import Protocol
 
 from drivers.exciter.sweep import SweepSettings
@@ -43,7 +43,7 @@ class SimulatedClock:
             return self._manual_s
 
 
-class PlateState(str, Enum):
+class PlateState(StrEnum):
     IDLE = "idle"
     RUNNING = "running"
     STOPPING = "stopping"

@@ -42,3 +42,25 @@ def sweep_velocity_m_s(settings: SweepSettings, t_s: np.ndarray | float) -> np.n
     """Plate velocity dx_r/dt in m/s (exact derivative of sweep_position_m)."""
     omega = 2 * np.pi * sweep_frequency_Hz(settings, t_s)
     return settings.amplitude_m * omega * np.cos(sweep_phase_rad(settings, t_s))
+
+
+def plate_motion(
+    settings: SweepSettings, t_s: np.ndarray | float, ramp_down_s: float = 0.5, phase_offset_rad: float = 0.0
+) -> tuple[np.ndarray, np.ndarray]:
+    """Plate position (m) and velocity (m/s) for a sweep that ends with a linear amplitude ramp-down over
+    ramp_down_s (as a controlled stop does) and then rests at zero. phase_offset_rad shifts the sine, e.g.
+    for the second plate of an axle bench."""
+    t = np.asarray(t_s, dtype=float)
+    phase = sweep_phase_rad(settings, t) + phase_offset_rad
+    omega = 2 * np.pi * sweep_frequency_Hz(settings, t)
+    late = (
+        np.clip((t - settings.duration_s) / ramp_down_s, 0.0, 1.0)
+        if ramp_down_s > 0
+        else ((t > settings.duration_s).astype(float))
+    )
+    envelope = 1.0 - late
+    envelope_rate = np.where((t > settings.duration_s) & (late < 1.0), -1.0 / max(ramp_down_s, 1e-12), 0.0)
+    amp = settings.amplitude_m
+    position = amp * envelope * np.sin(phase) * (t >= 0)
+    velocity = amp * (envelope * omega * np.cos(phase) + envelope_rate * np.sin(phase)) * (t >= 0)
+    return position, velocity

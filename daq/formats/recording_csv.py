@@ -1,0 +1,125 @@
+"""The recording CSV: the interchange format between acquisition, simulation and identification.
+
+Optional lines starting with '#' (metadata as '# key: value'), then a header row, then one row per sample.
+Column t in seconds; displacements in metres, upward positive, measured from the static position.
+Quarter car: t,x_s,x_t,x_r. Axle: t,x_s_l,x_s_r,x_t_l,x_t_r,x_r_l,x_r_r. The sample time must be uniform
+(1 ms at the bench). Any violation is a RecordingFormatError whose one-line message names the line.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from pathlib import Path
+
+import numpy as np
+
+from daq.formats.atomic import atomic_write
+from estimator.recording import AXLE_CHANNELS, QUARTER_CAR_CHANNELS, Recording
+
+UNIFORM_TOLERANCE = 1e-3
+"""A sample interval may differ from the first one by this fraction (timestamps printed to 1 µs)."""
+
+
+class RecordingFormatError(ValueError):
+    """The file is not a valid recording CSV; the message names the line."""
+
+
+def read_recording_csv(path: Path | str) -> Recording:
+    path = Path(path)
+    if not path.is_file():
+        raise RecordingFormatError(f"{path}: no such file")
+    metadata: dict[str, str] = {}
+    rows: list[list[float]] = []
+    header: list[str] | None = None
+    with path.open(newline="") as handle:
+        for line_no, raw in enumerate(handle, start=1):
+            line = raw.strip()
+            if not line:
+                continue
+            if line.startswith("#"):
+                if header is None and ":" in line:
+                    key, _, value = line[1:].partition(":")
+                    metadata[key.strip()] = value.strip()
+                continue
+            cells = next(csv.reader([line]))
+            if header is None:
+                header = [c.strip() for c in cells]
+                _check_header(path, header, line_no)
+                continue
+            if len(cells) != len(header):
+                raise RecordingFormatError(
+                    f"{path}:{line_no}: expected {len(header)} values, found {len(cells)}"
+                )
+            try:
+                values = [float(c) for c in cells]
+            except ValueError:
+                raise RecordingFormatError(f"{path}:{line_no}: not a number in {line!r}") from None
+            bad = [header[i] for i, v in enumerate(values) if not math.isfinite(v)]
+            if bad:
+                raise RecordingFormatError(
+                    f"{path}:{line_no}: missing or non-finite value in column {bad[0]}"
+                )
+            rows.append(values)
+    if header is None:
+        raise RecordingFormatError(f"{path}: no header row (expected t,x_s,x_t,x_r or the axle columns)")
+    if len(rows) < 3:
+        raise RecordingFormatError(f"{path}: only {len(rows)} data rows; a recording needs at least 3")
+    data = np.array(rows)
+    t = data[:, header.index("t")]
+    _check_uniform(path, t, first_data_line=_first_data_line(path))
+    channels = {name: data[:, i] for i, name in enumerate(header) if name != "t"}
+    return Recording(t, channels, metadata)
+
+
+def _check_header(path: Path, header: list[str], line_no: int) -> None:
+    names = set(header)
+    if len(names) != len(header):
+        raise RecordingFormatError(f"{path}:{line_no}: duplicated column in header")
+    for channels in (QUARTER_CAR_CHANNELS, AXLE_CHANNELS):
+        if names == {"t", *channels}:
+            return
+    raise RecordingFormatError(
+        f"{path}:{line_no}: columns {','.join(header)} are neither t,{','.join(QUARTER_CAR_CHANNELS)} "
+        f"nor t,{','.join(AXLE_CHANNELS)}"
+    )
+
+
+def _first_data_line(path: Path) -> int:
+    """1-based line number of the first data row (after comments and the header)."""
+    seen_header = False
+    with path.open() as handle:
+        for line_no, raw in enumerate(handle, start=1):
+            line = raw.strip()
+            if not line or line.startswith("#"):
+                continue
+            if seen_header:
+                return line_no
+            seen_header = True
+    return 0
+
+
+def _check_uniform(path: Path, t: np.ndarray, first_data_line: int) -> None:
+    steps = np.diff(t)
+    dt = steps[0]
+    if not dt > 0:
+        raise RecordingFormatError(f"{path}:{first_data_line + 1}: time does not increase")
+    off = np.nonzero(np.abs(steps - dt) > UNIFORM_TOLERANCE * dt)[0]
+    if off.size:
+        i = int(off[0]) + 1
+        raise RecordingFormatError(
+            f"{path}:{first_data_line + i}: sample time is not uniform (step {steps[i - 1] * 1e3:.6g} ms, "
+            f"expected {dt * 1e3:.6g} ms)"
+        )
+
+
+def write_recording_csv(path: Path | str, recording: Recording) -> None:
+    """Write atomically (a reader never sees half a file); metadata go to '# key: value' lines."""
+    names = AXLE_CHANNELS if recording.is_axle else QUARTER_CAR_CHANNELS
+    recording.require(names)
+    with atomic_write(path) as handle:
+        for key, value in recording.metadata.items():
+            handle.write(f"# {key}: {value}\n")
+        handle.write(",".join(["t", *names]) + "\n")
+        columns = np.column_stack([recording.time_s, *[recording.channels[n] for n in names]])
+        np.savetxt(handle, columns, delimiter=",", fmt=["%.6f"] + ["%.9e"] * len(names))

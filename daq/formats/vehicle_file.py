@@ -1,0 +1,107 @@
+"""The vehicle file (TOML): what is known about the wheel(s) under test.
+
+    [vehicle]
+    model = "quarter-car"            # or "axle"
+    mass_kg = 420.0                  # mass carried by the wheel(s) under test: M_1/4, or M_1/2 for an axle
+    spring_stiffness_N_per_m = 26000
+    tyre_stiffness_N_per_m = 210000
+    tyre_viscoelastic_coefficient = 0.97   # ϑ of the Maxwell tyre (paper eq 5)
+    # axle only:
+    track_m = 1.5
+    anti_roll_bar_stiffness_N_per_m = 18000   # absent = no bar
+
+An unknown key is an error; a missing required key is an error that names it.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from pathlib import Path
+
+from daq.formats.atomic import atomic_write
+from estimator.vehicle import ModelKind, VehicleParameters
+
+REQUIRED = (
+    "model",
+    "mass_kg",
+    "spring_stiffness_N_per_m",
+    "tyre_stiffness_N_per_m",
+    "tyre_viscoelastic_coefficient",
+)
+AXLE_REQUIRED = ("track_m",)
+OPTIONAL = ("anti_roll_bar_stiffness_N_per_m",)
+
+
+class VehicleFileError(ValueError):
+    """The vehicle file is invalid; the message names the key."""
+
+
+def parse_vehicle(text: str, source: str = "vehicle file") -> VehicleParameters:
+    try:
+        document = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise VehicleFileError(f"{source}: not valid TOML ({exc})") from None
+    extra_tables = sorted(set(document) - {"vehicle"})
+    if extra_tables:
+        raise VehicleFileError(f"{source}: unknown table or key '{extra_tables[0]}' (expected [vehicle])")
+    table = document.get("vehicle")
+    if not isinstance(table, dict):
+        raise VehicleFileError(f"{source}: missing table [vehicle]")
+    unknown = sorted(set(table) - set(REQUIRED) - set(AXLE_REQUIRED) - set(OPTIONAL))
+    if unknown:
+        raise VehicleFileError(f"{source}: unknown key '{unknown[0]}' in [vehicle]")
+    for key in REQUIRED:
+        if key not in table:
+            raise VehicleFileError(f"{source}: missing required key '{key}' in [vehicle]")
+    try:
+        model = ModelKind(table["model"])
+    except ValueError:
+        raise VehicleFileError(
+            f'{source}: model must be "quarter-car" or "axle", got {table["model"]!r}'
+        ) from None
+    if model is ModelKind.AXLE:
+        for key in AXLE_REQUIRED:
+            if key not in table:
+                raise VehicleFileError(f"{source}: missing required key '{key}' for an axle")
+    elif "track_m" in table or "anti_roll_bar_stiffness_N_per_m" in table:
+        key = "track_m" if "track_m" in table else "anti_roll_bar_stiffness_N_per_m"
+        raise VehicleFileError(f"{source}: key '{key}' applies to an axle only")
+    numbers = {}
+    for key, value in table.items():
+        if key == "model":
+            continue
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise VehicleFileError(f"{source}: '{key}' must be a number, got {value!r}")
+        numbers[key] = float(value)
+    try:
+        return VehicleParameters(model=model, **numbers)
+    except ValueError as exc:
+        raise VehicleFileError(f"{source}: {exc}") from None
+
+
+def read_vehicle(path: Path | str) -> VehicleParameters:
+    path = Path(path)
+    if not path.is_file():
+        raise VehicleFileError(f"{path}: no such file")
+    return parse_vehicle(path.read_text(), str(path))
+
+
+def format_vehicle(vehicle: VehicleParameters) -> str:
+    lines = [
+        "[vehicle]",
+        f'model = "{vehicle.model.value}"',
+        f"mass_kg = {vehicle.mass_kg!r}",
+        f"spring_stiffness_N_per_m = {vehicle.spring_stiffness_N_per_m!r}",
+        f"tyre_stiffness_N_per_m = {vehicle.tyre_stiffness_N_per_m!r}",
+        f"tyre_viscoelastic_coefficient = {vehicle.tyre_viscoelastic_coefficient!r}",
+    ]
+    if vehicle.is_axle:
+        lines.append(f"track_m = {vehicle.track_m!r}")
+        if vehicle.anti_roll_bar_stiffness_N_per_m:
+            lines.append(f"anti_roll_bar_stiffness_N_per_m = {vehicle.anti_roll_bar_stiffness_N_per_m!r}")
+    return "\n".join(lines) + "\n"
+
+
+def write_vehicle(path: Path | str, vehicle: VehicleParameters) -> None:
+    with atomic_write(path) as handle:
+        handle.write(format_vehicle(vehicle))

@@ -1,0 +1,100 @@
+"""Damper force-velocity curves: the piecewise-linear curve the estimator identifies (points C_a^1..C_a^N on
+a velocity grid, linear between them) and the hyperbolic-tangent model of the paper's eq (10).
+
+Velocity is v = ẋ_s - ẋ_t (extension positive); force is the damper force on the wheel, positive in
+extension, so a dissipative damper has force·velocity >= 0.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+def hat_basis(velocity_m_s: np.ndarray, grid_m_s: np.ndarray) -> np.ndarray:
+    """Basis of linear interpolation on `grid_m_s`: column j is the tent function of grid point j, so that
+    force = basis @ points. Outside the grid the two end segments extend linearly."""
+    v = np.asarray(velocity_m_s, dtype=float)
+    g = np.asarray(grid_m_s, dtype=float)
+    seg = np.clip(np.searchsorted(g, v, side="right") - 1, 0, len(g) - 2)
+    w = (v - g[seg]) / (g[seg + 1] - g[seg])
+    basis = np.zeros((v.size, g.size))
+    rows = np.arange(v.size)
+    basis[rows, seg] = 1.0 - w.ravel()
+    basis[rows, seg + 1] = w.ravel()
+    return basis
+
+
+@dataclass(frozen=True)
+class PiecewiseLinearCurve:
+    """Force points on a strictly increasing velocity grid; linear between points, linear extension beyond."""
+
+    velocity_m_s: np.ndarray
+    force_N: np.ndarray
+
+    def __post_init__(self) -> None:
+        v = np.asarray(self.velocity_m_s, dtype=float)
+        f = np.asarray(self.force_N, dtype=float)
+        if v.ndim != 1 or v.shape != f.shape or v.size < 2:
+            raise ValueError(
+                "a piecewise-linear curve needs matching 1-D velocity and force arrays of >= 2 points"
+            )
+        if np.any(np.diff(v) <= 0):
+            raise ValueError("curve velocities must be strictly increasing")
+        object.__setattr__(self, "velocity_m_s", v)
+        object.__setattr__(self, "force_N", f)
+
+    def force(self, velocity_m_s: np.ndarray | float) -> np.ndarray:
+        v = np.asarray(velocity_m_s, dtype=float)
+        g, f = self.velocity_m_s, self.force_N
+        inside = np.interp(v, g, f)
+        below = (f[1] - f[0]) / (g[1] - g[0]) * np.minimum(v - g[0], 0.0)
+        above = (f[-1] - f[-2]) / (g[-1] - g[-2]) * np.maximum(v - g[-1], 0.0)
+        return inside + below + above
+
+    def resampled(self, velocity_m_s: np.ndarray) -> PiecewiseLinearCurve:
+        """The same curve on another grid (exact where the new grid contains the old knots)."""
+        return PiecewiseLinearCurve(velocity_m_s, self.force(velocity_m_s))
+
+
+@dataclass(frozen=True)
+class TanhCurve:
+    """Paper eq (10): f = c_s·v + κ·(tanh(μ·v + β) − tanh(β)).
+
+    c_s: linear (high-speed) damping, N·s/m; kappa: κ, the tanh force scale, N; mu: μ, s/m, how fast the
+    valve opens; beta: β, the asymmetry between extension and compression (dimensionless). f(0) = 0.
+    """
+
+    c_s: float
+    kappa: float
+    mu: float
+    beta: float
+
+    def force(self, velocity_m_s: np.ndarray | float) -> np.ndarray:
+        v = np.asarray(velocity_m_s, dtype=float)
+        return self.c_s * v + self.kappa * (np.tanh(self.mu * v + self.beta) - np.tanh(self.beta))
+
+    def slope_at_zero(self) -> float:
+        """df/dv at v = 0, N·s/m."""
+        return self.c_s + self.kappa * self.mu * (1.0 - np.tanh(self.beta) ** 2)
+
+    def as_dict(self) -> dict[str, float]:
+        return {"c_s": self.c_s, "kappa": self.kappa, "mu": self.mu, "beta": self.beta}
+
+
+class CurveBatch:
+    """Several piecewise-linear curves on one common velocity grid, evaluated together: column b of
+    `force_N` (shape (n_grid, batch)) is curve b. force(v) takes v of shape (batch,) and returns the force
+    of each curve at its own velocity. Used to integrate a population of models at once."""
+
+    def __init__(self, velocity_m_s: np.ndarray, force_N: np.ndarray) -> None:
+        self.velocity_m_s = np.asarray(velocity_m_s, dtype=float)
+        self.force_N = np.asarray(force_N, dtype=float)
+        self._columns = np.arange(self.force_N.shape[1])
+
+    def force(self, velocity_m_s: np.ndarray) -> np.ndarray:
+        g = self.velocity_m_s
+        seg = np.clip(np.searchsorted(g, velocity_m_s, side="right") - 1, 0, g.size - 2)
+        w = (velocity_m_s - g[seg]) / (g[seg + 1] - g[seg])
+        return self.force_N[seg, self._columns] * (1.0 - w) + self.force_N[seg + 1, self._columns] * w

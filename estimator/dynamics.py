@@ -1,0 +1,229 @@
+"""Continuous equations of motion of the quarter car (paper eqs 1-3) and of the front axle (eqs 11-16 with a
+physically consistent anti-roll bar), with optional physical effects the model doctor can add.
+
+Sign conventions: displacements upward from static equilibrium; suspension deflection ζ = x_s − x_t;
+suspension velocity v = ẋ_s − ẋ_t; tyre deflection δ = x_t − x_r. The suspension force Q (damper + spring
++ effects) pushes the wheel up and the body down, so eq (1) reads M_s·ẍ_s + Q = 0.
+
+The functions work on numpy arrays of any trailing shape, so a whole population of candidate models can be
+integrated at once (one column per candidate).
+
+Anti-roll bar (deviation from the paper): eqs (11)-(12) put the bar on the tyre deflection and leave it out
+of (13)-(14). Here the bar is a torsion spring on the difference of the left and right suspension
+deflections: it adds K_e·(ζ_l − ζ_r) to the left suspension force and subtracts it from the right one, so it
+acts with equal and opposite forces on the wheels and on the body: no net heave force, a roll moment.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+
+from estimator.vehicle import TyreModel
+
+COULOMB_SMOOTHING_M_S = 0.005
+"""Coulomb friction is F_c·tanh(v / this): a smooth sign function, so the ODE stays integrable."""
+
+
+class ForceCurve(Protocol):
+    def force(self, velocity_m_s: np.ndarray) -> np.ndarray: ...
+
+
+@dataclass(frozen=True)
+class CornerPhysics:
+    """One suspension corner with its tyre.
+
+    tyre_damping_Ns_per_m: C_d; maxwell_time_constant_s: τ = C_d/K_d (Maxwell only).
+    Effects (0/False = absent): coulomb_friction_N (strut and seal friction, F_c), cubic_spring_N_per_m3
+    (progressive spring / bump stop: + k3·ζ³), tyre_liftoff (contact force cannot go below zero; needs
+    static_wheel_load_N).
+    """
+
+    damper: ForceCurve
+    spring_stiffness_N_per_m: float
+    tyre_stiffness_N_per_m: float
+    tyre_model: TyreModel = TyreModel.MAXWELL
+    tyre_damping_Ns_per_m: float = 0.0
+    maxwell_time_constant_s: float = 0.032
+    coulomb_friction_N: float = 0.0
+    cubic_spring_N_per_m3: float = 0.0
+    tyre_liftoff: bool = False
+    static_wheel_load_N: float = 0.0
+
+    def suspension_force_N(self, deflection_m: np.ndarray, velocity_m_s: np.ndarray) -> np.ndarray:
+        """Q: force pushing the wheel up and the body down (damper + spring + friction + progression)."""
+        force = self.damper.force(velocity_m_s) + self.spring_stiffness_N_per_m * deflection_m
+        if self.coulomb_friction_N:
+            force = force + self.coulomb_friction_N * np.tanh(velocity_m_s / COULOMB_SMOOTHING_M_S)
+        if self.cubic_spring_N_per_m3:
+            force = force + self.cubic_spring_N_per_m3 * deflection_m**3
+        return force
+
+    def tyre_force_N(
+        self, deflection_m: np.ndarray, rate_m_s: np.ndarray, maxwell_force_N: np.ndarray
+    ) -> np.ndarray:
+        """Dynamic upward force of the plate on the wheel: −K_t·δ − f_v, clipped at liftoff."""
+        if self.tyre_model is TyreModel.KELVIN_VOIGT:
+            viscous = self.tyre_damping_Ns_per_m * rate_m_s
+        elif self.tyre_model is TyreModel.MAXWELL:
+            viscous = maxwell_force_N
+        else:
+            viscous = 0.0
+        force = -self.tyre_stiffness_N_per_m * deflection_m - viscous
+        if self.tyre_liftoff:
+            force = np.maximum(force, -self.static_wheel_load_N)
+        return force
+
+    def maxwell_rate(self, rate_m_s: np.ndarray, maxwell_force_N: np.ndarray) -> np.ndarray:
+        """df_v/dt of eq (3): (C_d/K_d)·ḟ_v + f_v = C_d·δ̇."""
+        if self.tyre_model is not TyreModel.MAXWELL:
+            return np.zeros_like(maxwell_force_N)
+        return (self.tyre_damping_Ns_per_m * rate_m_s - maxwell_force_N) / self.maxwell_time_constant_s
+
+
+@dataclass(frozen=True)
+class QuarterCarPhysics:
+    """Quarter car: state = [x_s, ẋ_s, x_t, ẋ_t, f_v]."""
+
+    corner: CornerPhysics
+    sprung_mass_kg: float
+    unsprung_mass_kg: float
+
+    state_size = 5
+    output_names = ("x_s", "x_t")
+
+    def derivatives(self, state: np.ndarray, plate_m: np.ndarray, plate_rate_m_s: np.ndarray) -> np.ndarray:
+        x_s, v_s, x_t, v_t, f_v = state
+        q = self.corner.suspension_force_N(x_s - x_t, v_s - v_t)
+        tyre = self.corner.tyre_force_N(x_t - plate_m, v_t - plate_rate_m_s, f_v)
+        return np.stack(
+            [
+                v_s,
+                -q / self.sprung_mass_kg,
+                v_t,
+                (q + tyre) / self.unsprung_mass_kg,
+                self.corner.maxwell_rate(v_t - plate_rate_m_s, f_v),
+            ]
+        )
+
+    def outputs(self, state: np.ndarray) -> dict[str, np.ndarray]:
+        return {"x_s": state[0], "x_t": state[2]}
+
+    def contact_forces_N(
+        self, state: np.ndarray, plate_m: np.ndarray, plate_rate_m_s: np.ndarray
+    ) -> dict[str, np.ndarray]:
+        """Dynamic tyre force on the wheel (upward positive): the contact force is static load + this."""
+        return {"single": self.corner.tyre_force_N(state[2] - plate_m, state[3] - plate_rate_m_s, state[4])}
+
+
+@dataclass(frozen=True)
+class AxlePhysics:
+    """Front axle: body heave x_G and roll θ (small angle, θ ≈ (x_s_l − x_s_r)/b), two wheels.
+
+    state = [x_G, ẋ_G, θ, θ̇, x_t_l, ẋ_t_l, x_t_r, ẋ_t_r, f_v_l, f_v_r]. The plate inputs are stacked
+    (left, right). unsprung_mass_kg is per wheel (the paper's M_u^l = M_u^r).
+    """
+
+    left: CornerPhysics
+    right: CornerPhysics
+    sprung_mass_kg: float
+    unsprung_mass_kg: float
+    roll_inertia_kg_m2: float
+    track_m: float
+    anti_roll_bar_N_per_m: float = 0.0
+
+    state_size = 10
+    output_names = ("x_s_l", "x_s_r", "x_t_l", "x_t_r")
+
+    def _suspension(self, state: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        x_g, v_g, roll, roll_rate, x_tl, v_tl, x_tr, v_tr = state[:8]
+        half = 0.5 * self.track_m
+        zeta_l, zeta_r = x_g + half * roll - x_tl, x_g - half * roll - x_tr
+        vel_l, vel_r = v_g + half * roll_rate - v_tl, v_g - half * roll_rate - v_tr
+        bar = self.anti_roll_bar_N_per_m * (zeta_l - zeta_r)
+        return (
+            self.left.suspension_force_N(zeta_l, vel_l) + bar,
+            self.right.suspension_force_N(zeta_r, vel_r) - bar,
+        )
+
+    def derivatives(self, state: np.ndarray, plate_m: np.ndarray, plate_rate_m_s: np.ndarray) -> np.ndarray:
+        _, v_g, _, roll_rate, x_tl, v_tl, x_tr, v_tr, fv_l, fv_r = state
+        q_l, q_r = self._suspension(state)
+        tyre_l = self.left.tyre_force_N(x_tl - plate_m[0], v_tl - plate_rate_m_s[0], fv_l)
+        tyre_r = self.right.tyre_force_N(x_tr - plate_m[1], v_tr - plate_rate_m_s[1], fv_r)
+        half = 0.5 * self.track_m
+        return np.stack(
+            [
+                v_g,
+                -(q_l + q_r) / self.sprung_mass_kg,
+                roll_rate,
+                -half * (q_l - q_r) / self.roll_inertia_kg_m2,
+                v_tl,
+                (q_l + tyre_l) / self.unsprung_mass_kg,
+                v_tr,
+                (q_r + tyre_r) / self.unsprung_mass_kg,
+                self.left.maxwell_rate(v_tl - plate_rate_m_s[0], fv_l),
+                self.right.maxwell_rate(v_tr - plate_rate_m_s[1], fv_r),
+            ]
+        )
+
+    def outputs(self, state: np.ndarray) -> dict[str, np.ndarray]:
+        half = 0.5 * self.track_m
+        return {
+            "x_s_l": state[0] + half * state[2],
+            "x_s_r": state[0] - half * state[2],
+            "x_t_l": state[4],
+            "x_t_r": state[6],
+        }
+
+    def contact_forces_N(
+        self, state: np.ndarray, plate_m: np.ndarray, plate_rate_m_s: np.ndarray
+    ) -> dict[str, np.ndarray]:
+        return {
+            "left": self.left.tyre_force_N(state[4] - plate_m[0], state[5] - plate_rate_m_s[0], state[8]),
+            "right": self.right.tyre_force_N(state[6] - plate_m[1], state[7] - plate_rate_m_s[1], state[9]),
+        }
+
+
+VehiclePhysics = QuarterCarPhysics | AxlePhysics
+
+Derivatives = Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
+
+
+def integrate_rk4(
+    derivatives: Derivatives,
+    initial_state: np.ndarray,
+    step_s: float,
+    plate_m: np.ndarray,
+    plate_rate_m_s: np.ndarray,
+    midpoints_given: bool = False,
+) -> np.ndarray:
+    """Fixed-step classical Runge-Kutta driven by a sampled plate motion.
+
+    plate_m, plate_rate_m_s: shape (n,) or (n_plates, n). By default they are sampled at the step times and
+    the midpoint values are interpolated linearly (output error, where the plate is a 1 kHz measurement);
+    with midpoints_given they are sampled every half step, so n = 2·steps + 1 (the simulator, where the
+    plate motion is known exactly). Returns the state at every step, shape (steps + 1, *state.shape).
+    """
+    if midpoints_given:
+        at, mid = plate_m[..., ::2], plate_m[..., 1::2]
+        rate_at, rate_mid = plate_rate_m_s[..., ::2], plate_rate_m_s[..., 1::2]
+    else:
+        at, rate_at = plate_m, plate_rate_m_s
+        mid, rate_mid = 0.5 * (at[..., 1:] + at[..., :-1]), 0.5 * (rate_at[..., 1:] + rate_at[..., :-1])
+    steps = at.shape[-1] - 1
+    states = np.empty((steps + 1, *np.shape(initial_state)))
+    state = np.array(initial_state, dtype=float)
+    states[0] = state
+    h = step_s
+    for k in range(steps):
+        k1 = derivatives(state, at[..., k], rate_at[..., k])
+        k2 = derivatives(state + 0.5 * h * k1, mid[..., k], rate_mid[..., k])
+        k3 = derivatives(state + 0.5 * h * k2, mid[..., k], rate_mid[..., k])
+        k4 = derivatives(state + h * k3, at[..., k + 1], rate_at[..., k + 1])
+        state = state + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+        states[k + 1] = state
+    return states

@@ -1,0 +1,278 @@
+"""Identification: from a recording and the known vehicle constants to the damper curve(s), masses, tyre
+damping, inspection figures and the output-error gap.
+
+Steps: build the affine residual system (estimator.equations); minimise the paper's objective GF, exactly
+(default, estimator.solvers.exact) or by differential evolution (estimator.solvers.differential_evolution),
+in which case the exact optimum certifies how close DE got; fit the tanh model to each curve's points;
+simulate the identified model from the measured plate motion (output error); compute the inspection figures.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from enum import StrEnum
+
+import numpy as np
+
+from estimator.damper import PiecewiseLinearCurve
+from estimator.equations import LinearResiduals, build, tyre_damping_from_coefficient, tyre_regressor
+from estimator.inspection import CornerInspection, corner_inspection, imbalance
+from estimator.output_error import IdentifiedModel, refine_on_output_error, simulate_identified
+from estimator.recording import Recording
+from estimator.signals import kinematics
+from estimator.solvers.differential_evolution import DEProgress, DESettings, DifferentialEvolution
+from estimator.solvers.exact import solve_exact
+from estimator.tanh_fit import TanhFit, fit_tanh
+from estimator.vehicle import TyreModel, VehicleParameters
+
+SPRUNG_FRACTION_BOUNDS = (0.5, 0.99)
+"""DE search range of the sprung mass as a fraction of the mass carried by the wheel(s)."""
+TYRE_DAMPING_MAX_NS_PER_M = 5000.0
+DAMPER_FORCE_MARGIN = 1.5
+"""DE searches damper points within ± this × the largest force the body equation can ask of the damper."""
+
+
+class Solver(StrEnum):
+    EXACT = "exact"
+    DE = "de"
+
+
+class Coordinates(StrEnum):
+    """Where DE searches. DECORRELATED: θ = centre + W·z with W = L⁻ᵀ, L the Cholesky factor of AᵀA (the
+    equations' own normal matrix, not their solution), so the unknowns the data ties together (sprung mass
+    and every curve point) become independent and the paper's low crossover rate works. RAW: the
+    paper's unknowns as they are (with F = 1, CR = 0.3 DE then stalls far from the optimum; see
+    BENCHMARKS.md)."""
+
+    DECORRELATED = "decorrelated"
+    RAW = "raw"
+
+
+@dataclass(frozen=True)
+class IdentifyOptions:
+    tyre: TyreModel = TyreModel.MAXWELL
+    points: int | None = None
+    """Damper curve points; default 20 for a quarter car, 10 per side for an axle."""
+    solver: Solver = Solver.EXACT
+    nsample: int | None = 5000
+    de: DESettings = field(default_factory=DESettings)
+    de_coordinates: Coordinates = Coordinates.DECORRELATED
+    output_error: bool = True
+    refine_output_error: bool = False
+
+
+@dataclass(frozen=True)
+class CornerCurve:
+    corner: str  # "single", "left" or "right"
+    curve: PiecewiseLinearCurve
+    tanh: TanhFit
+
+
+@dataclass
+class IdentificationResult:
+    model: IdentifiedModel
+    curves: list[CornerCurve]
+    objective: float
+    solver: Solver
+    certified_gap: float
+    """Relative optimality gap of the reported solution, certified by the exact solver's dual bound."""
+    gap_m: float | None
+    inspection: dict[str, CornerInspection]
+    imbalance: dict[str, float] | None
+    system: LinearResiduals
+    de_generations: int | None = None
+    refined_gap_m: float | None = None
+
+    def to_json(self) -> dict[str, object]:
+        """The stable JSON shape of `shockbench identify --json`."""
+        m = self.model
+        inspection: dict[str, object]
+        if len(self.inspection) == 1:
+            inspection = self.inspection["single"].as_dict()
+        else:
+            inspection = {side: ins.as_dict() for side, ins in self.inspection.items()}
+            inspection["imbalance"] = self.imbalance
+        out: dict[str, object] = {
+            "curves": [
+                {
+                    "corner": c.corner,
+                    "velocity_m_s": c.curve.velocity_m_s.tolist(),
+                    "force_N": c.curve.force_N.tolist(),
+                    "tanh": c.tanh.curve.as_dict(),
+                    "tanh_rms_N": c.tanh.rms_N,
+                    "outliers": c.tanh.outliers,
+                }
+                for c in self.curves
+            ],
+            "masses_kg": {"sprung": m.sprung_mass_kg, "unsprung": m.unsprung_mass_kg},
+            "tyre_damping_Ns_per_m": m.tyre_damping_Ns_per_m,
+            "tyre_model": m.tyre_model.value,
+            "objective": self.objective,
+            "solver": self.solver.value,
+            "certified_gap": self.certified_gap,
+            "gap_m": self.gap_m,
+            "inspection": inspection,
+            "filters": {
+                "kinematics_cutoff_Hz": self.system.filters.kinematics_cutoff_Hz,
+                "equation_cutoff_Hz": self.system.filters.equation_cutoff_Hz,
+                "noise_floor_m": self.system.filters.noise_floor_m,
+            },
+        }
+        if m.roll_inertia_kg_m2 is not None:
+            out["roll_inertia_kg_m2"] = m.roll_inertia_kg_m2
+        if self.refined_gap_m is not None:
+            out["refined_gap_m"] = self.refined_gap_m
+        return out
+
+
+def de_bounds(system: LinearResiduals, vehicle: VehicleParameters) -> np.ndarray:
+    """Physical search box: sprung mass fraction, roll inertia, tyre coefficient, damper forces."""
+    mass = vehicle.mass_kg
+    bounds: list[tuple[float, float]] = []
+    for name in system.parameter_names:
+        if name == "sprung_mass_kg":
+            bounds.append((SPRUNG_FRACTION_BOUNDS[0] * mass, SPRUNG_FRACTION_BOUNDS[1] * mass))
+        elif name == "roll_inertia_kg_m2":
+            bounds.append((0.0, mass * float(vehicle.track_m) ** 2 / 2.0))
+        elif name == "tyre_coefficient":
+            scale = (
+                1.0 - vehicle.tyre_viscoelastic_coefficient if system.tyre_model is TyreModel.MAXWELL else 1.0
+            )
+            bounds.append((0.0, TYRE_DAMPING_MAX_NS_PER_M * scale))
+    # the body equations bound what the dampers can be asked for: |F_d| <~ M·|ẍ_s| + |spring and bar|
+    body = np.abs(system.matrix[-1 if vehicle.is_axle else 0, :, 0]) * mass + np.abs(
+        system.offset[-2 if vehicle.is_axle else 0]
+    )
+    force_limit = DAMPER_FORCE_MARGIN * float(np.max(body))
+    n_points = sum(s.stop - s.start for s in system.curve_slices)
+    bounds.extend([(-force_limit, force_limit)] * n_points)
+    return np.array(bounds)
+
+
+def run_de(
+    system: LinearResiduals,
+    vehicle: VehicleParameters,
+    options: IdentifyOptions,
+    progress: Callable[[DEProgress], bool | None] | None = None,
+    cancel: threading.Event | None = None,
+) -> tuple[np.ndarray, int, bool]:
+    """DE on the paper's objective; returns θ, generations run, and whether it was cancelled."""
+    bounds = de_bounds(system, vehicle)
+    flat = np.ascontiguousarray(system.matrix.reshape(-1, system.n_params).T)
+    if options.de_coordinates is Coordinates.DECORRELATED:
+        chol = np.linalg.cholesky(flat @ flat.T)
+        transform = np.linalg.inv(chol.T)  # θ = centre + transform @ z
+        centre = bounds.mean(axis=1)
+        half = np.abs(chol.T) @ ((bounds[:, 1] - bounds[:, 0]) / 2.0)
+        search = np.column_stack([-half, half])
+    else:
+        transform, centre, search = np.eye(system.n_params), np.zeros(system.n_params), bounds
+    e, n, _ = system.matrix.shape
+    # the population is ranked in float32 (half the memory traffic); the winner is re-scored in float64
+    flat32 = (transform.T @ flat).astype(np.float32)
+    offset32 = (system.offset.reshape(-1) + centre @ flat).astype(np.float32)
+
+    def objective(z: np.ndarray) -> np.ndarray:
+        r = z.astype(np.float32) @ flat32
+        r += offset32
+        np.square(r, out=r)
+        norms = r.reshape(-1, e, n).sum(axis=1)
+        np.sqrt(norms, out=norms)
+        return norms.sum(axis=1, dtype=np.float64)
+
+    result = DifferentialEvolution(objective, search, options.de, progress, cancel).solve()
+    return centre + transform @ result.theta, result.generations, result.cancelled
+
+
+def _inspection(
+    model: IdentifiedModel, recording: Recording, system: LinearResiduals, tyre_coefficient: float
+) -> tuple[dict[str, CornerInspection], dict[str, float] | None]:
+    v = model.vehicle
+    dt = recording.sample_time_s
+    cut = system.filters.kinematics_cutoff_Hz
+    kin = {name: kinematics(x, cut, dt) for name, x in recording.channels.items()}
+    sides = [("single", "")] if not v.is_axle else [("left", "_l"), ("right", "_r")]
+    sprung_per_corner = model.sprung_mass_kg / len(sides)
+    result: dict[str, CornerInspection] = {}
+    for (corner, suffix), curve, velocity in zip(sides, model.curves, system.velocity_m_s, strict=True):
+        t, r = kin[f"x_t{suffix}"], kin[f"x_r{suffix}"]
+        g = tyre_regressor(t.velocity_m_s - r.velocity_m_s, model.tyre_model, v.tyre_viscoelastic_coefficient)
+        viscous = tyre_coefficient * g if g is not None else 0.0
+        dynamic = -v.tyre_stiffness_N_per_m * (t.position_m - r.position_m) - viscous
+        keep = system.sample_index[0], system.sample_index[-1] + 1  # leave out filter start-up transients
+        result[corner] = corner_inspection(
+            static_load_N=v.static_wheel_load_N,
+            dynamic_force_N=dynamic[keep[0] : keep[1]],
+            plate_m=r.position_m[keep[0] : keep[1]],
+            sample_time_s=dt,
+            damper_force_N=curve.force(velocity),
+            velocity_m_s=velocity,
+            spring_stiffness_N_per_m=v.spring_stiffness_N_per_m,
+            sprung_mass_kg=sprung_per_corner,
+        )
+    balance = imbalance(result["left"], result["right"]) if v.is_axle else None
+    return result, balance
+
+
+def identify(
+    recording: Recording,
+    vehicle: VehicleParameters,
+    options: IdentifyOptions = IdentifyOptions(),
+    progress: Callable[[DEProgress], bool | None] | None = None,
+    cancel: threading.Event | None = None,
+) -> IdentificationResult:
+    """Identify the damper curve(s) and the unknown masses and tyre damping from a recording."""
+    if vehicle.is_axle != recording.is_axle:
+        kind = "axle" if vehicle.is_axle else "quarter-car"
+        raise ValueError(f"the vehicle file is for a {kind} model but the recording's channels are not")
+    system = build(recording, vehicle, options.tyre, options.points, options.nsample)
+    exact = solve_exact(system)
+    generations = None
+    if options.solver is Solver.DE:
+        theta, generations, cancelled = run_de(system, vehicle, options, progress, cancel)
+        if cancelled:
+            raise InterruptedError("identification cancelled")
+    else:
+        theta = exact.theta
+    objective = float(system.objective(theta))
+    certified_gap = (objective - exact.lower_bound) / objective if objective > 0 else 0.0
+    names = system.parameter_names
+    coefficient = float(theta[names.index("tyre_coefficient")]) if "tyre_coefficient" in names else 0.0
+    curves = tuple(
+        PiecewiseLinearCurve(g, theta[s]) for g, s in zip(system.grids_m_s, system.curve_slices, strict=True)
+    )
+    model = IdentifiedModel(
+        vehicle=vehicle,
+        tyre_model=options.tyre,
+        curves=curves,
+        sprung_mass_kg=float(theta[0]),
+        tyre_damping_Ns_per_m=tyre_damping_from_coefficient(
+            coefficient, options.tyre, vehicle.tyre_viscoelastic_coefficient
+        ),
+        roll_inertia_kg_m2=float(theta[1]) if vehicle.is_axle else None,
+    )
+    gap = simulate_identified(model, recording, system.filters).gap_m if options.output_error else None
+    refined_gap = None
+    if options.refine_output_error:
+        model, refined_gap = refine_on_output_error(model, recording, system.filters, cancel=cancel)
+    inspection, balance = _inspection(model, recording, system, coefficient)
+    corners = ["single"] if not vehicle.is_axle else ["left", "right"]
+    fitted = [
+        CornerCurve(c, curve, fit_tanh(curve.velocity_m_s, curve.force_N))
+        for c, curve in zip(corners, model.curves, strict=True)
+    ]
+    return IdentificationResult(
+        model,
+        fitted,
+        objective,
+        options.solver,
+        certified_gap,
+        gap,
+        inspection,
+        balance,
+        system,
+        generations,
+        refined_gap,
+    )

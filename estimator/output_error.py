@@ -1,0 +1,172 @@
+"""Output error: simulate the identified model driven by the measured plate motion and compare the predicted
+x_s, x_t with the measured ones. The gap is the RMS over all measured body and wheel channels (metres).
+
+The model is integrated with fixed-step Runge-Kutta at the recording's sample time (estimator.dynamics),
+starting from the measured (low-passed) state at the first sample.
+
+A DE refinement of the curve on that gap is offered: the population of candidate models is simulated at
+once (one column per candidate), so a generation costs one simulation of array operations.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from estimator.damper import CurveBatch, PiecewiseLinearCurve
+from estimator.dynamics import AxlePhysics, CornerPhysics, QuarterCarPhysics, integrate_rk4
+from estimator.recording import Recording
+from estimator.signals import FilterChoice, kinematics
+from estimator.solvers.differential_evolution import DEProgress, DESettings, DifferentialEvolution
+from estimator.vehicle import TyreModel, VehicleParameters
+
+REFINE_SETTINGS = DESettings(
+    generations=40,
+    population_size=24,
+    mutation_factor=0.6,
+    crossover_probability=0.5,
+    mutation_probability=0.0,
+)
+"""DE settings of the output-error refinement: a short local search around the equation-error solution."""
+
+
+@dataclass(frozen=True)
+class IdentifiedModel:
+    """The model as identified: curves (one, or left and right), masses, tyre damping, roll inertia."""
+
+    vehicle: VehicleParameters
+    tyre_model: TyreModel
+    curves: tuple[PiecewiseLinearCurve, ...]
+    sprung_mass_kg: float
+    tyre_damping_Ns_per_m: float
+    roll_inertia_kg_m2: float | None = None
+
+    @property
+    def unsprung_mass_kg(self) -> float:
+        """Per wheel."""
+        wheels = 2 if self.vehicle.is_axle else 1
+        return (self.vehicle.mass_kg - self.sprung_mass_kg) / wheels
+
+    def physics(self, sample_time_s: float, curves: tuple[object, ...] | None = None):
+        curves = curves or self.curves
+
+        def corner(curve: object) -> CornerPhysics:
+            return CornerPhysics(
+                damper=curve,  # type: ignore[arg-type]
+                spring_stiffness_N_per_m=self.vehicle.spring_stiffness_N_per_m,
+                tyre_stiffness_N_per_m=self.vehicle.tyre_stiffness_N_per_m,
+                tyre_model=self.tyre_model,
+                tyre_damping_Ns_per_m=self.tyre_damping_Ns_per_m,
+                maxwell_time_constant_s=self.vehicle.maxwell_time_constant_s(sample_time_s),
+            )
+
+        if not self.vehicle.is_axle:
+            return QuarterCarPhysics(corner(curves[0]), self.sprung_mass_kg, self.unsprung_mass_kg)
+        return AxlePhysics(
+            corner(curves[0]),
+            corner(curves[1]),
+            self.sprung_mass_kg,
+            self.unsprung_mass_kg,
+            float(self.roll_inertia_kg_m2 or 0.0),
+            float(self.vehicle.track_m or 0.0),
+            self.vehicle.anti_roll_bar_stiffness_N_per_m,
+        )
+
+
+@dataclass(frozen=True)
+class OutputErrorResult:
+    gap_m: float
+    simulated: dict[str, np.ndarray]
+    measured: dict[str, np.ndarray]
+
+
+def _measured_drive(recording: Recording, filters: FilterChoice, vehicle: VehicleParameters):
+    """Low-passed kinematics of every channel, the plate drive (position, rate) and the initial state."""
+    dt = recording.sample_time_s
+    kin = {n: kinematics(x, filters.kinematics_cutoff_Hz, dt) for n, x in recording.channels.items()}
+
+    def at0(name: str) -> tuple[float, float]:
+        return float(kin[name].position_m[0]), float(kin[name].velocity_m_s[0])
+
+    if not vehicle.is_axle:
+        plate, rate = kin["x_r"].position_m, kin["x_r"].velocity_m_s
+        return plate, rate, np.array([*at0("x_s"), *at0("x_t"), 0.0])
+    plate = np.stack([kin["x_r_l"].position_m, kin["x_r_r"].position_m])
+    rate = np.stack([kin["x_r_l"].velocity_m_s, kin["x_r_r"].velocity_m_s])
+    (sl, vl), (sr, vr) = at0("x_s_l"), at0("x_s_r")
+    b = float(vehicle.track_m)
+    state0 = np.array(
+        [
+            0.5 * (sl + sr),
+            0.5 * (vl + vr),
+            (sl - sr) / b,
+            (vl - vr) / b,
+            *at0("x_t_l"),
+            *at0("x_t_r"),
+            0.0,
+            0.0,
+        ]
+    )
+    return plate, rate, state0
+
+
+def simulate_identified(
+    model: IdentifiedModel,
+    recording: Recording,
+    filters: FilterChoice,
+    curves: tuple[object, ...] | None = None,
+    batch: int | None = None,
+) -> OutputErrorResult:
+    """Drive the model with the measured plate; `curves` may be CurveBatch objects with `batch` columns."""
+    plate, rate, state0 = _measured_drive(recording, filters, model.vehicle)
+    physics = model.physics(recording.sample_time_s, curves)
+    if batch is not None:
+        state0 = np.repeat(state0[:, None], batch, axis=1)
+    states = integrate_rk4(physics.derivatives, state0, recording.sample_time_s, plate, rate)
+    outputs = physics.outputs(np.moveaxis(states, 0, 1))
+    measured = {name: recording.channels[name] for name in outputs}
+    diffs = [outputs[n] - (measured[n][:, None] if batch is not None else measured[n]) for n in outputs]
+    gap = np.sqrt(np.mean(np.stack(diffs) ** 2, axis=(0, 1)))
+    return OutputErrorResult(gap if batch is not None else float(gap), outputs, measured)
+
+
+def refine_on_output_error(
+    model: IdentifiedModel,
+    recording: Recording,
+    filters: FilterChoice,
+    settings: DESettings = REFINE_SETTINGS,
+    spread: float = 0.15,
+    callback: Callable[[DEProgress], bool | None] | None = None,
+    cancel: threading.Event | None = None,
+) -> tuple[IdentifiedModel, float]:
+    """DE over the curve points and the tyre damping to minimise the output-error gap, searched within
+    ±spread (relative, with a floor of 5% of the peak force) around the equation-error solution, which
+    seeds the population. Returns the refined model and its gap."""
+    grids = [c.velocity_m_s for c in model.curves]
+    start = np.concatenate([*[c.force_N for c in model.curves], [model.tyre_damping_Ns_per_m]])
+    peak = max(float(np.max(np.abs(c.force_N))) for c in model.curves)
+    half = np.maximum(spread * np.abs(start), 0.05 * peak)
+    half[-1] = max(spread * abs(start[-1]), 50.0)
+    bounds = np.column_stack([start - half, start + half])
+    bounds[-1, 0] = max(bounds[-1, 0], 0.0)
+    sizes = [g.size for g in grids]
+
+    def gaps(population: np.ndarray) -> np.ndarray:
+        p = population.shape[0]
+        curves, offset = [], 0
+        for grid, size in zip(grids, sizes, strict=True):
+            curves.append(CurveBatch(grid, population[:, offset : offset + size].T))
+            offset += size
+        candidate = replace(model, tyre_damping_Ns_per_m=population[:, -1])
+        return simulate_identified(candidate, recording, filters, tuple(curves), batch=p).gap_m
+
+    result = DifferentialEvolution(gaps, bounds, settings, callback, cancel, initial=start).solve()
+    theta, offset, refined_curves = result.theta, 0, []
+    for grid, size in zip(grids, sizes, strict=True):
+        refined_curves.append(PiecewiseLinearCurve(grid, theta[offset : offset + size]))
+        offset += size
+    refined = replace(model, curves=tuple(refined_curves), tyre_damping_Ns_per_m=float(theta[-1]))
+    return refined, float(result.objective)

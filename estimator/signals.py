@@ -1,0 +1,108 @@
+"""From measured displacements to velocities and accelerations, with filter settings chosen from the data.
+
+Only displacements are measured. Two zero-phase Butterworth low-passes (scipy.signal, 4th order, run
+forward and backward) are used:
+
+- the *kinematics* filter (cutoff `kinematics_cutoff_Hz`) before central differences gives the velocities
+  used inside nonlinear terms (the damper curve's velocity, the tyre deflection rate), and the states used for
+  output error and inspection figures. Its cutoff sits above the band where the signals stand out of the
+  sensor noise, so it does not bend the response.
+- the *equation* filter (cutoff `equation_cutoff_Hz`) is applied to every column of the equations of motion
+  alike (accelerations, positions and each damper basis function of the velocity). The equations are linear
+  in those columns, so they hold exactly after filtering while the noise amplified by double
+  differentiation is cut, and the harmonics that a nonlinear damper generates are treated the same way in
+  the acceleration as in the damper force (no bias from filtering one and not the other).
+
+How the cutoffs are chosen from the data: the noise floor is the median Welch power density in the top 40% of
+the band below Nyquist (laser noise is white there; the vehicle has no response); the signal band edge is
+the highest frequency where any channel's density is `SNR_DB` above that floor. The kinematics cutoff is
+1.5 × the band edge; the equation cutoff is 1.5 × the excitation's top frequency (found from the plate
+channels' spectrum). Both are clipped to [5 Hz, 0.4 × sample rate].
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import signal
+
+SNR_DB = 20.0
+FILTER_ORDER = 4
+MIN_CUTOFF_HZ = 5.0
+MAX_CUTOFF_FRACTION_OF_RATE = 0.4
+
+
+@dataclass(frozen=True)
+class FilterChoice:
+    """Filter settings and the evidence they were chosen from."""
+
+    sample_time_s: float
+    noise_floor_m: float
+    """Estimated white-noise standard deviation of the displacement channels (m)."""
+    band_edge_Hz: float
+    excitation_top_Hz: float
+    kinematics_cutoff_Hz: float
+    equation_cutoff_Hz: float
+
+
+def _welch(x: np.ndarray, fs: float) -> tuple[np.ndarray, np.ndarray]:
+    nperseg = int(min(x.size, max(256, 2 ** int(np.log2(fs)))))  # ~1 s segments: 1 Hz resolution
+    return signal.welch(x - np.mean(x), fs=fs, nperseg=nperseg)
+
+
+def choose_filters(channels: dict[str, np.ndarray], sample_time_s: float) -> FilterChoice:
+    """Pick both cutoffs from the spectra of the displacement channels (see module docstring)."""
+    fs = 1.0 / sample_time_s
+    hi_limit = MAX_CUTOFF_FRACTION_OF_RATE * fs
+    floors, edges, plate_tops = [], [], []
+    for name, x in channels.items():
+        f, p = _welch(x, fs)
+        top = f >= 0.6 * f[-1]
+        floor = float(np.median(p[top])) if np.any(top) else float(np.min(p))
+        floors.append(floor)
+        above = np.nonzero(p > floor * 10 ** (SNR_DB / 10))[0]
+        edge = float(f[above[-1]]) if above.size else MIN_CUTOFF_HZ
+        edges.append(edge)
+        if name.startswith("x_r"):
+            # the excitation's top: where the plate's density falls 20 dB under its peak, searched upwards
+            strong = np.nonzero(p > p.max() * 1e-2)[0]
+            plate_tops.append(float(f[strong[-1]]) if strong.size else edge)
+    noise_density = float(np.median(floors))  # m²/Hz, one-sided
+    band_edge = float(max(edges))
+    excitation_top = float(max(plate_tops)) if plate_tops else band_edge
+    return FilterChoice(
+        sample_time_s=sample_time_s,
+        noise_floor_m=float(np.sqrt(noise_density * fs / 2)),
+        band_edge_Hz=band_edge,
+        excitation_top_Hz=excitation_top,
+        kinematics_cutoff_Hz=float(np.clip(1.5 * band_edge, MIN_CUTOFF_HZ, hi_limit)),
+        equation_cutoff_Hz=float(np.clip(1.5 * excitation_top, MIN_CUTOFF_HZ, hi_limit)),
+    )
+
+
+def lowpass(x: np.ndarray, cutoff_Hz: float, sample_time_s: float, axis: int = 0) -> np.ndarray:
+    """Zero-phase Butterworth low-pass (FILTER_ORDER, forward and backward)."""
+    sos = signal.butter(FILTER_ORDER, cutoff_Hz, btype="low", fs=1.0 / sample_time_s, output="sos")
+    return signal.sosfiltfilt(sos, x, axis=axis)
+
+
+def derivative(x: np.ndarray, sample_time_s: float, axis: int = 0) -> np.ndarray:
+    """Central differences (second-order accurate; one-sided at the ends)."""
+    return np.gradient(x, sample_time_s, axis=axis)
+
+
+@dataclass(frozen=True)
+class Kinematics:
+    """Position, velocity and acceleration of one channel after a low-pass of the given cutoff."""
+
+    position_m: np.ndarray
+    velocity_m_s: np.ndarray
+    acceleration_m_s2: np.ndarray
+
+
+def kinematics(x: np.ndarray, cutoff_Hz: float, sample_time_s: float) -> Kinematics:
+    """Low-pass, then differentiate twice by central differences."""
+    position = lowpass(x, cutoff_Hz, sample_time_s)
+    velocity = derivative(position, sample_time_s)
+    return Kinematics(position, velocity, derivative(velocity, sample_time_s))

@@ -1,0 +1,1 @@
+"""Solvers for the identification objective: exact (convex) and differential evolution."""

@@ -1,0 +1,134 @@
+"""Fit the paper's hyperbolic-tangent damper model (eq 10) to identified curve points, robustly, and flag the
+points that do not belong (the paper's Table 2 has one: 10 821.8 N where about 1 082 N fits).
+
+For fixed μ and β the model is linear in c_s and κ, so a grid over (μ, β) with robust (Tukey-reweighted)
+linear fits, ranked by least-trimmed squares, finds the basin without being pulled by an outlier;
+scipy's least_squares with a Cauchy loss then refines all four parameters. The loss scale is the
+residual spread estimated robustly (MAD). A point is an outlier when its residual exceeds OUTLIER_SIGMAS
+robust standard deviations and also OUTLIER_FLOOR_FRACTION of the peak force: only gross errors are flagged,
+not a real damper's knee that the tanh form cannot follow. The reported parameters are then an ordinary
+least-squares fit to all inliers.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from estimator.damper import TanhCurve
+
+OUTLIER_SIGMAS = 5.0
+OUTLIER_FLOOR_FRACTION = 0.15
+MAD_TO_SIGMA = 1.4826
+MU_SPAN_RANGE = (0.2, 40.0)
+"""μ·max|v| searched: from a nearly linear damper to a sharp valve knee."""
+TRIM_KEEP = 0.8
+"""Share of points whose squared residuals make the trimmed cost (robust to up to 20% outliers)."""
+TUKEY_C = 4.685
+BETA_LIMIT = 4.0
+"""|β| beyond this makes tanh an exponential that can chase an outlier instead of describing a damper."""
+
+
+@dataclass(frozen=True)
+class TanhFit:
+    curve: TanhCurve
+    rms_N: float
+    """RMS residual over the inlier points."""
+    outliers: list[int]
+    """0-based indices of the points flagged as outliers."""
+
+    def as_dict(self) -> dict[str, object]:
+        return {**self.curve.as_dict(), "rms_N": self.rms_N, "outliers": self.outliers}
+
+
+def _robust_sigma(residual: np.ndarray) -> float:
+    return float(MAD_TO_SIGMA * np.median(np.abs(residual - np.median(residual))))
+
+
+def _model(params: np.ndarray, v: np.ndarray) -> np.ndarray:
+    c_s, kappa, mu, beta = params
+    return c_s * v + kappa * (np.tanh(mu * v + beta) - np.tanh(beta))
+
+
+def _trimmed_cost(residual: np.ndarray) -> float:
+    """Least-trimmed squares: the sum of the smallest TRIM_KEEP share of squared residuals."""
+    r2 = np.sort(residual**2)
+    return float(np.sum(r2[: max(3, int(TRIM_KEEP * r2.size))]))
+
+
+def _linear_fit(v: np.ndarray, f: np.ndarray, mu: float, beta: float) -> tuple[np.ndarray, float]:
+    """Best (c_s, κ) for fixed (μ, β) by Tukey-bisquare reweighted least squares; returns params and the
+    trimmed cost."""
+    basis = np.column_stack([v, np.tanh(mu * v + beta) - np.tanh(beta)])
+    weights = np.ones_like(f)
+    coef = np.zeros(2)
+    floor = 1e-9 * (np.max(np.abs(f)) + 1.0)
+    for _ in range(6):
+        coef, *_ = np.linalg.lstsq(basis * weights[:, None], f * weights, rcond=None)
+        r = f - basis @ coef
+        u = r / (TUKEY_C * max(_robust_sigma(r), floor))
+        weights = np.sqrt(np.clip(1.0 - u**2, 0.0, None) ** 2 + 1e-6)
+    r = f - basis @ coef
+    return np.array([coef[0], coef[1], mu, beta]), _trimmed_cost(r)
+
+
+def fit_tanh(velocity_m_s: np.ndarray, force_N: np.ndarray) -> TanhFit:
+    """Robust fit of f = c_s·v + κ·(tanh(μ·v + β) − tanh(β)) to curve points; needs at least 5 points."""
+    v = np.asarray(velocity_m_s, dtype=float)
+    f = np.asarray(force_N, dtype=float)
+    if v.shape != f.shape or v.ndim != 1:
+        raise ValueError("velocity and force must be 1-D arrays of the same length")
+    if v.size < 5:
+        raise ValueError(f"a tanh fit needs at least 5 points, got {v.size}")
+    if not (np.all(np.isfinite(v)) and np.all(np.isfinite(f))):
+        raise ValueError("curve points must be finite numbers")
+    span = float(np.max(np.abs(v)))
+    if span == 0:
+        raise ValueError("all velocities are zero")
+    best_params, best_cost = None, np.inf
+    for mu_span in np.geomspace(MU_SPAN_RANGE[0], MU_SPAN_RANGE[1], 16):
+        for beta in np.linspace(-BETA_LIMIT + 1, BETA_LIMIT - 1, 15):
+            params, cost = _linear_fit(v, f, mu_span / span, float(beta))
+            if cost < best_cost:
+                best_params, best_cost = params, cost
+    assert best_params is not None
+    residual = f - _model(best_params, v)
+    scale = max(_robust_sigma(residual), 1e-6 * (np.max(np.abs(f)) + 1.0))
+    lower = [-np.inf, -np.inf, MU_SPAN_RANGE[0] / 2 / span, -BETA_LIMIT]
+    upper = [np.inf, np.inf, MU_SPAN_RANGE[1] * 2 / span, BETA_LIMIT]
+    start = np.clip(best_params, np.array(lower) + 1e-12, np.array(upper) - 1e-12)
+    refined = least_squares(
+        lambda p: _model(p, v) - f,
+        start,
+        loss="cauchy",
+        f_scale=scale,
+        bounds=(lower, upper),
+        x_scale="jac",
+        max_nfev=2000,
+    )
+
+    def robust_cost(p: np.ndarray) -> float:
+        return _trimmed_cost(f - _model(p, v))
+
+    params = refined.x if robust_cost(refined.x) <= robust_cost(best_params) else best_params
+    residual = f - _model(params, v)
+    sigma = max(_robust_sigma(residual), 1e-12)
+    floor = OUTLIER_FLOOR_FRACTION * float(np.max(np.abs(f)))
+    flagged = np.abs(residual) > np.maximum(OUTLIER_SIGMAS * sigma, floor)
+    # final parameters: ordinary least squares on the inliers, so a curve that is not of the tanh form is
+    # described as a whole rather than by its best-fitting 80%
+    keep = ~flagged
+    final = least_squares(
+        lambda p: _model(p, v[keep]) - f[keep],
+        np.clip(params, np.array(lower) + 1e-12, np.array(upper) - 1e-12),
+        bounds=(lower, upper),
+        x_scale="jac",
+        max_nfev=2000,
+    )
+    params = final.x
+    inliers = (f - _model(params, v))[keep]
+    rms = float(np.sqrt(np.mean(inliers**2))) if inliers.size else float("nan")
+    curve = TanhCurve(*map(float, params))
+    return TanhFit(curve, rms, [int(i) for i in np.nonzero(flagged)[0]])

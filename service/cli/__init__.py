@@ -1,0 +1,1 @@
+"""The `shockbench` command line: one module per group of subcommands, registered in main.py."""

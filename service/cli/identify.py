@@ -1,0 +1,219 @@
+"""`shockbench identify`, `shockbench fit-tanh` and `shockbench demo`."""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from daq.formats.recording_csv import read_recording_csv, write_recording_csv
+from daq.formats.vehicle_file import read_vehicle, write_vehicle
+from estimator.identify import IdentificationResult, IdentifyOptions, Solver, identify
+from estimator.solvers.differential_evolution import DEProgress, DESettings
+from estimator.tanh_fit import fit_tanh
+from estimator.vehicle import TyreModel
+from service.cli.errors import CliError
+from service.plots import save_curve_plot
+from simulators.vehicle_sim import SimulationSettings, default_quarter_car, simulate, true_damper
+
+
+class _ProgressLine:
+    """DE progress on one terminal line (stderr), at most ~50 updates per run."""
+
+    def __init__(self) -> None:
+        self.last = -1
+
+    def __call__(self, p: DEProgress) -> None:
+        step = max(1, p.generations // 50)
+        if p.generation % step and p.generation != p.generations:
+            return
+        width = 30
+        done = int(width * p.generation / p.generations)
+        sys.stderr.write(
+            f"\rDE [{'#' * done}{'.' * (width - done)}] generation {p.generation}/{p.generations}"
+            f"  best objective {p.best_objective:.6g}"
+        )
+        if p.generation == p.generations:
+            sys.stderr.write("\n")
+        sys.stderr.flush()
+
+
+def summary(result: IdentificationResult) -> str:
+    """Readable report of an identification."""
+    m = result.model
+    lines = [
+        f"model: {m.vehicle.model.value}, tyre: {m.tyre_model.value}, solver: {result.solver.value}",
+        f"sprung mass {m.sprung_mass_kg:.1f} kg, unsprung mass {m.unsprung_mass_kg:.1f} kg per wheel"
+        + (f", roll inertia {m.roll_inertia_kg_m2:.1f} kg·m²" if m.roll_inertia_kg_m2 is not None else ""),
+        f"tyre damping C_d {m.tyre_damping_Ns_per_m:.0f} N·s/m",
+        f"objective GF {result.objective:.6g} "
+        f"(certified within {100 * result.certified_gap:.3g}% of the optimum)",
+    ]
+    if result.gap_m is not None:
+        lines.append(f"output-error gap {result.gap_m * 1e6:.1f} µm RMS (model driven by the measured plate)")
+    if result.refined_gap_m is not None:
+        lines.append(f"after DE refinement on the output error: {result.refined_gap_m * 1e6:.1f} µm RMS")
+    for c in result.curves:
+        t = c.tanh.curve
+        lines.append(
+            f"\n{c.corner} damper: tanh fit c_s={t.c_s:.1f} N·s/m κ={t.kappa:.1f} N μ={t.mu:.3f} s/m "
+            f"β={t.beta:.3f} (RMS {c.tanh.rms_N:.1f} N"
+            + (f", outlier points {c.tanh.outliers})" if c.tanh.outliers else ")")
+        )
+        lines.append("  velocity m/s   force N")
+        for v, f in zip(c.curve.velocity_m_s, c.curve.force_N, strict=True):
+            lines.append(f"  {v:+12.4f} {f:+9.1f}")
+    lines.append("\ninspection figures (for comparison with today's lanes):")
+    for corner, ins in result.inspection.items():
+        lines.append(
+            f"  {corner}: EUSAMA {ins.eusama_percent:.1f}%, minimum phase shift "
+            f"{ins.phase_shift_min_deg:.1f}°, damping ratio {ins.damping_ratio:.3f}"
+        )
+    if result.imbalance:
+        lines.append(
+            f"  left/right imbalance: EUSAMA {result.imbalance['eusama_difference_points']:.1f} points, "
+            f"damping {result.imbalance['damping_difference_percent']:.1f}%"
+        )
+    return "\n".join(lines)
+
+
+def options_from_args(args: argparse.Namespace) -> IdentifyOptions:
+    if args.points is not None and not 3 <= args.points <= 60:
+        raise CliError("--points must lie between 3 and 60")
+    de = DESettings(generations=args.generations, seed=args.seed)
+    return IdentifyOptions(
+        tyre=TyreModel(args.tyre),
+        points=args.points,
+        solver=Solver(args.solver),
+        de=de,
+        refine_output_error=args.refine,
+    )
+
+
+def run_identify(args: argparse.Namespace) -> int:
+    recording = read_recording_csv(args.recording)
+    vehicle = read_vehicle(args.vehicle)
+    options = options_from_args(args)
+    progress = _ProgressLine() if options.solver is Solver.DE and not args.json else None
+    result = identify(recording, vehicle, options, progress=progress)
+    plot = (
+        Path(args.plot)
+        if args.plot
+        else (None if args.json else Path(args.recording).with_suffix(".curve.png"))
+    )
+    if args.json:
+        print(json.dumps(result.to_json()))
+    else:
+        print(summary(result))
+    if plot is not None:
+        save_curve_plot(result, plot)
+        if not args.json:
+            print(f"\nplot: {plot}")
+    return 0
+
+
+def read_points_csv(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    if not path.is_file():
+        raise CliError(f"{path}: no such file")
+    with path.open(newline="") as handle:
+        rows = [r for r in csv.reader(line for line in handle if not line.lstrip().startswith("#")) if r]
+    if not rows or [c.strip() for c in rows[0]] != ["velocity_m_s", "force_N"]:
+        raise CliError(f"{path}:1: header must be velocity_m_s,force_N")
+    values = []
+    for line_no, row in enumerate(rows[1:], start=2):
+        try:
+            v, f = (float(x) for x in row)
+        except ValueError:
+            raise CliError(f"{path}:{line_no}: expected two numbers, got {','.join(row)!r}") from None
+        if not (np.isfinite(v) and np.isfinite(f)):
+            raise CliError(f"{path}:{line_no}: non-finite value")
+        values.append((v, f))
+    if len(values) < 5:
+        raise CliError(f"{path}: {len(values)} points; the tanh fit needs at least 5")
+    data = np.array(values)
+    return data[:, 0], data[:, 1]
+
+
+def run_fit_tanh(args: argparse.Namespace) -> int:
+    velocity, force = read_points_csv(Path(args.points_csv))
+    fit = fit_tanh(velocity, force)
+    if args.json:
+        print(json.dumps(fit.as_dict()))
+    else:
+        c = fit.curve
+        print(
+            f"f = c_s·v + κ·(tanh(μ·v + β) − tanh(β)) with c_s = {c.c_s:.4g} N·s/m, κ = {c.kappa:.4g} N, "
+            f"μ = {c.mu:.4g} s/m, β = {c.beta:.4g}; RMS {fit.rms_N:.3g} N"
+        )
+        print("outliers (0-based rows): " + (", ".join(map(str, fit.outliers)) if fit.outliers else "none"))
+    return 0
+
+
+def run_demo(args: argparse.Namespace) -> int:
+    """The main job on the embedded default bench: simulate a sweep, identify, print, plot."""
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    vehicle = default_quarter_car()
+    print(
+        f"simulating a {20:g} s sweep 0-20 Hz ±4 mm on the default quarter car "
+        f"(valve-model damper, Maxwell tyre, 5 µm sensor noise, seed {args.seed}) ..."
+    )
+    sim = simulate(vehicle, SimulationSettings(seed=args.seed))
+    write_recording_csv(out / "demo_recording.csv", sim.recording)
+    write_vehicle(out / "demo_vehicle.toml", vehicle.known)
+    result = identify(sim.recording, vehicle.known)
+    print(summary(result))
+    truth = true_damper(vehicle.dampers[0])
+    curve = result.curves[0].curve
+    dense = np.linspace(curve.velocity_m_s[0], curve.velocity_m_s[-1], 400)
+    error = curve.force(dense) - truth.force(dense)
+    peak = float(np.max(np.abs(truth.force(dense))))
+    print(
+        f"\nagainst the simulator's truth: curve RMS error "
+        f"{100 * np.sqrt(np.mean(error**2)) / peak:.2f}% of peak "
+        f"force, sprung mass error {100 * (result.model.sprung_mass_kg / vehicle.sprung_mass_kg - 1):+.2f}%"
+    )
+    plot = save_curve_plot(result, out / "demo_curve.png", truth={"single": truth})
+    print(f"wrote {out / 'demo_recording.csv'}, {out / 'demo_vehicle.toml'} and the plot {plot}")
+    return 0
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "identify",
+        help="identify the damper curve(s) from a recording",
+        description="Identify the damper force-velocity curve, masses and tyre damping.",
+    )
+    p.add_argument("recording", help="recording CSV")
+    p.add_argument("--vehicle", required=True, help="vehicle file (TOML)")
+    p.add_argument("--tyre", choices=[t.value for t in TyreModel], default="maxwell")
+    p.add_argument("--points", type=int, default=None, help="curve points (default 20, axle 10 per side)")
+    p.add_argument("--solver", choices=[s.value for s in Solver], default="exact")
+    p.add_argument("--generations", type=int, default=3000, help="DE generations (default 3000)")
+    p.add_argument("--seed", type=int, default=0, help="DE seed (default 0)")
+    p.add_argument("--refine", action="store_true", help="refine the curve by DE on the output-error gap")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.add_argument(
+        "--plot", default=None, help="plot file (.png or .svg); default REC.curve.png without --json"
+    )
+    p.set_defaults(handler=run_identify)
+
+    p = sub.add_parser(
+        "fit-tanh",
+        help="fit the tanh damper model to curve points",
+        description="Robust fit of eq (10) to velocity_m_s,force_N points; flags outliers.",
+    )
+    p.add_argument("points_csv", help="CSV with columns velocity_m_s,force_N")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(handler=run_fit_tanh)
+
+    p = sub.add_parser("demo", help="simulate a sweep on the embedded default bench and identify the curve")
+    p.add_argument(
+        "--out", default="out", help="folder for the recording, vehicle file and plot (default out)"
+    )
+    p.add_argument("--seed", type=int, default=0)
+    p.set_defaults(handler=run_demo)

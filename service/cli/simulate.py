@@ -1,0 +1,128 @@
+"""`shockbench simulate`: write a simulated recording of a sweep (the physics simulator on a vehicle file)."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from daq.formats.recording_csv import write_recording_csv
+from daq.formats.vehicle_file import read_vehicle
+from drivers.exciter.sweep import SweepSettings
+from estimator.vehicle import TyreModel
+from service.cli.errors import CliError
+from simulators.dampers import PAPER_TANH_MAXWELL, load_table, valve_damper
+from simulators.vehicle_sim import SensorModel, SimulatedVehicle, SimulationSettings, simulate
+
+DAMPER_CHOICES = "valve (embedded valve-model damper), paper-tanh (the paper's Table 3), or a CSV table path"
+
+
+def damper_from_option(value: str):
+    """--damper: 'valve', 'valve-weak', 'paper-tanh', or a velocity_m_s,force_N CSV file."""
+    if value == "valve":
+        return valve_damper()
+    if value == "valve-weak":
+        return valve_damper(
+            bleed_Ns_per_m=3000.0,
+            blowoff_extension_N=300.0,
+            blowoff_compression_N=180.0,
+            high_speed_extension_Ns_per_m=1200.0,
+            high_speed_compression_Ns_per_m=600.0,
+        )
+    if value == "paper-tanh":
+        return PAPER_TANH_MAXWELL
+    path = Path(value)
+    if not path.is_file():
+        raise CliError(f"--damper {value!r}: not {DAMPER_CHOICES}")
+    try:
+        return load_table(path)
+    except (KeyError, ValueError) as exc:
+        raise CliError(f"--damper {value}: not a velocity_m_s,force_N table ({exc})") from None
+
+
+def add_simulation_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--seconds", type=float, default=20.0, help="sweep duration in s (default 20)")
+    p.add_argument("--settle", type=float, default=1.0, help="recorded time after the sweep, s (default 1)")
+    p.add_argument("--seed", type=int, default=0, help="random seed of the sensor noise (default 0)")
+    p.add_argument(
+        "--noise-m", type=float, default=5e-6, help="sensor noise standard deviation, m (default 5e-6)"
+    )
+    p.add_argument("--resolution-m", type=float, default=1e-6, help="sensor resolution, m (default 1e-6)")
+    p.add_argument("--amplitude-m", type=float, default=0.004, help="plate amplitude, m (default 0.004)")
+    p.add_argument("--stop-hz", type=float, default=20.0, help="sweep end frequency, Hz (default 20)")
+    p.add_argument("--damper", default="valve", help=f"the damper: {DAMPER_CHOICES} (default valve)")
+    p.add_argument("--damper-right", default="valve-weak", help="axle: the right damper (default valve-weak)")
+    p.add_argument(
+        "--sprung-fraction", type=float, default=0.89, help="true sprung share of mass_kg (default 0.89)"
+    )
+    p.add_argument(
+        "--tyre-damping", type=float, default=1500.0, help="true tyre damping C_d, N·s/m (default 1500)"
+    )
+    p.add_argument(
+        "--tyre",
+        choices=[t.value for t in TyreModel],
+        default="maxwell",
+        help="true tyre model (default maxwell)",
+    )
+    p.add_argument(
+        "--roll-inertia", type=float, default=280.0, help="axle: true roll inertia, kg·m² (default 280)"
+    )
+
+
+def simulated_vehicle_from_args(args: argparse.Namespace) -> SimulatedVehicle:
+    known = read_vehicle(args.vehicle)
+    if not 0.3 < args.sprung_fraction < 1.0:
+        raise CliError("--sprung-fraction must lie between 0.3 and 1")
+    dampers = (damper_from_option(args.damper),)
+    if known.is_axle:
+        dampers = (*dampers, damper_from_option(args.damper_right))
+    return SimulatedVehicle(
+        known=known,
+        sprung_mass_kg=args.sprung_fraction * known.mass_kg,
+        dampers=dampers,
+        tyre_damping_Ns_per_m=args.tyre_damping,
+        tyre_model=TyreModel(args.tyre),
+        roll_inertia_kg_m2=args.roll_inertia,
+    )
+
+
+def settings_from_args(args: argparse.Namespace) -> SimulationSettings:
+    if args.seconds <= 0 or args.seconds > 600:
+        raise CliError("--seconds must lie in (0, 600]")
+    sweep = SweepSettings(
+        start_Hz=0.0, stop_Hz=args.stop_hz, amplitude_m=args.amplitude_m, duration_s=args.seconds
+    )
+    return SimulationSettings(
+        sweep=sweep,
+        settle_s=args.settle,
+        seed=args.seed,
+        sensor=SensorModel(noise_m=args.noise_m, resolution_m=args.resolution_m),
+    )
+
+
+def run_simulate(args: argparse.Namespace) -> int:
+    vehicle = simulated_vehicle_from_args(args)
+    result = simulate(vehicle, settings_from_args(args))
+    result.recording.metadata |= {
+        "vehicle": str(args.vehicle),
+        "sweep": f"0-{args.stop_hz} Hz, {args.amplitude_m * 1e3:g} mm, {args.seconds:g} s",
+        "damper": args.damper,
+    }
+    write_recording_csv(args.out, result.recording)
+    n = result.recording.time_s.size
+    print(
+        f"wrote {args.out}: {n} samples at {result.recording.sample_time_s * 1e3:g} ms "
+        f"({', '.join(result.recording.channels)})"
+    )
+    return 0
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "simulate",
+        help="simulate a sweep on the bench and write a recording CSV",
+        description="Simulate a sine sweep with the physics simulator and write a recording.",
+    )
+    p.add_argument("--vehicle", required=True, help="vehicle file (TOML)")
+    p.add_argument("--out", required=True, help="recording CSV to write")
+    add_simulation_options(p)
+    p.set_defaults(handler=run_simulate)
