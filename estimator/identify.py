@@ -112,7 +112,8 @@ class IdentificationResult:
             "objective": self.objective,
             "solver": self.solver.value,
             "certified_gap": self.certified_gap,
-            "gap_m": self.gap_m,
+            "gap_m": self.gap_m if self.gap_m is None or np.isfinite(self.gap_m) else None,
+            "gap_diverged": self.gap_m is not None and not np.isfinite(self.gap_m),
             "inspection": inspection,
             "filters": {
                 "kinematics_cutoff_Hz": self.system.filters.kinematics_cutoff_Hz,

@@ -33,6 +33,11 @@ REFINE_SETTINGS = DESettings(
 """DE settings of the output-error refinement: a short local search around the equation-error solution."""
 
 
+DIVERGED_GAP_M = 1.0
+"""A simulated response this far off the measurement (RMS, m) means the identified model is unstable, e.g. a
+negative tyre damping; the gap is then reported as infinite (JSON: null with gap_diverged = true)."""
+
+
 @dataclass(frozen=True)
 class IdentifiedModel:
     """The model as identified: curves (one, or left and right), masses, tyre damping, roll inertia."""
@@ -125,11 +130,14 @@ def simulate_identified(
     physics = model.physics(recording.sample_time_s, curves)
     if batch is not None:
         state0 = np.repeat(state0[:, None], batch, axis=1)
-    states = integrate_rk4(physics.derivatives, state0, recording.sample_time_s, plate, rate)
+    with np.errstate(over="ignore", invalid="ignore"):  # an unstable model is reported as a diverged gap
+        states = integrate_rk4(physics.derivatives, state0, recording.sample_time_s, plate, rate)
     outputs = physics.outputs(np.moveaxis(states, 0, 1))
     measured = {name: recording.channels[name] for name in outputs}
-    diffs = [outputs[n] - (measured[n][:, None] if batch is not None else measured[n]) for n in outputs]
-    gap = np.sqrt(np.mean(np.stack(diffs) ** 2, axis=(0, 1)))
+    with np.errstate(over="ignore", invalid="ignore"):
+        diffs = [outputs[n] - (measured[n][:, None] if batch is not None else measured[n]) for n in outputs]
+        gap = np.sqrt(np.mean(np.stack(diffs) ** 2, axis=(0, 1)))
+    gap = np.where(np.isfinite(gap) & (gap < DIVERGED_GAP_M), gap, np.inf)
     return OutputErrorResult(gap if batch is not None else float(gap), outputs, measured)
 
 

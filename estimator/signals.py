@@ -16,8 +16,10 @@ forward and backward) are used:
 How the cutoffs are chosen from the data: the noise floor is the median Welch power density in the top 40% of
 the band below Nyquist (laser noise is white there; the vehicle has no response); the signal band edge is
 the highest frequency where any channel's density is `SNR_DB` above that floor. The kinematics cutoff is
-1.5 × the band edge; the equation cutoff is 1.5 × the excitation's top frequency (found from the plate
-channels' spectrum). Both are clipped to [5 Hz, 0.4 × sample rate].
+KINEMATICS_CUTOFF_RATIO × the band edge; the equation cutoff is
+EQUATION_CUTOFF_RATIO × the excitation's top frequency (found from the plate
+channels' spectrum). Both are clipped to [5 Hz, 0.4 × sample rate]. Measured on a 0-20 Hz sweep (test
+test_signals.py): velocity and acceleration bias at 17-19.5 Hz about 0.03%.
 """
 
 from __future__ import annotations
@@ -28,6 +30,8 @@ import numpy as np
 from scipy import signal
 
 SNR_DB = 20.0
+KINEMATICS_CUTOFF_RATIO = 2.0
+EQUATION_CUTOFF_RATIO = 1.5
 FILTER_ORDER = 4
 MIN_CUTOFF_HZ = 5.0
 MAX_CUTOFF_FRACTION_OF_RATE = 0.4
@@ -76,8 +80,8 @@ def choose_filters(channels: dict[str, np.ndarray], sample_time_s: float) -> Fil
         noise_floor_m=float(np.sqrt(noise_density * fs / 2)),
         band_edge_Hz=band_edge,
         excitation_top_Hz=excitation_top,
-        kinematics_cutoff_Hz=float(np.clip(1.5 * band_edge, MIN_CUTOFF_HZ, hi_limit)),
-        equation_cutoff_Hz=float(np.clip(1.5 * excitation_top, MIN_CUTOFF_HZ, hi_limit)),
+        kinematics_cutoff_Hz=float(np.clip(KINEMATICS_CUTOFF_RATIO * band_edge, MIN_CUTOFF_HZ, hi_limit)),
+        equation_cutoff_Hz=float(np.clip(EQUATION_CUTOFF_RATIO * excitation_top, MIN_CUTOFF_HZ, hi_limit)),
     )
 
 
@@ -88,8 +92,14 @@ def lowpass(x: np.ndarray, cutoff_Hz: float, sample_time_s: float, axis: int = 0
 
 
 def derivative(x: np.ndarray, sample_time_s: float, axis: int = 0) -> np.ndarray:
-    """Central differences (second-order accurate; one-sided at the ends)."""
-    return np.gradient(x, sample_time_s, axis=axis)
+    """Fourth-order central differences, (−x[i+2] + 8·x[i+1] − 8·x[i−1] + x[i−2]) / 12Δt: at 20 Hz and
+    1 kHz the gain error is 8·10⁻⁶ (second-order differences lose 0.26%). Second order at the two samples
+    next to each end, one-sided at the ends."""
+    x = np.moveaxis(np.asarray(x, dtype=float), axis, 0)
+    out = np.gradient(x, sample_time_s, axis=0)
+    if x.shape[0] >= 5:
+        out[2:-2] = (-x[4:] + 8.0 * x[3:-1] - 8.0 * x[1:-3] + x[:-4]) / (12.0 * sample_time_s)
+    return np.moveaxis(out, 0, axis)
 
 
 @dataclass(frozen=True)
@@ -102,7 +112,7 @@ class Kinematics:
 
 
 def kinematics(x: np.ndarray, cutoff_Hz: float, sample_time_s: float) -> Kinematics:
-    """Low-pass, then differentiate twice by central differences."""
+    """Low-pass, then differentiate twice (fourth-order central differences)."""
     position = lowpass(x, cutoff_Hz, sample_time_s)
     velocity = derivative(position, sample_time_s)
     return Kinematics(position, velocity, derivative(velocity, sample_time_s))

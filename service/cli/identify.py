@@ -53,7 +53,10 @@ def summary(result: IdentificationResult) -> str:
         f"objective GF {result.objective:.6g} "
         f"(certified within {100 * result.certified_gap:.3g}% of the optimum)",
     ]
-    if result.gap_m is not None:
+    if result.gap_m is not None and not np.isfinite(result.gap_m):
+        lines.append("output-error gap: the identified model diverges when driven by the measured plate "
+                     "(unstable model; try another tyre model)")
+    elif result.gap_m is not None:
         lines.append(f"output-error gap {result.gap_m * 1e6:.1f} µm RMS (model driven by the measured plate)")
     if result.refined_gap_m is not None:
         lines.append(f"after DE refinement on the output error: {result.refined_gap_m * 1e6:.1f} µm RMS")
