@@ -152,6 +152,50 @@ def de_bounds(system: LinearResiduals, vehicle: VehicleParameters) -> np.ndarray
     return np.array(bounds)
 
 
+@dataclass(frozen=True)
+class DEProblem:
+    """The paper's objective as DE sees it: search box and the map from search coordinates to θ."""
+
+    system: LinearResiduals
+    transform: np.ndarray
+    centre: np.ndarray
+    bounds: np.ndarray
+
+    def theta(self, z: np.ndarray) -> np.ndarray:
+        return self.centre + z @ self.transform.T
+
+    def objective(self, z: np.ndarray) -> np.ndarray:
+        """GF in float64 for one point (p,) or a population (P, p) of search coordinates."""
+        return self.system.objective(self.theta(z))
+
+    def population_objective32(self) -> Callable[[np.ndarray], np.ndarray]:
+        """GF of a whole population in float32 (half the memory traffic; DE only ranks with it)."""
+        flat = np.ascontiguousarray(self.system.matrix.reshape(-1, self.system.n_params).T)
+        e, n, _ = self.system.matrix.shape
+        flat32 = (self.transform.T @ flat).astype(np.float32)
+        offset32 = (self.system.offset.reshape(-1) + self.centre @ flat).astype(np.float32)
+
+        def objective(z: np.ndarray) -> np.ndarray:
+            r = z.astype(np.float32) @ flat32
+            r += offset32
+            np.square(r, out=r)
+            norms = r.reshape(-1, e, n).sum(axis=1)
+            np.sqrt(norms, out=norms)
+            return norms.sum(axis=1, dtype=np.float64)
+
+        return objective
+
+
+def de_problem(system: LinearResiduals, vehicle: VehicleParameters, coordinates: Coordinates) -> DEProblem:
+    bounds = de_bounds(system, vehicle)
+    if coordinates is Coordinates.RAW:
+        return DEProblem(system, np.eye(system.n_params), np.zeros(system.n_params), bounds)
+    flat = system.matrix.reshape(-1, system.n_params)
+    chol = np.linalg.cholesky(flat.T @ flat)
+    half = np.abs(chol.T) @ ((bounds[:, 1] - bounds[:, 0]) / 2.0)  # the θ box seen in z, enclosed
+    return DEProblem(system, np.linalg.inv(chol.T), bounds.mean(axis=1), np.column_stack([-half, half]))
+
+
 def run_de(
     system: LinearResiduals,
     vehicle: VehicleParameters,
@@ -160,31 +204,12 @@ def run_de(
     cancel: threading.Event | None = None,
 ) -> tuple[np.ndarray, int, bool]:
     """DE on the paper's objective; returns θ, generations run, and whether it was cancelled."""
-    bounds = de_bounds(system, vehicle)
-    flat = np.ascontiguousarray(system.matrix.reshape(-1, system.n_params).T)
-    if options.de_coordinates is Coordinates.DECORRELATED:
-        chol = np.linalg.cholesky(flat @ flat.T)
-        transform = np.linalg.inv(chol.T)  # θ = centre + transform @ z
-        centre = bounds.mean(axis=1)
-        half = np.abs(chol.T) @ ((bounds[:, 1] - bounds[:, 0]) / 2.0)
-        search = np.column_stack([-half, half])
-    else:
-        transform, centre, search = np.eye(system.n_params), np.zeros(system.n_params), bounds
-    e, n, _ = system.matrix.shape
-    # the population is ranked in float32 (half the memory traffic); the winner is re-scored in float64
-    flat32 = (transform.T @ flat).astype(np.float32)
-    offset32 = (system.offset.reshape(-1) + centre @ flat).astype(np.float32)
-
-    def objective(z: np.ndarray) -> np.ndarray:
-        r = z.astype(np.float32) @ flat32
-        r += offset32
-        np.square(r, out=r)
-        norms = r.reshape(-1, e, n).sum(axis=1)
-        np.sqrt(norms, out=norms)
-        return norms.sum(axis=1, dtype=np.float64)
-
-    result = DifferentialEvolution(objective, search, options.de, progress, cancel).solve()
-    return centre + transform @ result.theta, result.generations, result.cancelled
+    problem = de_problem(system, vehicle, options.de_coordinates)
+    solver = DifferentialEvolution(
+        problem.population_objective32(), problem.bounds, options.de, progress, cancel
+    )
+    result = solver.solve()
+    return problem.theta(result.theta), result.generations, result.cancelled
 
 
 def _inspection(

@@ -58,20 +58,33 @@ def _trimmed_cost(residual: np.ndarray) -> float:
     return float(np.sum(r2[: max(3, int(TRIM_KEEP * r2.size))]))
 
 
-def _linear_fit(v: np.ndarray, f: np.ndarray, mu: float, beta: float) -> tuple[np.ndarray, float]:
-    """Best (c_s, κ) for fixed (μ, β) by Tukey-bisquare reweighted least squares; returns params and the
-    trimmed cost."""
-    basis = np.column_stack([v, np.tanh(mu * v + beta) - np.tanh(beta)])
-    weights = np.ones_like(f)
-    coef = np.zeros(2)
+def _linear_fits(
+    v: np.ndarray, f: np.ndarray, mu: np.ndarray, beta: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Best (c_s, κ) for each of K fixed (μ, β) pairs at once, by Tukey-bisquare reweighted least squares
+    (batched 2×2 normal equations). Returns params (K, 4) and the trimmed cost of each (K,)."""
+    basis = np.stack(
+        [
+            np.broadcast_to(v, (mu.size, v.size)),
+            np.tanh(mu[:, None] * v + beta[:, None]) - np.tanh(beta)[:, None],
+        ],
+        axis=2,
+    )  # (K, n, 2)
+    weights = np.ones((mu.size, v.size))
     floor = 1e-9 * (np.max(np.abs(f)) + 1.0)
+    ridge = 1e-12 * np.eye(2)
     for _ in range(6):
-        coef, *_ = np.linalg.lstsq(basis * weights[:, None], f * weights, rcond=None)
-        r = f - basis @ coef
-        u = r / (TUKEY_C * max(_robust_sigma(r), floor))
-        weights = np.sqrt(np.clip(1.0 - u**2, 0.0, None) ** 2 + 1e-6)
-    r = f - basis @ coef
-    return np.array([coef[0], coef[1], mu, beta]), _trimmed_cost(r)
+        weighted = basis * weights[:, :, None]
+        gram = np.einsum("kni,knj->kij", weighted, basis) + ridge
+        coef = np.linalg.solve(gram, np.einsum("kni,n->ki", weighted, f)[:, :, None])[:, :, 0]
+        r = f - np.einsum("kni,ki->kn", basis, coef)
+        centred = r - np.median(r, axis=1, keepdims=True)
+        sigma = np.maximum(MAD_TO_SIGMA * np.median(np.abs(centred), axis=1, keepdims=True), floor)
+        u = r / (TUKEY_C * sigma)
+        weights = np.clip(1.0 - u**2, 0.0, None) ** 2 + 1e-6
+    r2 = np.sort(r**2, axis=1)
+    cost = r2[:, : max(3, int(TRIM_KEEP * v.size))].sum(axis=1)
+    return np.column_stack([coef, mu, beta]), cost
 
 
 def fit_tanh(velocity_m_s: np.ndarray, force_N: np.ndarray) -> TanhFit:
@@ -87,13 +100,12 @@ def fit_tanh(velocity_m_s: np.ndarray, force_N: np.ndarray) -> TanhFit:
     span = float(np.max(np.abs(v)))
     if span == 0:
         raise ValueError("all velocities are zero")
-    best_params, best_cost = None, np.inf
-    for mu_span in np.geomspace(MU_SPAN_RANGE[0], MU_SPAN_RANGE[1], 16):
-        for beta in np.linspace(-BETA_LIMIT + 1, BETA_LIMIT - 1, 15):
-            params, cost = _linear_fit(v, f, mu_span / span, float(beta))
-            if cost < best_cost:
-                best_params, best_cost = params, cost
-    assert best_params is not None
+    mu_grid, beta_grid = np.meshgrid(
+        np.geomspace(MU_SPAN_RANGE[0], MU_SPAN_RANGE[1], 16) / span,
+        np.linspace(-BETA_LIMIT + 1, BETA_LIMIT - 1, 15),
+    )
+    candidates, costs = _linear_fits(v, f, mu_grid.ravel(), beta_grid.ravel())
+    best_params = candidates[int(np.argmin(costs))]
     residual = f - _model(best_params, v)
     scale = max(_robust_sigma(residual), 1e-6 * (np.max(np.abs(f)) + 1.0))
     lower = [-np.inf, -np.inf, MU_SPAN_RANGE[0] / 2 / span, -BETA_LIMIT]

@@ -15,6 +15,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.linalg
 
 from estimator.equations import LinearResiduals
 
@@ -54,6 +55,17 @@ def dual_lower_bound(system: LinearResiduals, theta: np.ndarray) -> float:
     return float(y @ c)
 
 
+def _weighted_least_squares(a: np.ndarray, c: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """argmin Σ w·(a z + c)²: normal equations by Cholesky (columns are pre-scaled, so they are well
+    conditioned); falls back to an SVD least-squares solve if the normal matrix is not positive definite."""
+    aw = a * weights[:, None]
+    try:
+        return scipy.linalg.cho_solve(scipy.linalg.cho_factor(a.T @ aw), -(aw.T @ c))
+    except np.linalg.LinAlgError:
+        root = np.sqrt(weights)
+        return np.linalg.lstsq(a * root[:, None], -c * root, rcond=None)[0]
+
+
 def solve_exact(
     system: LinearResiduals, tolerance: float = 1e-10, max_iterations: int = 500
 ) -> ExactSolution:
@@ -75,8 +87,7 @@ def solve_exact(
             break
         previous = objective
         floor = 1e-9 * max(float(np.median(norms)), 1e-300)
-        sqrt_w = np.repeat(1.0 / np.sqrt(np.maximum(norms, floor)), e)
-        z, *_ = np.linalg.lstsq(a_scaled * sqrt_w[:, None], -c * sqrt_w, rcond=None)
+        z = _weighted_least_squares(a_scaled, c, np.repeat(1.0 / np.maximum(norms, floor), e))
     theta = z / column_scale
     objective = float(system.objective(theta))
     return ExactSolution(theta, objective, dual_lower_bound(system, theta), iterations)

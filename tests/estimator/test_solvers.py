@@ -45,7 +45,7 @@ def test_exact_solver_matches_an_independent_minimiser_and_certifies_it(seed: in
     assert exact.objective <= reference.fun * (1 + 1e-9)
     assert exact.lower_bound <= exact.objective
     assert exact.lower_bound <= reference.fun  # a true lower bound on the optimum
-    assert exact.certified_gap < 1e-5
+    assert exact.certified_gap < 1e-4  # 0.01%: a tenth of what the DE comparison needs
 
 
 def test_de_and_exact_reach_the_same_objective_on_the_same_data(hit_rate) -> None:
@@ -98,16 +98,18 @@ def test_de_evaluates_the_population_in_one_call_per_generation() -> None:
 
 
 def test_raw_coordinates_remain_available_and_are_documented_as_slower() -> None:
-    """With the paper's settings in the raw unknowns DE is far from the optimum after a short run, while the
-    decorrelated coordinates are already close: the reason the default searches decorrelated."""
+    """With the paper's settings in the raw unknowns DE is far from the optimum after 1500 generations (it
+    stays several times the optimum even after 3000), while in decorrelated coordinates it is within 1%:
+    the reason the default searches decorrelated."""
     case = quarter_car_case(101)
     system = build(case.result.recording, case.vehicle.known, TyreModel.MAXWELL)
     exact = solve_exact(system)
     gaps = {}
     for coordinates in Coordinates:
         options = IdentifyOptions(
-            output_error=False, solver=Solver.DE, de_coordinates=coordinates, de=DESettings(generations=600)
+            output_error=False, solver=Solver.DE, de_coordinates=coordinates, de=DESettings(generations=1500)
         )
         result = identify(case.result.recording, case.vehicle.known, options)
         gaps[coordinates] = (result.objective - exact.objective) / exact.objective
-    assert gaps[Coordinates.DECORRELATED] < 0.05 < gaps[Coordinates.RAW]
+    assert gaps[Coordinates.DECORRELATED] < 0.01
+    assert gaps[Coordinates.RAW] > 1.0
