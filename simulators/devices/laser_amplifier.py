@@ -420,7 +420,38 @@ class AmplifierLine:
         return reply, False
 
 
-class PtyAmplifierServer(AmplifierLine):
+class _ServedLine(AmplifierLine):
+    """An amplifier line served by one thread: start/stop and the context manager; a transport says how to
+    wake its thread (_wake) and what to close (_release)."""
+
+    _thread: threading.Thread
+
+    def start(self) -> Self:
+        """Start serving (idempotent)."""
+        if not self._thread.is_alive():
+            self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        if self._thread.is_alive():
+            self._wake()
+            self._thread.join(timeout=2.0)
+        self._release()
+
+    def __enter__(self) -> Self:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    def _wake(self) -> None:
+        raise NotImplementedError
+
+    def _release(self) -> None:
+        raise NotImplementedError
+
+
+class PtyAmplifierServer(_ServedLine):
     """Amplifiers on a pseudo-terminal; the driver opens `port_path` (or `device_url(node)`) as a port."""
 
     def __init__(self, amplifiers: Mapping[int, SimulatedAmplifier]) -> None:
@@ -436,25 +467,13 @@ class PtyAmplifierServer(AmplifierLine):
     def device_url(self, node: int) -> str:
         return f"serial://{self.port_path}?node={node}"
 
-    def start(self) -> Self:
-        """Start serving (idempotent)."""
-        if not self._thread.is_alive():
-            self._thread.start()
-        return self
+    def _wake(self) -> None:
+        os.write(self._wake_w, b"x")
 
-    def stop(self) -> None:
-        if self._thread.is_alive():
-            os.write(self._wake_w, b"x")
-            self._thread.join(timeout=2.0)
+    def _release(self) -> None:
         for fd in (self._master, self._slave, self._wake_r, self._wake_w):
             with contextlib.suppress(OSError):
                 os.close(fd)
-
-    def __enter__(self) -> Self:
-        return self.start()
-
-    def __exit__(self, *exc: object) -> None:
-        self.stop()
 
     def _serve(self) -> None:
         buffer = b""
@@ -475,7 +494,7 @@ class PtyAmplifierServer(AmplifierLine):
                     os.write(self._master, reply)
 
 
-class TcpAmplifierServer(AmplifierLine):
+class TcpAmplifierServer(_ServedLine):
     """Amplifiers behind a TCP socket on 127.0.0.1 (a serial-to-Ethernet converter): the driver connects
     to `url` = socket://127.0.0.1:PORT. Several clients may connect; each is served in turn by one thread."""
 
@@ -498,25 +517,13 @@ class TcpAmplifierServer(AmplifierLine):
     def device_url(self, node: int) -> str:
         return f"{self.url}?node={node}"
 
-    def start(self) -> Self:
-        """Start serving (idempotent)."""
-        if not self._thread.is_alive():
-            self._thread.start()
-        return self
+    def _wake(self) -> None:
+        self._wake_w.send(b"x")
 
-    def stop(self) -> None:
-        if self._thread.is_alive():
-            self._wake_w.send(b"x")
-            self._thread.join(timeout=2.0)
+    def _release(self) -> None:
         for sock in (self._listener, self._wake_r, self._wake_w):
             sock.close()
         self._selector.close()
-
-    def __enter__(self) -> Self:
-        return self.start()
-
-    def __exit__(self, *exc: object) -> None:
-        self.stop()
 
     def _close_client(self, conn: socket.socket, buffers: dict[socket.socket, bytes]) -> None:
         self._selector.unregister(conn)
