@@ -193,6 +193,22 @@ VehiclePhysics = QuarterCarPhysics | AxlePhysics
 Derivatives = Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
 
 
+def rk4_step(
+    derivatives: Derivatives,
+    state: np.ndarray,
+    step_s: float,
+    plate_m: tuple[np.ndarray, np.ndarray, np.ndarray],
+    plate_rate_m_s: tuple[np.ndarray, np.ndarray, np.ndarray],
+) -> np.ndarray:
+    """One classical Runge-Kutta step; the plate motion is given at the start, middle and end of the step."""
+    (p0, pm, p1), (r0, rm, r1) = plate_m, plate_rate_m_s
+    k1 = derivatives(state, p0, r0)
+    k2 = derivatives(state + 0.5 * step_s * k1, pm, rm)
+    k3 = derivatives(state + 0.5 * step_s * k2, pm, rm)
+    k4 = derivatives(state + step_s * k3, p1, r1)
+    return state + (step_s / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+
+
 def integrate_rk4(
     derivatives: Derivatives,
     initial_state: np.ndarray,
@@ -220,10 +236,12 @@ def integrate_rk4(
     states[0] = state
     h = step_s
     for k in range(steps):
-        k1 = derivatives(state, at[..., k], rate_at[..., k])
-        k2 = derivatives(state + 0.5 * h * k1, mid[..., k], rate_mid[..., k])
-        k3 = derivatives(state + 0.5 * h * k2, mid[..., k], rate_mid[..., k])
-        k4 = derivatives(state + h * k3, at[..., k + 1], rate_at[..., k + 1])
-        state = state + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+        state = rk4_step(
+            derivatives,
+            state,
+            h,
+            (at[..., k], mid[..., k], at[..., k + 1]),
+            (rate_at[..., k], rate_mid[..., k], rate_at[..., k + 1]),
+        )
         states[k + 1] = state
     return states

@@ -14,6 +14,7 @@ import threading
 import numpy as np
 
 from drivers.exciter.sweep import SweepSettings
+from estimator.dynamics import rk4_step
 from simulators.coupling import PlateStatus, SimulatedClock
 from simulators.plate import SimulatedPlate
 from simulators.vehicle_sim import SimulatedVehicle
@@ -52,19 +53,11 @@ class VehicleBench:
 
     def _advance(self) -> None:
         now = self.clock.now_s()
-        f = self.physics.derivatives
         while self._time_s < now - 1e-12:
             h = min(self.step_s, now - self._time_s)
             t = self._time_s
-            p0, r0 = self._plate_at(t)
-            pm, rm = self._plate_at(t + h / 2)
-            p1, r1 = self._plate_at(t + h)
-            y = self._state
-            k1 = f(y, p0, r0)
-            k2 = f(y + 0.5 * h * k1, pm, rm)
-            k3 = f(y + 0.5 * h * k2, pm, rm)
-            k4 = f(y + h * k3, p1, r1)
-            self._state = y + (h / 6.0) * (k1 + 2 * k2 + 2 * k3 + k4)
+            (p0, r0), (pm, rm), (p1, r1) = self._plate_at(t), self._plate_at(t + h / 2), self._plate_at(t + h)
+            self._state = rk4_step(self.physics.derivatives, self._state, h, (p0, pm, p1), (r0, rm, r1))
             self._time_s = t + h
         self._refresh_outputs()
 
