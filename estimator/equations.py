@@ -22,7 +22,7 @@ from scipy import signal as sps
 
 from estimator.damper import hat_basis
 from estimator.recording import AXLE_CHANNELS, QUARTER_CAR_CHANNELS, Recording
-from estimator.signals import FilterChoice, choose_filters, derivative, kinematics, lowpass
+from estimator.signals import FilterChoice, Kinematics, choose_filters, derivative, kinematics, lowpass
 from estimator.vehicle import TyreModel, VehicleParameters
 
 EDGE_TRIM_S = 0.25
@@ -49,6 +49,9 @@ class LinearResiduals:
     """Indices of the recording's samples used in the objective."""
     velocity_m_s: list[np.ndarray]
     """Suspension velocity at the selected samples, per damper (what the curve is evaluated at)."""
+    kinematics: dict[str, Kinematics] = field(default_factory=dict, repr=False)
+    """Every channel low-passed at the kinematics cutoff (full length): what output error and the inspection
+    figures reuse instead of filtering the recording again."""
     _flat: np.ndarray | None = field(default=None, repr=False)
     _flat_offset: np.ndarray | None = field(default=None, repr=False)
 
@@ -66,13 +69,22 @@ class LinearResiduals:
         if self._flat is None:
             self._flat = np.ascontiguousarray(self.matrix.reshape(e * n, p).T)
             self._flat_offset = self.offset.reshape(e * n)
-        r = np.atleast_2d(theta) @ self._flat  # (P, e·n): one matrix product for the whole population
-        r += self._flat_offset
-        np.square(r, out=r)
-        norms = r.reshape(-1, e, n).sum(axis=1)
-        np.sqrt(norms, out=norms)
-        gf = norms.sum(axis=1)
+        gf = population_sum_of_norms(np.atleast_2d(theta), self._flat, self._flat_offset, e)
         return gf if np.ndim(theta) == 2 else gf[0]
+
+
+def population_sum_of_norms(
+    population: np.ndarray, flat: np.ndarray, flat_offset: np.ndarray, equations: int
+) -> np.ndarray:
+    """Σ_i sqrt(Σ_e r_ei²) for every row of `population` (P, p), where the residuals are
+    population @ flat + flat_offset laid out equation-major, shape (P, e·n): one matrix product for the whole
+    population, then squares and roots in place. Runs in the arrays' precision; sums in float64."""
+    r = population @ flat
+    r += flat_offset
+    np.square(r, out=r)
+    norms = r.reshape(r.shape[0], equations, -1).sum(axis=1)
+    np.sqrt(norms, out=norms)
+    return norms.sum(axis=1, dtype=np.float64)
 
 
 def tyre_regressor(rate_m_s: np.ndarray, tyre: TyreModel, theta: float) -> np.ndarray | None:
@@ -182,6 +194,7 @@ def build_quarter_car(
         filters=filters,
         sample_index=index,
         velocity_m_s=[v[index]],
+        kinematics=cols.kin,
     )
 
 
@@ -269,6 +282,7 @@ def build_axle(
         filters=filters,
         sample_index=index,
         velocity_m_s=vel,
+        kinematics=cols.kin,
     )
 
 

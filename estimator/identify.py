@@ -17,11 +17,16 @@ from enum import StrEnum
 import numpy as np
 
 from estimator.damper import PiecewiseLinearCurve
-from estimator.equations import LinearResiduals, build, tyre_damping_from_coefficient, tyre_regressor
+from estimator.equations import (
+    LinearResiduals,
+    build,
+    population_sum_of_norms,
+    tyre_damping_from_coefficient,
+    tyre_regressor,
+)
 from estimator.inspection import CornerInspection, corner_inspection, imbalance
 from estimator.output_error import IdentifiedModel, refine_on_output_error, simulate_identified
 from estimator.recording import Recording
-from estimator.signals import kinematics
 from estimator.solvers.differential_evolution import DEProgress, DESettings, DifferentialEvolution
 from estimator.solvers.exact import solve_exact
 from estimator.tanh_fit import TanhFit, fit_tanh
@@ -171,17 +176,12 @@ class DEProblem:
     def population_objective32(self) -> Callable[[np.ndarray], np.ndarray]:
         """GF of a whole population in float32 (half the memory traffic; DE only ranks with it)."""
         flat = np.ascontiguousarray(self.system.matrix.reshape(-1, self.system.n_params).T)
-        e, n, _ = self.system.matrix.shape
+        equations = self.system.matrix.shape[0]
         flat32 = (self.transform.T @ flat).astype(np.float32)
         offset32 = (self.system.offset.reshape(-1) + self.centre @ flat).astype(np.float32)
 
         def objective(z: np.ndarray) -> np.ndarray:
-            r = z.astype(np.float32) @ flat32
-            r += offset32
-            np.square(r, out=r)
-            norms = r.reshape(-1, e, n).sum(axis=1)
-            np.sqrt(norms, out=norms)
-            return norms.sum(axis=1, dtype=np.float64)
+            return population_sum_of_norms(z.astype(np.float32), flat32, offset32, equations)
 
         return objective
 
@@ -217,8 +217,7 @@ def _inspection(
 ) -> tuple[dict[str, CornerInspection], dict[str, float] | None]:
     v = model.vehicle
     dt = recording.sample_time_s
-    cut = system.filters.kinematics_cutoff_Hz
-    kin = {name: kinematics(x, cut, dt) for name, x in recording.channels.items()}
+    kin = system.kinematics
     sides = [("single", "")] if not v.is_axle else [("left", "_l"), ("right", "_r")]
     sprung_per_corner = model.sprung_mass_kg / len(sides)
     result: dict[str, CornerInspection] = {}
@@ -279,10 +278,10 @@ def identify(
         ),
         roll_inertia_kg_m2=float(theta[1]) if vehicle.is_axle else None,
     )
-    gap = simulate_identified(model, recording, system.filters).gap_m if options.output_error else None
+    gap = simulate_identified(model, recording, system.kinematics).gap_m if options.output_error else None
     refined_gap = None
     if options.refine_output_error:
-        model, refined_gap = refine_on_output_error(model, recording, system.filters, cancel=cancel)
+        model, refined_gap = refine_on_output_error(model, recording, system.kinematics, cancel=cancel)
     inspection, balance = _inspection(model, recording, system, coefficient)
     corners = ["single"] if not vehicle.is_axle else ["left", "right"]
     fitted = [

@@ -11,7 +11,7 @@ once (one column per candidate), so a generation costs one simulation of array o
 from __future__ import annotations
 
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -19,7 +19,7 @@ import numpy as np
 from estimator.damper import CurveBatch, PiecewiseLinearCurve
 from estimator.dynamics import AxlePhysics, CornerPhysics, QuarterCarPhysics, integrate_rk4
 from estimator.recording import Recording
-from estimator.signals import FilterChoice, kinematics
+from estimator.signals import Kinematics
 from estimator.solvers.differential_evolution import DEProgress, DESettings, DifferentialEvolution
 from estimator.vehicle import TyreModel, VehicleParameters
 
@@ -88,10 +88,8 @@ class OutputErrorResult:
     measured: dict[str, np.ndarray]
 
 
-def _measured_drive(recording: Recording, filters: FilterChoice, vehicle: VehicleParameters):
-    """Low-passed kinematics of every channel, the plate drive (position, rate) and the initial state."""
-    dt = recording.sample_time_s
-    kin = {n: kinematics(x, filters.kinematics_cutoff_Hz, dt) for n, x in recording.channels.items()}
+def _measured_drive(kin: Mapping[str, Kinematics], vehicle: VehicleParameters):
+    """The plate drive (position, rate) and the initial state, from the low-passed measured channels."""
 
     def at0(name: str) -> tuple[float, float]:
         return float(kin[name].position_m[0]), float(kin[name].velocity_m_s[0])
@@ -121,12 +119,13 @@ def _measured_drive(recording: Recording, filters: FilterChoice, vehicle: Vehicl
 def simulate_identified(
     model: IdentifiedModel,
     recording: Recording,
-    filters: FilterChoice,
+    kinematics: Mapping[str, Kinematics],
     curves: tuple[object, ...] | None = None,
     batch: int | None = None,
 ) -> OutputErrorResult:
-    """Drive the model with the measured plate; `curves` may be CurveBatch objects with `batch` columns."""
-    plate, rate, state0 = _measured_drive(recording, filters, model.vehicle)
+    """Drive the model with the measured plate; `kinematics` are the recording's channels low-passed (as
+    LinearResiduals.kinematics holds them); `curves` may be CurveBatch objects with `batch` columns."""
+    plate, rate, state0 = _measured_drive(kinematics, model.vehicle)
     physics = model.physics(recording.sample_time_s, curves)
     if batch is not None:
         state0 = np.repeat(state0[:, None], batch, axis=1)
@@ -144,7 +143,7 @@ def simulate_identified(
 def refine_on_output_error(
     model: IdentifiedModel,
     recording: Recording,
-    filters: FilterChoice,
+    kinematics: Mapping[str, Kinematics],
     settings: DESettings = REFINE_SETTINGS,
     spread: float = 0.15,
     callback: Callable[[DEProgress], bool | None] | None = None,
@@ -169,7 +168,7 @@ def refine_on_output_error(
             curves.append(CurveBatch(grid, population[:, offset : offset + size].T))
             offset += size
         candidate = replace(model, tyre_damping_Ns_per_m=population[:, -1])
-        return simulate_identified(candidate, recording, filters, tuple(curves), batch=p).gap_m
+        return simulate_identified(candidate, recording, kinematics, tuple(curves), batch=p).gap_m
 
     result = DifferentialEvolution(gaps, bounds, settings, callback, cancel, initial=start).solve()
     theta, offset, refined_curves = result.theta, 0, []
