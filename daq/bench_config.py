@@ -22,6 +22,8 @@ One TOML file per bench, read with `load_bench_config` and written with `write_b
     head = "ZX-LD100"
     sign = 1                             # optional, default 1
     zero_m = 0.0                         # optional, default 0.0
+    sample_period_s = 0.001              # optional: the amplifier samples on its own clock (see below)
+    buffer_length = 256                  # optional, with sample_period_s
 
     [[lasers]]
     name = "wheel"
@@ -45,7 +47,11 @@ Keys:
     laser). head: "ZX-LD40" (40 +- 10 mm) or "ZX-LD100" (100 +- 40 mm). sign: +1 when the head looks down
     on its target (an upward move reads positive), -1 when it looks up. zero_m: what the amplifier reads
     with the channel at its static position. The channel displacement is sign * (reading_m - zero_m)
-    (`LaserConfig.to_channel_m`).
+    (`LaserConfig.to_channel_m`). sample_period_s: give it when the amplifier samples on its own clock
+    into a buffer with a sample counter (drivers.compowayf.amplifier.streaming_measured_config): samples
+    then carry device timestamps and none is missed between reads. Leave it out for an amplifier that only
+    holds its present value: it is polled as fast as the line allows and stamped with host time, and the
+    recording states the rate achieved. buffer_length: the samples such an amplifier keeps (default 256).
 
 Errors are `BenchConfigError` (a ValueError) with one line naming the file, the line where it is known
 (TOML syntax errors and keys are located; a missing key points at its table) and the table and key, e.g.
@@ -66,6 +72,7 @@ from typing import Any, TypeVar
 from urllib.parse import urlsplit
 
 from daq.formats.atomic import atomic_write
+from drivers.compowayf.amplifier import STREAM_BUFFER_LENGTH, AmplifierConfig, streaming_measured_config
 from drivers.compowayf.errors import DeviceUrlError
 from drivers.compowayf.urls import parse_device_url
 from drivers.exciter.envelope import DEFAULT_HARD_LIMITS, EnvelopeLimits, SafetyEnvelope
@@ -78,6 +85,8 @@ LASER_HEADS = ("ZX-LD40", "ZX-LD100")
 """Head models a laser may name (catalogue data in simulators/devices/sensor_heads.py)."""
 
 LASER_URL_SCHEMES = ("serial", "socket", "rfc2217", "loop")
+MAX_BUFFER_LENGTH = 1000
+"""Longest sample buffer a streaming amplifier may declare (its reply must fit one CompoWay/F frame)."""
 """Schemes a laser URL may use (besides a plain device path); all but serial are pyserial URL handlers."""
 
 CHANNELS: dict[ModelKind, tuple[str, ...]] = {
@@ -106,9 +115,22 @@ class LaserConfig:
     head: str
     sign: int = 1
     zero_m: float = 0.0
+    sample_period_s: float | None = None
+    buffer_length: int = STREAM_BUFFER_LENGTH
 
     def __post_init__(self) -> None:
         _check_name(self.name)
+        if self.sample_period_s is not None:
+            if not (math.isfinite(self.sample_period_s) and 0 < self.sample_period_s <= 1.0):
+                raise BenchConfigError(
+                    f"sample_period_s must be in (0, 1] s, got {self.sample_period_s!r}", ("sample_period_s",)
+                )
+            object.__setattr__(self, "sample_period_s", float(self.sample_period_s))
+        if type(self.buffer_length) is not int or not 1 <= self.buffer_length <= MAX_BUFFER_LENGTH:
+            raise BenchConfigError(
+                f"buffer_length must be an integer 1..{MAX_BUFFER_LENGTH}, got {self.buffer_length!r}",
+                ("buffer_length",),
+            )
         if self.head not in LASER_HEADS:
             raise BenchConfigError(
                 f"unknown head {self.head!r}; expected one of {list(LASER_HEADS)}", ("head",)
@@ -136,6 +158,12 @@ class LaserConfig:
         if parsed.node is None:
             raise BenchConfigError(f"laser URL {self.url!r} names no node: add ?node=N", ("url",))
         return parsed.pyserial_url, parsed.node
+
+    def amplifier_config(self) -> AmplifierConfig:
+        """How the driver reads this amplifier: the streaming layout when it samples on its own clock."""
+        if self.sample_period_s is None:
+            return AmplifierConfig()
+        return AmplifierConfig(measured=streaming_measured_config(self.sample_period_s, self.buffer_length))
 
     def to_channel_m(self, reading_m: float) -> float:
         """Channel displacement (upward positive, from the static position) for an amplifier reading."""
@@ -249,6 +277,8 @@ _TABLE_KEYS: dict[str, dict[str, tuple[type, ...]]] = {
         "head": (str,),
         "sign": (int,),
         "zero_m": (int, float),
+        "sample_period_s": (int, float),
+        "buffer_length": (int,),
     },
 }
 _REQUIRED = {
@@ -417,7 +447,11 @@ def dump_bench_config(config: BenchConfig, comment: str = "") -> str:
         out += ["", "[bench.envelope]"] + [_pair(f.name, getattr(limits, f.name)) for f in fields(limits)]
     out += ["", "[exciter]", _pair("name", config.exciter.name), _pair("url", config.exciter.url)]
     for laser in config.lasers:
-        out += ["", "[[lasers]]"] + [_pair(f.name, getattr(laser, f.name)) for f in fields(LaserConfig)]
+        out += ["", "[[lasers]]"] + [
+            _pair(f.name, getattr(laser, f.name))
+            for f in fields(LaserConfig)
+            if getattr(laser, f.name) is not None
+        ]
     return "\n".join(out) + "\n"
 
 

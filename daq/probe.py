@@ -92,7 +92,7 @@ def _probe_laser_line(lasers: list[LaserConfig], timeout_s: float) -> list[Devic
 
 def probe_laser(laser: LaserConfig, port: CompowayFPort) -> DeviceReport:
     """Model, status and one position of the amplifier `laser` names, on an open `port`."""
-    amplifier = ZxlAmplifier(port, laser.device()[1])
+    amplifier = ZxlAmplifier(port, laser.device()[1], laser.amplifier_config())
     try:
         model = amplifier.read_model()
         status = amplifier.read_status()

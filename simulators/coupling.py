@@ -66,9 +66,10 @@ class BenchPhysics(Protocol):
 
     clock: SimulatedClock
 
-    def position_m(self, channel: str) -> float:
+    def position_m(self, channel: str, at_s: float | None = None) -> float:
         """Displacement of a named channel ('x_s', 'x_t', 'x_r', or with '_l'/'_r' for an axle) in metres,
-        upward positive, from the static position. Sensor noise is added by the amplifier, not here."""
+        upward positive, from the static position, now or at a recent past instant at_s (s; what a device
+        sampling on its own clock needs). Sensor noise is added by the amplifier, not here."""
         ...
 
     def start_sweep(self, settings: SweepSettings) -> None: ...

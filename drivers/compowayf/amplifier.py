@@ -71,6 +71,12 @@ class MeasuredValueConfig:
     count_unit: metres per count (signed 32-bit counts for double-word areas); OMRON's ZS/ZX-L send nm.
     out_of_range_counts: count values that mean "no valid measurement" (OMRON uses 7FFFFFFx-style
         markers); the first one is what the simulator sends.
+    sample_period_s: the amplifier's own sampling period when it samples on its own clock and buffers
+        (None: it holds only the value at the moment of the read, which the host then timestamps).
+    counter_address: with sample_period_s, the address of a sample counter (samples taken since the
+        amplifier started, modulo 2**31) directly before the newest sample (address - 1), so that one
+        read returns the counter and the newest samples together: the counter is the device clock
+        (time = counter * sample_period_s) and tells how many samples are new since the last read.
     """
 
     area: MeasuredArea = MeasuredArea.VARIABLE
@@ -79,10 +85,24 @@ class MeasuredValueConfig:
     buffer_length: int = 1
     count_unit: CountUnit = CountUnit.NANOMETRE
     out_of_range_counts: tuple[int, ...] = (0x7FFFFFFF,)
+    sample_period_s: float | None = None
+    counter_address: int | None = None
 
     def __post_init__(self) -> None:
         if self.buffer_length < 1:
             raise ValueError(f"buffer_length must be >= 1, got {self.buffer_length}")
+        if self.sample_period_s is not None and not (
+            math.isfinite(self.sample_period_s) and self.sample_period_s > 0
+        ):
+            raise ValueError(f"sample_period_s must be positive, got {self.sample_period_s}")
+        if self.counter_address is not None:
+            if self.sample_period_s is None:
+                raise ValueError("a sample counter needs the sample_period_s it counts")
+            if self.counter_address != self.address - 1:
+                raise ValueError(
+                    f"the sample counter must sit directly before the newest sample (address "
+                    f"0x{self.address - 1:04X}), got 0x{self.counter_address:04X}"
+                )
         if not self.out_of_range_counts:
             raise ValueError("at least one out-of-range marker is needed")
         type_max = 0xFF if self.area is MeasuredArea.VARIABLE else 0xFFFF
@@ -109,6 +129,42 @@ class MeasuredValueConfig:
 
     def m_to_counts(self, value_m: float) -> int:
         return round(value_m / self.count_unit.metres)
+
+    @property
+    def is_streaming(self) -> bool:
+        """True when the amplifier samples on its own clock and exposes a sample counter."""
+        return self.counter_address is not None
+
+
+COUNTER_MODULUS = 2**31
+"""The sample counter wraps here (a non-negative signed double word)."""
+
+STREAM_BUFFER_LENGTH = 256
+"""Samples a streaming amplifier keeps by default: 256 ms at 1 kHz, so a host may pause that long between
+reads without losing a sample."""
+
+
+def streaming_measured_config(
+    sample_period_s: float = 0.001, buffer_length: int = STREAM_BUFFER_LENGTH
+) -> MeasuredValueConfig:
+    """The layout of an amplifier that samples on its own clock: the sample counter at variable area C0
+    address 0000, the newest sample at 0001, older ones after it. An assumed layout (no ZX-L manual was at
+    hand); the simulated amplifier serves exactly this."""
+    return MeasuredValueConfig(
+        address=0x0001, buffer_length=buffer_length, sample_period_s=sample_period_s, counter_address=0x0000
+    )
+
+
+@dataclass(frozen=True)
+class StreamRead:
+    """One read of a streaming amplifier: the sample counter and the newest samples.
+
+    counter: samples taken since the amplifier started, modulo COUNTER_MODULUS; the newest sample is
+        number counter - 1. counts: raw counts, newest first (markers included).
+    """
+
+    counter: int
+    counts: list[int]
 
 
 @dataclass(frozen=True)
@@ -245,6 +301,30 @@ class ZxlAmplifier:
                 values = self.read_parameter_area(measured.area_type, measured.address, count)
             ok = True
             return values
+        finally:
+            self._rate.record(started_s, self._rate.clock(), count, ok)
+
+    def read_stream(self, count: int) -> StreamRead:
+        """Counter and newest `count` samples in one request (streaming layout only, count <= buffer_length).
+        Timed for read_rate() like read_counts."""
+        measured = self.config.measured
+        if measured.counter_address is None:
+            raise ValueError("this amplifier's configuration has no sample counter (not a streaming layout)")
+        if not 1 <= count <= measured.buffer_length:
+            raise ValueError(f"count must be 1..{measured.buffer_length} (buffer_length), got {count}")
+        started_s = self._rate.clock()
+        ok = False
+        try:
+            if measured.area is MeasuredArea.VARIABLE:
+                values = self.read_variable_area(measured.area_type, measured.counter_address, count + 1)
+            else:
+                values = self.read_parameter_area(measured.area_type, measured.counter_address, count + 1)
+            if not 0 <= values[0] < COUNTER_MODULUS:
+                raise UnexpectedResponseError(
+                    f"node {self.node:02d}: sample counter {values[0]} out of range"
+                )
+            ok = True
+            return StreamRead(values[0], values[1:])
         finally:
             self._rate.record(started_s, self._rate.clock(), count, ok)
 

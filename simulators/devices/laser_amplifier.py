@@ -12,6 +12,13 @@ already taken at that simulated time) and pushes it into a ring buffer of `buffe
 the configured address, older ones at the following addresses. Tests fill the buffer at a chosen rate by
 advancing the clock and calling `sample()`; a buffer not yet full repeats its oldest sample.
 
+Streaming amplifiers (a configuration with `sample_period_s` and a sample counter, see
+drivers.compowayf.amplifier.streaming_measured_config) sample on their own clock instead: sample k is taken
+at origin + k * sample_period_s, where origin is the bench time at which the amplifier was created. On
+every read (and every `sample()`), the samples due since the last one are taken, at their own instants
+(the bench keeps a short history of its motion for this), and the counter in front of the buffer says how
+many have been taken in all. Samples older than the buffer are counted but never measured.
+
 Faults (`inject_fault`, `clear_faults`), switchable at run time, for one node or all, for the next `count`
 replies or until cleared: no reply, garbage bytes, bad BCC, a given end code, a given response code,
 out-of-range readings, an incomplete reply (no ETX/BCC) and, on TCP, a dropped connection (on a pty that
@@ -33,7 +40,7 @@ from dataclasses import dataclass
 from enum import StrEnum
 from typing import Self
 
-from drivers.compowayf.amplifier import AmplifierConfig, MeasuredArea
+from drivers.compowayf.amplifier import COUNTER_MODULUS, AmplifierConfig, MeasuredArea
 from drivers.compowayf.codec import (
     STX,
     CommandFrame,
@@ -121,6 +128,8 @@ class SimulatedAmplifier:
         self._zero_m = 0.0
         self._zero_active = False
         self._last_out_of_range = False
+        self._origin_s = head.bench.clock.now_s()
+        self._samples_taken = 0
 
     @classmethod
     def for_channel(
@@ -160,15 +169,39 @@ class SimulatedAmplifier:
             return measured.out_of_range_marker
         return counts
 
+    def _take(self, at_s: float | None = None) -> None:
+        reading_m = self.head.measure_m(at_s)
+        self._last_reading_m = reading_m
+        self._last_out_of_range = reading_m is None
+        self._buffer.appendleft(self._counts_for(reading_m))
+
+    def _catch_up(self, now_s: float) -> None:
+        """Streaming: take every sample due by now_s on the amplifier's own clock (only the ones the buffer
+        can hold are measured; older ones are counted)."""
+        period_s = self.config.measured.sample_period_s
+        assert period_s is not None
+        due = int((now_s - self._origin_s) / period_s + 1e-9) + 1
+        first = max(self._samples_taken, due - self.config.measured.buffer_length)
+        for index in range(first, due):
+            self._take(self._origin_s + index * period_s)
+        self._samples_taken = max(self._samples_taken, due)
+
+    @property
+    def samples_taken(self) -> int:
+        """Streaming: samples taken since the amplifier was created (the device counter, unwrapped)."""
+        with self._lock:
+            return self._samples_taken
+
     def sample(self) -> int:
-        """Take a sample now (unless one was taken at this simulated time) and return the newest counts."""
+        """Take a sample now (unless one was taken at this simulated time) and return the newest counts.
+        A streaming amplifier takes every sample due on its own clock instead."""
         now_s = self.head.bench.clock.now_s()
         with self._lock:
+            if self.config.measured.is_streaming:
+                self._catch_up(now_s)
+                return self._buffer[0]
             if self._last_sample_s != now_s or not self._buffer:
-                reading_m = self.head.measure_m()
-                self._last_reading_m = reading_m
-                self._last_out_of_range = reading_m is None
-                self._buffer.appendleft(self._counts_for(reading_m))
+                self._take()
                 self._last_sample_s = now_s
             return self._buffer[0]
 
@@ -277,6 +310,22 @@ class SimulatedAmplifier:
         self, area: MeasuredArea, area_type: int, start: int, count: int, out_of_range: bool
     ) -> list[int]:
         measured = self.config.measured
+        if (
+            measured.counter_address is not None
+            and start == measured.counter_address
+            and self._measured_slice(area, area_type, measured.address) is not None
+        ):
+            if count - 1 > measured.buffer_length:
+                raise _RefusalError("1104")
+            with self._lock:  # counter and samples from one instant
+                samples = (
+                    self._read(area, area_type, measured.address, count - 1, out_of_range)
+                    if count > 1
+                    else []
+                )
+                if count == 1:
+                    self.sample()
+                return [self._samples_taken % COUNTER_MODULUS, *samples]
         offset = self._measured_slice(area, area_type, start)
         if offset is not None:
             if offset + count > measured.buffer_length:

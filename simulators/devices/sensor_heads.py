@@ -78,9 +78,13 @@ class SimulatedHead:
         self._rng = rng if rng is not None else np.random.default_rng(seed)
         self._lock = threading.Lock()
 
-    def true_deviation_m(self) -> float:
-        """Noise-free deviation from the measuring centre, positive toward the head, at the current time."""
-        return self.static_offset_m + self.sign * self.bench.position_m(self.channel)
+    def true_deviation_m(self, at_s: float | None = None) -> float:
+        """Noise-free deviation from the measuring centre, positive toward the head, now or at the recent
+        past instant at_s (s)."""
+        position_m = (
+            self.bench.position_m(self.channel) if at_s is None else self.bench.position_m(self.channel, at_s)
+        )
+        return self.static_offset_m + self.sign * position_m
 
     def in_range(self, deviation_m: float) -> bool:
         return abs(deviation_m) <= self.model.half_range_m
@@ -89,9 +93,10 @@ class SimulatedHead:
         step = self.model.resolution_m
         return round(value_m / step) * step
 
-    def measure_m(self) -> float | None:
-        """One reading: deviation + Gaussian noise, quantised to the resolution; None when out of range."""
-        deviation_m = self.true_deviation_m()
+    def measure_m(self, at_s: float | None = None) -> float | None:
+        """One reading (now, or at the past instant at_s): deviation + Gaussian noise, quantised to the
+        resolution; None when out of range."""
+        deviation_m = self.true_deviation_m(at_s)
         if not self.in_range(deviation_m):
             return None
         if self.noise_sigma_m > 0:
