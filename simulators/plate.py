@@ -78,6 +78,11 @@ class SimulatedPlate:
         with self._lock:
             return self._position_locked(self.clock.now_s() if t_s is None else t_s)
 
+    def status_at_rest(self) -> bool:
+        """No run (sweep or ramp-down) is under way and the plate is held at zero."""
+        with self._lock:
+            return self._run is None and self._held_position_m == 0.0
+
     def status(self) -> PlateStatus:
         with self._lock:
             now = self.clock.now_s()
@@ -101,9 +106,9 @@ class PlateOnlyBench:
         self.clock = clock or SimulatedClock()
         self.plate = SimulatedPlate(self.clock)
 
-    def position_m(self, channel: str) -> float:
+    def position_m(self, channel: str, at_s: float | None = None) -> float:
         if channel.startswith("x_r"):
-            return self.plate.position_m()
+            return self.plate.position_m(at_s)
         if channel.startswith(("x_s", "x_t")):
             return 0.0
         raise KeyError(f"unknown channel {channel!r}")

@@ -33,6 +33,7 @@ from typing import Any, Literal, Self
 import numpy as np
 
 from daq.bench_config import BenchConfig, ExciterConfig, LaserConfig
+from drivers.compowayf.amplifier import AmplifierConfig, streaming_measured_config
 from drivers.exciter.envelope import EnvelopeLimits
 from simulators.coupling import SimulatedClock
 from simulators.devices.can_exciter import SimulatedCanExciter
@@ -60,10 +61,11 @@ HEAD_MODELS: dict[str, HeadModel] = {head.name: head for head in (ZX_LD40, ZX_LD
 """Simulated heads by catalogue name (the names a bench configuration may give)."""
 
 DEFAULT_TICK_PERIOD_S = 0.01
-REALTIME_STEP_S = 0.001
-"""Integration step of the vehicle when the clock follows the wall clock: twice VehicleBench's default
-(positions a few micrometres off it during a 20 Hz sweep) for about half the CPU, so that the simulation
-keeps up with real time on a loaded machine (one that falls behind makes every read wait for it)."""
+BENCH_STEP_S = 0.001
+"""Integration step of the vehicle on a served bench: twice VehicleBench's default (positions a few
+micrometres off it during a 20 Hz sweep) for about half the CPU, so that the simulation keeps up with real
+time on a loaded machine (one that falls behind makes every read wait for it) and a manual-clock sweep runs
+about as fast as real time."""
 START_TIMEOUT_S = 10.0
 
 
@@ -92,7 +94,10 @@ class SimulatedBench:
         (alternately). One server, hence one port, per amplifier; node numbers 1, 2, ... in channel order.
     seed: seeds the laser noise (one independent stream per laser); noise_sigma_m overrides the heads'
         noise (0 for exact readings).
-    step_s: the vehicle's integration step (default: VehicleBench's; REALTIME_STEP_S when realtime).
+    step_s: the vehicle's integration step (default BENCH_STEP_S).
+    laser_sample_period_s: the amplifiers sample on their own clock at this period into a buffer with a
+        sample counter (drivers.compowayf.amplifier.streaming_measured_config); None: they hold only the
+        value at the moment of a read (sampled on read, as a polled amplifier).
     """
 
     def __init__(
@@ -110,6 +115,7 @@ class SimulatedBench:
         can_channel: str | None = None,
         tick_period_s: float = DEFAULT_TICK_PERIOD_S,
         step_s: float | None = None,
+        laser_sample_period_s: float | None = 0.001,
     ) -> None:
         if exciter not in ("modbus", "can"):
             raise ValueError(f"exciter must be 'modbus' or 'can', got {exciter!r}")
@@ -118,13 +124,7 @@ class SimulatedBench:
         self.vehicle = vehicle or default_quarter_car()
         self.realtime = realtime
         self.clock = SimulatedClock(follow_wall_clock=realtime)
-        if step_s is None and realtime:
-            step_s = REALTIME_STEP_S
-        self.physics = (
-            VehicleBench(self.vehicle, self.clock)
-            if step_s is None
-            else VehicleBench(self.vehicle, self.clock, step_s=step_s)
-        )
+        self.physics = VehicleBench(self.vehicle, self.clock, step_s=step_s or BENCH_STEP_S)
         self.exciter_kind: ExciterKind = exciter
         self.laser_transport: LaserTransport = lasers
         self.seed = seed
@@ -134,6 +134,7 @@ class SimulatedBench:
         self.can_interface = can_interface
         self.can_channel = can_channel or f"shockbench-sim-{uuid.uuid4().hex[:12]}"
         self.tick_period_s = tick_period_s
+        self.laser_sample_period_s = laser_sample_period_s
         self.amplifiers: dict[str, SimulatedAmplifier] = {}
         """Simulated amplifier per channel."""
         self.laser_lines: dict[str, AmplifierLine] = {}
@@ -271,7 +272,12 @@ class SimulatedBench:
         for index, channel in enumerate(channels):
             head = head_for_channel(channel)
             amplifier = SimulatedAmplifier.for_channel(
-                self.physics, channel, head, seed=int(seeds[index]), noise_sigma_m=self.noise_sigma_m
+                self.physics,
+                channel,
+                head,
+                config=self._amplifier_config(),
+                seed=int(seeds[index]),
+                noise_sigma_m=self.noise_sigma_m,
             )
             node = index + 1
             use_pty = self.laser_transport == "pty" or (self.laser_transport == "mixed" and index % 2 == 1)
@@ -290,9 +296,16 @@ class SimulatedBench:
                     head.name,
                     sign=amplifier.head.sign,
                     zero_m=amplifier.head.static_offset_m,
+                    sample_period_s=self.laser_sample_period_s,
+                    buffer_length=amplifier.config.measured.buffer_length,
                 )
             )
         return lasers
+
+    def _amplifier_config(self) -> AmplifierConfig:
+        if self.laser_sample_period_s is None:
+            return AmplifierConfig()
+        return AmplifierConfig(measured=streaming_measured_config(self.laser_sample_period_s))
 
     def _start_exciter(self) -> ExciterConfig:
         if self.exciter_kind == "modbus":
