@@ -12,6 +12,7 @@ import numpy as np
 
 from daq.formats.recording_csv import read_recording_csv, write_recording_csv
 from daq.formats.vehicle_file import read_vehicle, write_vehicle
+from estimator.bandwidth import check_bandwidth
 from estimator.identify import IdentificationResult, IdentifyOptions, Solver, identify
 from estimator.solvers.differential_evolution import DEProgress, DESettings
 from estimator.tanh_fit import fit_tanh
@@ -54,8 +55,10 @@ def summary(result: IdentificationResult) -> str:
         f"(certified within {100 * result.certified_gap:.3g}% of the optimum)",
     ]
     if result.gap_m is not None and not np.isfinite(result.gap_m):
-        lines.append("output-error gap: the identified model diverges when driven by the measured plate "
-                     "(unstable model; try another tyre model)")
+        lines.append(
+            "output-error gap: the identified model diverges when driven by the measured plate "
+            "(unstable model; try another tyre model)"
+        )
     elif result.gap_m is not None:
         lines.append(f"output-error gap {result.gap_m * 1e6:.1f} µm RMS (model driven by the measured plate)")
     if result.refined_gap_m is not None:
@@ -100,6 +103,8 @@ def options_from_args(args: argparse.Namespace) -> IdentifyOptions:
 def run_identify(args: argparse.Namespace) -> int:
     recording = read_recording_csv(args.recording)
     vehicle = read_vehicle(args.vehicle)
+    for warning in check_bandwidth(recording).warnings:  # refuses (ValueError, one line) when hopeless
+        print(f"shockbench identify: warning: {warning}", file=sys.stderr)
     options = options_from_args(args)
     progress = _ProgressLine() if options.solver is Solver.DE and not args.json else None
     result = identify(recording, vehicle, options, progress=progress)

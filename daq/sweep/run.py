@@ -1,0 +1,452 @@
+"""One sweep, end to end: connect, zero the sensors at rest, start the plate's sweep, record the sweep and
+the settling, stop the plate, close the recording.
+
+    outcome = await run_sweep(config, SweepRequest(sweep, vehicle_file=...), Path("run.h5"), pacing=...)
+
+Before the plate moves, any problem (a channel without a laser, a vehicle of the wrong model, a sweep
+outside the envelope, a laser that does not answer or reads out of range at rest, an exciter in fault, an
+existing output file) raises `SweepError` with one line naming it, and nothing is written.
+
+Once the plate has been told to start, nothing raises: every ending comes back as a `SweepOutcome`, and the
+recording is kept, closed as complete or as incomplete with the reason:
+
+* the sweep and settling ran out: a stop command as a matter of course, complete;
+* `abort` set (operator, service) or the task cancelled (Ctrl-C): controlled stop, "aborted ...";
+* a source silent for `silence_timeout_s` (no new samples: the line is down, the amplifier stopped
+  answering or sampling): controlled stop, "sensor silence: ...";
+* the exciter's link lost (status cannot be read): controlled stop attempted, "lost link to exciter ...";
+* the exciter reports a fault: emergency stop, "exciter fault 0x....";
+* any other error on the host: controlled stop, "host error: ...".
+
+A controlled stop that cannot be sent is followed by an emergency stop; if neither reaches the drive, its
+watchdog stops the plate once the keep-alive has ended (both stops end it first), and the outcome says so.
+After a stop the recording continues until the drive reports the plate at rest (at most
+`STOP_RECORD_LIMIT_S`), so the ramp-down is in the data.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import math
+import threading
+import time
+from collections import defaultdict
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from daq.bench_config import BenchConfig
+from daq.formats.vehicle_file import read_vehicle
+from daq.recorder import Recorder, max_interval_s
+from daq.sources.laser_source import LaserSource
+from daq.storage.hdf5_recording import MetadataValue, RecordingWriter
+from daq.sweep.model import StopKind, SweepOutcome, SweepPhase, SweepProgress, SweepRequest
+from daq.sweep.pacing import Pacing, RealtimePacing
+from drivers.compowayf.amplifier import ZxlAmplifier
+from drivers.compowayf.transport import CompowayFPort
+from drivers.exciter.codes import ExciterState
+from drivers.exciter.interface import ExciterStatus, PlateExciter
+from drivers.exciter.urls import open_exciter
+
+log = logging.getLogger(__name__)
+
+SAMPLE_TIME_S = 0.001
+"""The recording's grid: 1 ms."""
+STEP_S = 0.05
+"""The orchestration's cycle: recorder step, exciter status, silence check, progress (s)."""
+DEFAULT_SILENCE_TIMEOUT_S = 0.5
+STOP_RECORD_LIMIT_S = 3.0
+"""After a stop command, recording goes on until the plate rests, at most this long (s)."""
+REST_MIN_SAMPLES = 5
+REST_MAX_STD_M = 0.5e-3
+"""A channel moving more than this (standard deviation at rest) means the vehicle is not at rest."""
+
+
+class SweepError(Exception):
+    """The sweep could not begin; the plate did not move and nothing was written. One line."""
+
+
+class SweepFaultError(Exception):
+    """Ends a running sweep early: `reason` goes into the recording; `emergency` asks for an emergency
+    stop (an exciter fault) instead of a controlled one."""
+
+    def __init__(self, reason: str, emergency: bool = False) -> None:
+        super().__init__(reason)
+        self.reason = reason
+        self.emergency = emergency
+
+
+class SweepAbortedError(Exception):
+    """The operator (or the service) aborted the sweep."""
+
+
+async def run_sweep(
+    config: BenchConfig,
+    request: SweepRequest,
+    out_path: Path | str,
+    *,
+    pacing: Pacing | None = None,
+    progress: Callable[[SweepProgress], None] | None = None,
+    abort: threading.Event | None = None,
+    silence_timeout_s: float = DEFAULT_SILENCE_TIMEOUT_S,
+) -> SweepOutcome:
+    """Run one sweep on the bench `config` describes and record it at out_path (HDF5). See the module."""
+    run = _SweepRun(config, request, Path(out_path), pacing or RealtimePacing(), progress, abort)
+    run.silence_timeout_s = silence_timeout_s
+    return await run.run()
+
+
+def check_request(config: BenchConfig, request: SweepRequest, out_path: Path) -> None:
+    """Everything that can be checked before touching a device (SweepError, one line)."""
+    missing = [channel for channel in config.channels if config.laser_for(channel) is None]
+    if missing:
+        raise SweepError(f"bench {config.name!r} has no laser for channel(s) {', '.join(missing)}")
+    if request.vehicle_file is not None:
+        try:
+            vehicle = read_vehicle(request.vehicle_file)
+        except (OSError, ValueError) as exc:
+            raise SweepError(str(exc).splitlines()[0]) from None
+        if vehicle.model != config.model:
+            raise SweepError(
+                f"{request.vehicle_file}: a {vehicle.model} vehicle cannot be tested on the {config.model} "
+                f"bench {config.name!r}"
+            )
+    try:
+        config.safety_envelope().check(request.sweep)
+    except ValueError as exc:
+        raise SweepError(str(exc)) from None
+    if out_path.exists():
+        raise SweepError(f"{out_path}: already exists; a recording is never overwritten")
+    if not out_path.parent.is_dir():
+        raise SweepError(f"{out_path.parent}: no such folder")
+
+
+class _SweepRun:
+    def __init__(
+        self,
+        config: BenchConfig,
+        request: SweepRequest,
+        out_path: Path,
+        pacing: Pacing,
+        progress: Callable[[SweepProgress], None] | None,
+        abort: threading.Event | None,
+    ) -> None:
+        self.config = config
+        self.request = request
+        self.out_path = out_path
+        self.pacing = pacing
+        self.clock = pacing.host_clock
+        self.on_progress = progress
+        self.abort = abort or threading.Event()
+        self.silence_timeout_s = DEFAULT_SILENCE_TIMEOUT_S
+        self.ports: list[CompowayFPort] = []
+        self.sources: list[LaserSource] = []
+        self.models: dict[str, str] = {}
+        self.exciter: PlateExciter | None = None
+        self.writer: RecordingWriter | None = None
+        self.recorder: Recorder | None = None
+        self.phase = SweepPhase.CONNECTING
+        self.frequency_Hz = 0.0
+        self.started_s = math.nan
+
+    # ---- the run ----------------------------------------------------------------------------------------
+
+    async def run(self) -> SweepOutcome:
+        check_request(self.config, self.request, self.out_path)
+        cpu0, wall0 = time.process_time(), time.perf_counter()
+        complete, reason, stop = False, "", StopKind.NOT_STARTED
+        cancelled: BaseException | None = None
+        try:
+            await self._connect()
+            rest = await self._zero()
+            self._open_recording(rest)
+            assert self.exciter is not None
+            await self.exciter.configure_sweep(self.request.sweep)
+            stop = StopKind.CONTROLLED  # from here on the plate may move
+            await self.exciter.start()
+            self.started_s = self.clock()
+            self._start_recorder(rest)
+            await self._record_sweep()
+            stop = await self._stop(emergency=False, at_end=True)
+            complete = True
+        except SweepError:
+            if stop is not StopKind.NOT_STARTED:
+                raise AssertionError("SweepError after the start") from None
+            await self._close_devices()
+            raise
+        except (SweepAbortedError, asyncio.CancelledError, KeyboardInterrupt) as exc:
+            if not isinstance(exc, SweepAbortedError):
+                cancelled = exc
+            reason = "aborted by the operator"
+            stop = await self._stop_if_moving(stop, emergency=False)
+        except SweepFaultError as fault:
+            reason = fault.reason
+            stop = await self._stop_if_moving(stop, emergency=fault.emergency)
+        except Exception as exc:  # the host's own failure: still stop the plate and keep the data
+            log.exception("sweep failed on the host")
+            reason = f"host error: {type(exc).__name__}: {exc}"
+            stop = await self._stop_if_moving(stop, emergency=False)
+        if self.writer is None and not complete:
+            await self._close_devices()
+            if cancelled is not None:
+                raise cancelled
+            raise SweepError(reason or "the sweep did not begin")
+        outcome = await self._finish(complete, reason, stop, cpu0, wall0)
+        if cancelled is not None:
+            raise cancelled
+        return outcome
+
+    async def _stop_if_moving(self, stop: StopKind, *, emergency: bool) -> StopKind:
+        if stop is StopKind.NOT_STARTED:
+            return stop
+        return await self._stop(emergency=emergency, at_end=False)
+
+    # ---- connecting and zeroing ---------------------------------------------------------------------
+
+    async def _connect(self) -> None:
+        self._report()
+        lines: dict[str, list[LaserSource]] = defaultdict(list)
+        for laser in self.config.lasers:
+            url, node = laser.device()
+            port = next((p for p in self.ports if p.pyserial_url == url), None)
+            try:
+                if port is None:
+                    port = await asyncio.to_thread(CompowayFPort, laser.url)
+                    self.ports.append(port)
+                amplifier = ZxlAmplifier(port, node, laser.amplifier_config())
+                self.models[laser.name] = await asyncio.to_thread(amplifier.read_model)
+            except Exception as exc:
+                raise SweepError(f"laser {laser.name!r} ({laser.url}): {exc}") from None
+            source = LaserSource(laser, amplifier, host_clock=self.clock)
+            self.sources.append(source)
+            lines[url].append(source)
+        try:
+            self.exciter = await open_exciter(
+                self.config.exciter.url, envelope=self.config.safety_envelope(), clock=self.clock
+            )
+            status = await self.exciter.status()
+        except Exception as exc:
+            exciter = self.config.exciter
+            raise SweepError(f"exciter {exciter.name!r} ({exciter.url}): {exc}") from None
+        if status.is_fault:
+            raise SweepError(f"exciter in fault 0x{status.fault_code:04X}: reset the drive first")
+        if status.state is not ExciterState.IDLE:
+            raise SweepError(f"the plate is not at rest (drive state {status.state}); stop it first")
+        self.pacing.start(list(lines.values()))
+
+    async def _zero(self) -> dict[str, tuple[float, float]]:
+        """Read at rest: per channel (mean m, typical interval s). Freezes the device clock mappings."""
+        self.phase = SweepPhase.ZEROING
+        self._report()
+        readers = [source.buffer.reader("zeroing", from_oldest=True) for source in self.sources]
+        await self.pacing.wait(self.request.rest_s)
+        rest: dict[str, tuple[float, float]] = {}
+        for source, reader in zip(self.sources, readers, strict=True):
+            result = reader.read()
+            reader.close()
+            values = result.values[:, 0]
+            where = f"laser {source.name!r} ({source.channel})"
+            if result.count < REST_MIN_SAMPLES:
+                error = source.statistics().last_error or "no error reported"
+                raise SweepError(
+                    f"{where}: {result.count} samples in {self.request.rest_s:g} s at rest ({error})"
+                )
+            if np.isnan(values).any():
+                raise SweepError(f"{where}: out of measuring range at rest; check the head's position")
+            spread = float(np.std(values))
+            if spread > REST_MAX_STD_M:
+                raise SweepError(f"{where}: moves by {spread * 1e3:.2f} mm (std) at rest; is all still?")
+            typical = float(np.median(np.diff(result.timestamps_s)))
+            if source.streaming:
+                source.mapping.freeze()
+            rest[source.channel] = (float(np.mean(values)), typical)
+        return rest
+
+    def _start_recorder(self, rest: dict[str, tuple[float, float]]) -> None:
+        """Rows from the start command on (t = 0 there); the samples at rest lead into row 0."""
+        assert self.writer is not None
+        self.recorder = Recorder(
+            self.sources,
+            self.writer,
+            origin_s=self.started_s,
+            max_intervals_s={s.channel: max_interval_s(s, rest[s.channel][1]) for s in self.sources},
+            rest_offsets_m={channel: mean for channel, (mean, _) in rest.items()},
+        )
+
+    def _open_recording(self, rest: dict[str, tuple[float, float]]) -> None:
+        metadata = self._metadata(rest)
+        nominal = {s.channel: (1.0 / s.period_s if s.period_s else 0.0) for s in self.sources}
+        self.writer = RecordingWriter(
+            self.out_path,
+            self.config.channels,
+            SAMPLE_TIME_S,
+            metadata,
+            vehicle_file=self.request.vehicle_file,
+            rates_Hz=nominal,
+        )
+
+    def _metadata(self, rest: dict[str, tuple[float, float]]) -> dict[str, MetadataValue]:
+        sweep = self.request.sweep
+        meta: dict[str, MetadataValue] = {
+            "bench": self.config.name,
+            "bench_model": str(self.config.model),
+            "operator": self.request.operator,
+            "sweep_start_Hz": sweep.start_Hz,
+            "sweep_stop_Hz": sweep.stop_Hz,
+            "sweep_amplitude_m": sweep.amplitude_m,
+            "sweep_duration_s": sweep.duration_s,
+            "sweep_law": str(sweep.law),
+            "settle_s": self.request.settle_s,
+            "exciter": f"{self.config.exciter.name} {self.config.exciter.url}",
+            "interpolation": "cubic (4-point Lagrange) onto the 1 ms grid; linear at edges; gaps NaN",
+            "time_origin": "t = 0 s when the drive acknowledged the start command",
+        }
+        for source in self.sources:
+            laser = source.laser
+            channel = laser.channel
+            meta[f"laser.{channel}"] = f"{laser.name} {laser.url} head {laser.head} sign {laser.sign:+d}"
+            meta[f"device_model.{laser.name}"] = self.models.get(laser.name, "")
+            meta[f"clock.{channel}"] = str(source.buffer.clock)
+            meta[f"rest_offset_m.{channel}"] = rest[channel][0]
+        return meta
+
+    # ---- recording --------------------------------------------------------------------------------------
+
+    async def _record_sweep(self) -> None:
+        total_s = self.request.recorded_s
+        self.phase = SweepPhase.SWEEPING
+        while (elapsed := self.clock() - self.started_s) < total_s:
+            if self.abort.is_set():
+                raise SweepAbortedError()
+            if elapsed >= self.request.sweep.duration_s:
+                self.phase = SweepPhase.SETTLING
+            await self.pacing.wait(min(STEP_S, max(total_s - elapsed, 1e-3)))
+            await self._cycle()
+
+    async def _cycle(self) -> ExciterStatus:
+        """One orchestration cycle: write the final rows, check the drive and the sources, report."""
+        assert self.recorder is not None and self.exciter is not None
+        await asyncio.to_thread(self.recorder.step)
+        try:
+            status = await self.exciter.status()
+        except Exception as exc:
+            raise SweepFaultError(f"lost link to exciter: {type(exc).__name__}: {exc}") from None
+        if status.is_fault:
+            raise SweepFaultError(f"exciter fault 0x{status.fault_code:04X}", emergency=True)
+        self.frequency_Hz = status.frequency_Hz
+        for source in self.sources:
+            silent_s = source.seconds_since_data()
+            if silent_s > self.silence_timeout_s:
+                error = source.statistics().last_error or "no error reported"
+                raise SweepFaultError(
+                    f"sensor silence: laser {source.name!r} ({source.channel}) delivered nothing for "
+                    f"{silent_s:.2f} s (last error: {error})"
+                )
+        self._report()
+        return status
+
+    # ---- stopping and finishing -------------------------------------------------------------------------
+
+    async def _stop(self, *, emergency: bool, at_end: bool) -> StopKind:
+        """Stop the plate; on anything but the regular end, keep recording until it rests."""
+        self.phase = SweepPhase.STOPPING
+        exciter = self.exciter
+        if exciter is None:
+            return StopKind.NOT_STARTED
+        kind = StopKind.END_OF_SWEEP if at_end else StopKind.CONTROLLED
+        try:
+            if emergency:
+                kind = StopKind.EMERGENCY
+                await exciter.emergency_stop()
+            else:
+                await exciter.stop()
+        except Exception as exc:
+            log.warning("stop command failed (%s); trying an emergency stop", exc)
+            try:
+                await exciter.emergency_stop()
+                kind = StopKind.EMERGENCY
+            except Exception as again:
+                log.error("emergency stop failed too (%s); the drive's watchdog must stop the plate", again)
+                return StopKind.WATCHDOG
+        if not at_end:
+            await self._record_until_rest()
+        return kind
+
+    async def _record_until_rest(self) -> None:
+        deadline = self.clock() + STOP_RECORD_LIMIT_S
+        while self.clock() < deadline and self.exciter is not None and self.recorder is not None:
+            await self.pacing.wait(STEP_S)
+            await asyncio.to_thread(self.recorder.step)
+            try:
+                status = await self.exciter.status()
+            except Exception:
+                return
+            self.frequency_Hz = status.frequency_Hz
+            self._report()
+            if status.state in (ExciterState.IDLE, ExciterState.FAULT):
+                return
+
+    async def _finish(
+        self, complete: bool, reason: str, stop: StopKind, cpu0: float, wall0: float
+    ) -> SweepOutcome:
+        end_s = self.clock()
+        self.pacing.stop()
+        rows = gap_rows = overruns = 0
+        try:
+            if self.recorder is not None:
+                self.recorder.finish(end_s)
+                stats = self.recorder.statistics()
+                rows, gap_rows, overruns = stats.rows, stats.gap_rows, stats.overrun_samples
+        except Exception as exc:  # keep what is on disk; say why the rest is missing
+            log.exception("recorder failed while finishing")
+            complete, reason = False, reason or f"host error while finishing: {exc}"
+        if stop is StopKind.WATCHDOG:
+            reason = f"{reason}; no stop command reached the drive (its watchdog stops the plate)"
+        sources = tuple(source.statistics() for source in self.sources)
+        if self.writer is not None:
+            rates = {s.channel: s.achieved_rate_Hz for s in sources}
+            self.writer.close(complete, reason or None, rates)
+        await self._close_devices()
+        self.phase = SweepPhase.DONE
+        self._report()
+        return SweepOutcome(
+            path=self.out_path if self.writer is not None else None,
+            complete=complete,
+            reason=reason,
+            stop=stop,
+            rows=rows,
+            gap_rows=gap_rows,
+            overrun_samples=overruns,
+            sources=sources,
+            cpu_s=time.process_time() - cpu0,
+            wall_s=time.perf_counter() - wall0,
+        )
+
+    async def _close_devices(self) -> None:
+        self.pacing.stop()
+        if self.exciter is not None:
+            with contextlib.suppress(Exception):
+                await self.exciter.close()
+        for port in self.ports:
+            with contextlib.suppress(Exception):
+                port.close()
+        self.ports.clear()
+
+    def _report(self) -> None:
+        if self.on_progress is None:
+            return
+        elapsed = 0.0 if math.isnan(self.started_s) else self.clock() - self.started_s
+        stats = self.recorder.statistics() if self.recorder is not None else None
+        self.on_progress(
+            SweepProgress(
+                phase=self.phase,
+                elapsed_s=elapsed,
+                total_s=self.request.recorded_s,
+                frequency_Hz=self.frequency_Hz,
+                rows=stats.rows if stats else 0,
+                gap_rows=stats.gap_rows if stats else 0,
+            )
+        )

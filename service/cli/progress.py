@@ -1,0 +1,49 @@
+"""A text progress bar for long CLI runs (sweeps): one line redrawn in place on a terminal; on a pipe or a
+log file, a plain line at each phase change and every tenth of the run, so logs stay readable."""
+
+from __future__ import annotations
+
+import sys
+from typing import TextIO
+
+from daq.sweep.model import SweepProgress
+
+BAR_WIDTH = 30
+
+
+class SweepProgressBar:
+    def __init__(self, stream: TextIO | None = None) -> None:
+        self.stream = stream or sys.stderr
+        self.interactive = bool(getattr(self.stream, "isatty", lambda: False)())
+        self._last_phase: str | None = None
+        self._last_tenth = -1
+        self._drawn = False
+
+    def __call__(self, progress: SweepProgress) -> None:
+        line = self.render(progress)
+        tenth = int(progress.fraction * 10)
+        if self.interactive:
+            self.stream.write("\r" + line.ljust(100))
+            self._drawn = True
+        elif progress.phase != self._last_phase or tenth != self._last_tenth:
+            self.stream.write(line + "\n")
+        self._last_phase, self._last_tenth = str(progress.phase), tenth
+        self.stream.flush()
+
+    @staticmethod
+    def render(progress: SweepProgress) -> str:
+        filled = round(progress.fraction * BAR_WIDTH)
+        bar = "#" * filled + "-" * (BAR_WIDTH - filled)
+        gaps = f", {progress.gap_rows} gap rows" if progress.gap_rows else ""
+        return (
+            f"[{bar}] {progress.fraction * 100:5.1f}% {progress.phase:<10} "
+            f"{progress.elapsed_s:6.1f}/{progress.total_s:.1f} s  plate {progress.frequency_Hz:5.2f} Hz  "
+            f"{progress.rows} rows{gaps}"
+        )
+
+    def close(self) -> None:
+        """End the redrawn line (call once the run is over)."""
+        if self._drawn:
+            self.stream.write("\n")
+            self.stream.flush()
+            self._drawn = False

@@ -1,0 +1,110 @@
+"""`shockbench sweep`: one sweep end to end, recorded to an HDF5 file.
+
+    shockbench sweep --vehicle V.toml --out RUN.h5 --simulated               # simulated bench, in-process
+    shockbench sweep --config BENCH.toml --vehicle V.toml --out RUN.h5       # the devices BENCH.toml names
+
+With --simulated and no --config, the simulated devices (the preset vehicle of the vehicle file's model on
+the plate, lasers on TCP, a Modbus drive) are started in this process on a manual clock that the sweep
+moves: deterministic, and as fast as the machine allows. With --config the devices run on their own (a real
+bench, or `shockbench sim-devices`) and the sweep follows the wall clock.
+
+Exit codes: 0 the recording is complete; 1 the sweep ended early (the recording is kept, marked incomplete
+with the reason, printed on stderr); 2 the sweep could not begin (bad input, a device missing): nothing
+moved and nothing was written; 130 interrupted (the plate was stopped, the recording kept).
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import sys
+from pathlib import Path
+
+from daq.bench_config import load_bench_config
+from daq.formats.vehicle_file import read_vehicle
+from daq.sweep.model import DEFAULT_REST_S, DEFAULT_SETTLE_S, SweepOutcome, SweepRequest
+from daq.sweep.pacing import Pacing, RealtimePacing, SimulatedPacing
+from daq.sweep.run import SweepError, run_sweep
+from drivers.exciter.sweep import SweepLaw, SweepSettings
+from service.cli.errors import EXIT_FAILED, CliError
+from service.cli.progress import SweepProgressBar
+from simulators.devices.sim_bench import SimulatedBench, vehicle_preset
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    parser = sub.add_parser(
+        "sweep",
+        help="run a sweep on the bench and record it (HDF5)",
+        description="Zero the sensors at rest, run the plate's sine sweep, record the sweep and the settling "
+        "at 1 ms, stop the plate, and write the recording (export it to CSV with `shockbench export`).",
+    )
+    parser.add_argument("--config", type=Path, metavar="BENCH.toml", help="bench configuration")
+    parser.add_argument("--vehicle", type=Path, required=True, metavar="V.toml", help="vehicle file")
+    parser.add_argument("--out", type=Path, required=True, metavar="PATH", help="recording to write (.h5)")
+    parser.add_argument(
+        "--simulated",
+        action="store_true",
+        help="without --config: start a simulated bench in this process and sweep it",
+    )
+    defaults = SweepSettings()
+    parser.add_argument("--start-hz", type=float, default=defaults.start_Hz, help="sweep start (Hz)")
+    parser.add_argument("--stop-hz", type=float, default=defaults.stop_Hz, help="sweep end (Hz)")
+    parser.add_argument(
+        "--amplitude-mm", type=float, default=defaults.amplitude_m * 1e3, help="plate amplitude, 0-peak (mm)"
+    )
+    parser.add_argument("--duration-s", type=float, default=defaults.duration_s, help="sweep duration (s)")
+    parser.add_argument("--law", choices=[law.value for law in SweepLaw], default=defaults.law.value)
+    parser.add_argument("--settle-s", type=float, default=DEFAULT_SETTLE_S, help="recorded after the sweep")
+    parser.add_argument("--rest-s", type=float, default=DEFAULT_REST_S, help="read at rest before (zeroing)")
+    parser.add_argument("--operator", default="", help="who runs the sweep (kept in the recording)")
+    parser.add_argument("--seed", type=int, default=0, help="--simulated: seed of the laser noise")
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    parser.set_defaults(handler=run_sweep_command)
+
+
+def _request(args: argparse.Namespace) -> SweepRequest:
+    sweep = SweepSettings(
+        start_Hz=args.start_hz,
+        stop_Hz=args.stop_hz,
+        amplitude_m=args.amplitude_mm * 1e-3,
+        duration_s=args.duration_s,
+        law=SweepLaw(args.law),
+    )
+    return SweepRequest(
+        sweep, vehicle_file=args.vehicle, operator=args.operator, settle_s=args.settle_s, rest_s=args.rest_s
+    )
+
+
+def run_sweep_command(args: argparse.Namespace) -> int:
+    request = _request(args)
+    vehicle = read_vehicle(args.vehicle)
+    bar = None if args.quiet else SweepProgressBar()
+    bench: SimulatedBench | None = None
+    pacing: Pacing
+    if args.config is not None:
+        config = load_bench_config(args.config)
+        pacing = RealtimePacing()
+    elif args.simulated:
+        bench = SimulatedBench(vehicle_preset(str(vehicle.model)), seed=args.seed)
+        config = bench.start()
+        pacing = SimulatedPacing(bench)
+    else:
+        raise CliError("give --config BENCH.toml, or --simulated to sweep a simulated bench")
+    try:
+        outcome = asyncio.run(run_sweep(config, request, args.out, pacing=pacing, progress=bar))
+    except SweepError as exc:
+        raise CliError(str(exc)) from None
+    finally:
+        if bar is not None:
+            bar.close()
+        if bench is not None:
+            bench.close()
+    return _report(outcome)
+
+
+def _report(outcome: SweepOutcome) -> int:
+    print(outcome.summary())
+    if not outcome.complete:
+        print(f"shockbench sweep: sweep ended early: {outcome.reason}", file=sys.stderr)
+        return EXIT_FAILED
+    return 0

@@ -1,0 +1,115 @@
+"""Laser sources over a real transport (TCP) against simulated ZX-L amplifiers on a manual clock: every
+sample arrives once with its device time, losses are counted exactly, failures are counted and recovered."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+
+import numpy as np
+import pytest
+
+from daq.sources.laser_source import LaserSource
+from drivers.compowayf.amplifier import ZxlAmplifier
+from drivers.compowayf.errors import CompowayFError
+from drivers.compowayf.transport import CompowayFPort
+from drivers.exciter.sweep import SweepSettings
+from simulators.devices.laser_amplifier import FaultKind
+from simulators.devices.sim_bench import SimulatedBench
+from simulators.excitation import sweep_position_m
+
+
+def _source(bench: SimulatedBench, channel: str) -> LaserSource:
+    laser = bench.config.laser_for(channel)
+    assert laser is not None
+    port = CompowayFPort(laser.url)
+    amplifier = ZxlAmplifier(port, laser.device()[1], laser.amplifier_config())
+    return LaserSource(laser, amplifier, host_clock=bench.clock.now_s)
+
+
+@pytest.fixture
+def bench() -> Iterator[SimulatedBench]:
+    with SimulatedBench(noise_sigma_m=0.0) as started:
+        yield started
+
+
+def _drain(source: LaserSource) -> tuple[np.ndarray, np.ndarray]:
+    reader = source.buffer.reader("test", from_oldest=True)
+    result = reader.read()
+    reader.close()
+    return result.timestamps_s, result.values[:, 0]
+
+
+def test_streaming_source_gets_every_sample_once_with_device_time(bench: SimulatedBench) -> None:
+    settings = SweepSettings(duration_s=5.0)
+    bench.physics.start_sweep(settings)
+    started_s = bench.clock.now_s()
+    source = _source(bench, "x_r")
+    rng = np.random.default_rng(11)
+    source.poll()
+    for _ in range(60):  # irregular polls: 1 to 60 ms apart
+        bench.clock.advance(float(rng.uniform(0.001, 0.060)))
+        bench.tick()
+        source.poll()
+    times, values = _drain(source)
+    amplifier = bench.amplifiers["x_r"]
+    assert source.statistics().samples == times.size
+    first_number = round(times[0] / 1e-3)  # device time = sample number x period
+    assert times.size == amplifier.samples_taken - first_number  # every sample from the first polled on
+    np.testing.assert_allclose(np.diff(times), 1e-3, rtol=0, atol=1e-12)  # not one missing or repeated
+    assert times[-1] == pytest.approx(bench.clock.now_s(), abs=1e-3)
+    truth = sweep_position_m(settings, source.to_host_s(times) - started_s)
+    resolution = amplifier.head.model.resolution_m
+    assert np.max(np.abs(values - truth)) <= resolution / 2 + 1e-12
+    stats = source.statistics()
+    assert stats.lost_samples == 0 and stats.failed_reads == 0
+    assert stats.achieved_rate_Hz == pytest.approx(1000.0, rel=1e-9)
+
+
+def test_a_pause_longer_than_the_amplifier_buffer_loses_exactly_the_overwritten_samples(
+    bench: SimulatedBench,
+) -> None:
+    source = _source(bench, "x_s")
+    buffer_length = source.amplifier.config.measured.buffer_length
+    source.poll()
+    bench.clock.advance(0.02)
+    source.poll()
+    bench.clock.advance(0.400)  # 400 samples taken, the amplifier keeps buffer_length of them
+    source.poll()
+    times, _ = _drain(source)
+    assert source.statistics().lost_samples == 400 - buffer_length
+    steps = np.round(np.diff(times) * 1e3).astype(int)
+    assert sorted(set(steps)) == [1, 400 - buffer_length + 1]  # one hole, exactly as long as the loss
+
+
+def test_failed_reads_are_counted_and_the_next_read_catches_up_without_loss(bench: SimulatedBench) -> None:
+    source = _source(bench, "x_t")
+    source.poll()
+    line = bench.laser_lines["x_t"]
+    line.inject_fault(FaultKind.GARBAGE)
+    bench.clock.advance(0.05)
+    with pytest.raises(CompowayFError):
+        source.poll()
+    line.clear_faults()
+    bench.clock.advance(0.05)
+    source.poll()
+    times, _ = _drain(source)
+    stats = source.statistics()
+    assert stats.failed_reads == 1 and stats.last_error.startswith("MalformedFrameError")
+    assert stats.lost_samples == 0
+    np.testing.assert_allclose(np.diff(times), 1e-3, atol=1e-12)
+    assert times.size == 101
+
+
+def test_polled_source_stamps_host_time_and_reports_the_rate_it_got() -> None:
+    with SimulatedBench(noise_sigma_m=0.0, laser_sample_period_s=None) as bench:
+        source = _source(bench, "x_r")
+        assert not source.streaming
+        for _ in range(20):
+            bench.clock.advance(0.004)  # one read per 4 ms of host time: 250 Hz
+            source.poll()
+        times, _ = _drain(source)
+        np.testing.assert_allclose(np.diff(times), 0.004, atol=1e-12)
+        stats = source.statistics()
+        assert stats.nominal_rate_Hz is None
+        assert stats.achieved_rate_Hz == pytest.approx(250.0)
+        assert str(stats.clock) == "host_monotonic"
