@@ -4,6 +4,7 @@ stops. Alone it is an empty bench (`PlateOnlyBench`); the vehicle bench puts a c
 from __future__ import annotations
 
 import threading
+from collections import deque
 from dataclasses import dataclass
 
 from drivers.exciter.sweep import SweepSettings
@@ -28,6 +29,9 @@ class SimulatedPlate:
         self.clock = clock
         self._lock = threading.Lock()
         self._run: _Run | None = None
+        self._ended: deque[tuple[float, _Run]] = deque(maxlen=4)
+        """Recently ended runs with the time each ended: a device sampling on its own clock may still ask
+        where the plate was during one of them."""
         self._held_position_m = 0.0
         self._fault_code = 0
 
@@ -44,7 +48,7 @@ class SimulatedPlate:
             now = self.clock.now_s()
             if emergency:
                 self._held_position_m = self._position_locked(now)
-                self._run = None
+                self._end_run(now)
             elif self._run.stop_requested_s is None:
                 self._run.stop_requested_s = now
 
@@ -53,7 +57,7 @@ class SimulatedPlate:
         with self._lock:
             now = self.clock.now_s()
             self._held_position_m = self._position_locked(now) if self._run else self._held_position_m
-            self._run = None
+            self._end_run(now)
             self._fault_code = code
 
     def reset_fault(self) -> None:
@@ -68,10 +72,20 @@ class SimulatedPlate:
             return 1.0
         return max(0.0, 1.0 - (now - run.stop_requested_s) / CONTROLLED_STOP_RAMP_S)
 
+    def _end_run(self, now: float) -> None:
+        if self._run is not None:
+            self._ended.append((now, self._run))
+        self._run = None
+
     def _position_locked(self, now: float) -> float:
         run = self._run
+        if run is not None and now < run.started_s:  # asked about a moment before this run began
+            run = None
         if run is None:
-            return self._held_position_m
+            ended = next((r for end_s, r in reversed(self._ended) if r.started_s <= now < end_s), None)
+            if ended is None:
+                return self._held_position_m
+            run = ended
         return float(self._envelope(run, now) * sweep_position_m(run.settings, now - run.started_s))
 
     def position_m(self, t_s: float | None = None) -> float:
@@ -92,7 +106,7 @@ class SimulatedPlate:
             if run is None or self._envelope(run, now) == 0.0:
                 if run is not None:  # finished: settle at rest
                     self._held_position_m = 0.0
-                    self._run = None
+                    self._end_run(now)
                 return PlateStatus(PlateState.IDLE, 0.0, self._held_position_m)
             state = PlateState.RUNNING if run.stop_requested_s is None else PlateState.STOPPING
             freq = float(sweep_frequency_Hz(run.settings, now - run.started_s))

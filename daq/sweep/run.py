@@ -58,6 +58,8 @@ SAMPLE_TIME_S = 0.001
 STEP_S = 0.05
 """The orchestration's cycle: recorder step, exciter status, silence check, progress (s)."""
 DEFAULT_SILENCE_TIMEOUT_S = 0.5
+TIME_TOLERANCE_S = 1e-6
+"""Sums of float steps land a hair short of a target time; closer than this counts as there."""
 STOP_RECORD_LIMIT_S = 3.0
 """After a stop command, recording goes on until the plate rests, at most this long (s)."""
 REST_MIN_SAMPLES = 5
@@ -318,7 +320,7 @@ class _SweepRun:
     async def _record_sweep(self) -> None:
         total_s = self.request.recorded_s
         self.phase = SweepPhase.SWEEPING
-        while (elapsed := self.clock() - self.started_s) < total_s:
+        while (elapsed := self.clock() - self.started_s) < total_s - TIME_TOLERANCE_S:
             if self.abort.is_set():
                 raise SweepAbortedError()
             if elapsed >= self.request.sweep.duration_s:
