@@ -14,6 +14,8 @@ from dataclasses import dataclass, field
 from enum import StrEnum
 from typing import Protocol
 
+import numpy as np
+
 from drivers.exciter.sweep import SweepSettings
 
 
@@ -70,6 +72,10 @@ class BenchPhysics(Protocol):
         """Displacement of a named channel ('x_s', 'x_t', 'x_r', or with '_l'/'_r' for an axle) in metres,
         upward positive, from the static position, now or at a recent past instant at_s (s; what a device
         sampling on its own clock needs). Sensor noise is added by the amplifier, not here."""
+        ...
+
+    def positions_m(self, channel: str, times_s: np.ndarray) -> np.ndarray:
+        """position_m at many recent instants (ascending, none in the future), in one call."""
         ...
 
     def start_sweep(self, settings: SweepSettings) -> None: ...

@@ -7,6 +7,8 @@ import threading
 from collections import deque
 from dataclasses import dataclass
 
+import numpy as np
+
 from drivers.exciter.sweep import SweepSettings
 from simulators.coupling import PlateState, PlateStatus, SimulatedClock
 from simulators.excitation import sweep_frequency_Hz, sweep_position_m
@@ -119,6 +121,9 @@ class PlateOnlyBench:
     def __init__(self, clock: SimulatedClock | None = None) -> None:
         self.clock = clock or SimulatedClock()
         self.plate = SimulatedPlate(self.clock)
+
+    def positions_m(self, channel: str, times_s: np.ndarray) -> np.ndarray:
+        return np.array([self.position_m(channel, float(t)) for t in times_s])
 
     def position_m(self, channel: str, at_s: float | None = None) -> float:
         if channel.startswith("x_r"):

@@ -15,6 +15,8 @@ instant: `position_m(channel, at_s)` interpolates linearly between the two steps
 from __future__ import annotations
 
 import bisect
+import itertools
+import math
 import threading
 from collections import deque
 
@@ -50,14 +52,17 @@ class VehicleBench:
         self._lock = threading.Lock()
         self._state = np.zeros(self.physics.state_size)
         self._time_s = self.clock.now_s()
+        self.time_origin_s = self._time_s
+        """Steps fall on time_origin_s + k * step_s: a device sampling on the same grid reads exact states."""
         history_steps = max(2, int(history_s / step_s) + 2)
         self._output_names = tuple(self.physics.outputs(self._state))
         self._history_times_s: deque[float] = deque([self._time_s], maxlen=history_steps)
         self._history_outputs: deque[np.ndarray] = deque(
             [self._vehicle_outputs(self._state)], maxlen=history_steps
         )
-        self._outputs: dict[str, float] = {}
-        self._refresh_outputs()
+        self._next: tuple[float, np.ndarray, np.ndarray] | None = None  # (from time, state, outputs)
+        plates = ("x_r_l", "x_r_r") if vehicle.known.is_axle else ("x_r",)
+        self._channels = (*self._output_names, *plates)
 
     def _vehicle_outputs(self, state: np.ndarray) -> np.ndarray:
         outputs = self.physics.outputs(state)
@@ -76,44 +81,90 @@ class VehicleBench:
             return np.array([x, x]), np.array([v, v])
         return np.asarray(x), np.asarray(v)
 
+    def _step(self, state: np.ndarray, t: float, h: float) -> np.ndarray:
+        (p0, r0), (pm, rm), (p1, r1) = self._plate_at(t), self._plate_at(t + h / 2), self._plate_at(t + h)
+        return rk4_step(self.physics.derivatives, state, h, (p0, pm, p1), (r0, rm, r1))
+
+    def _next_step(self) -> tuple[np.ndarray, np.ndarray]:
+        """(state, outputs) one whole step after the committed time, computed once per step."""
+        if self._next is None or self._next[0] != self._time_s:
+            state = self._step(self._state, self._time_s, self.step_s)
+            self._next = (self._time_s, state, self._vehicle_outputs(state))
+        return self._next[1], self._next[2]
+
     def _advance(self) -> None:
+        """Commit whole steps up to the clock's present. A position inside the step under way is
+        interpolated between the committed state and the next one (computed once, and committed when the
+        clock gets there), so frequent reads on a wall clock cost no extra integration."""
         now = self.clock.now_s()
         if self._time_s < now - 1e-12 and self._at_rest():  # idle bench: time passes, nothing moves
-            self._time_s = now
-            self._history_times_s.append(now)
-            self._history_outputs.append(self._history_outputs[-1])
-        while self._time_s < now - 1e-12:
-            h = min(self.step_s, now - self._time_s)
-            t = self._time_s
-            (p0, r0), (pm, rm), (p1, r1) = self._plate_at(t), self._plate_at(t + h / 2), self._plate_at(t + h)
-            self._state = rk4_step(self.physics.derivatives, self._state, h, (p0, pm, p1), (r0, rm, r1))
-            self._time_s = t + h
+            if len(self._history_times_s) >= 2 and self._history_times_s[-2] > self._time_s - self.step_s:
+                self._history_times_s[-1] = now  # one entry per step at most: the history keeps its span
+            else:
+                self._history_times_s.append(now)
+                self._history_outputs.append(self._history_outputs[-1])
+            steps = math.floor((now - self.time_origin_s) / self.step_s + 1e-9)
+            self._time_s = max(self._time_s, self.time_origin_s + steps * self.step_s)  # stay on the grid
+        while self._time_s + self.step_s <= now + 1e-12:
+            self._state, outputs = self._next_step()
+            self._time_s += self.step_s
             self._history_times_s.append(self._time_s)
-            self._history_outputs.append(self._vehicle_outputs(self._state))
-        self._refresh_outputs()
-
-    def _refresh_outputs(self) -> None:
-        out = {name: float(value) for name, value in self.physics.outputs(self._state).items()}
-        plate = self.plate.position_m(self._time_s)
-        if self.vehicle.known.is_axle:
-            out |= {"x_r_l": plate, "x_r_r": plate}
-        else:
-            out["x_r"] = plate
-        self._outputs = out
+            self._history_outputs.append(outputs)
 
     def position_m(self, channel: str, at_s: float | None = None) -> float:
         """Displacement of `channel` (m) now, or at the past instant at_s (s) within the kept history."""
         with self._lock:
             self._advance()
-            if channel not in self._outputs:
-                raise KeyError(f"unknown channel {channel!r}; this bench has {sorted(self._outputs)}")
-            if at_s is None or at_s >= self._time_s:
-                return self._outputs[channel]
-            if channel.startswith("x_r"):
+            if channel.startswith("x_r") and channel in self._channels:
                 return float(self.plate.position_m(at_s))
-            return self._past_output(channel, at_s)
+            try:
+                column = self._output_names.index(channel)
+            except ValueError:
+                raise KeyError(
+                    f"unknown channel {channel!r}; this bench has {sorted(self._channels)}"
+                ) from None
+            t = self.clock.now_s() if at_s is None else at_s
+            if t > self._time_s + 1e-12:  # inside the step under way
+                weight = min(1.0, (t - self._time_s) / self.step_s)
+                after = self._next_step()[1][column]
+                return float((1.0 - weight) * self._history_outputs[-1][column] + weight * after)
+            if t >= self._time_s - 1e-12:
+                return float(self._history_outputs[-1][column])
+            return self._past_output(column, t)
 
-    def _past_output(self, channel: str, at_s: float) -> float:
+    def positions_m(self, channel: str, times_s: np.ndarray) -> np.ndarray:
+        """Displacements of `channel` (m) at many recent instants (ascending, none after the present): what
+        an amplifier catching up on its own clock asks for, in one call."""
+        times_s = np.asarray(times_s, dtype=float)
+        with self._lock:
+            self._advance()
+            if channel.startswith("x_r") and channel in self._channels:
+                return np.array([self.plate.position_m(float(t)) for t in times_s])
+            try:
+                column = self._output_names.index(channel)
+            except ValueError:
+                raise KeyError(
+                    f"unknown channel {channel!r}; this bench has {sorted(self._channels)}"
+                ) from None
+            if times_s.size == 0:
+                return times_s.copy()
+            span = max(0, int((self._time_s - float(times_s[0])) / self.step_s) + 3)
+            keep = min(len(self._history_times_s), span)
+            hist_t = list(itertools.islice(self._history_times_s, len(self._history_times_s) - keep, None))
+            hist_v = [
+                v[column]
+                for v in itertools.islice(self._history_outputs, len(self._history_outputs) - keep, None)
+            ]
+            if float(times_s[0]) < hist_t[0] - 1e-12:
+                raise ValueError(
+                    f"position at t = {times_s[0]:.6f} s asked for; the history starts at {hist_t[0]:.6f} s"
+                )
+            if float(times_s[-1]) > self._time_s + 1e-12:  # the step under way, interpolated
+                hist_t.append(self._time_s + self.step_s)
+                hist_v.append(float(self._next_step()[1][column]))
+            return np.interp(times_s, hist_t, hist_v)
+
+    def _past_output(self, column: int, at_s: float) -> float:
         times = self._history_times_s
         if at_s < times[0]:
             raise ValueError(
@@ -122,7 +173,6 @@ class VehicleBench:
         upper = min(max(1, bisect.bisect_right(times, at_s)), len(times) - 1)
         t0, t1 = times[upper - 1], times[upper]
         weight = 0.0 if t1 <= t0 else (at_s - t0) / (t1 - t0)
-        column = self._output_names.index(channel)
         before, after = self._history_outputs[upper - 1][column], self._history_outputs[upper][column]
         return float((1.0 - weight) * before + weight * after)
 
@@ -130,11 +180,13 @@ class VehicleBench:
         with self._lock:
             self._advance()
             self.plate.start_sweep(settings)
+            self._next = None  # the next step was computed with the old plate law
 
     def stop(self, emergency: bool = False) -> None:
         with self._lock:
             self._advance()
             self.plate.stop(emergency)
+            self._next = None
 
     def plate_status(self) -> PlateStatus:
         with self._lock:
@@ -143,4 +195,4 @@ class VehicleBench:
 
     @property
     def channels(self) -> tuple[str, ...]:
-        return tuple(self._outputs)
+        return self._channels

@@ -155,7 +155,7 @@ class LaserSource:
         self._last_poll_host_s = received_s
         total = read.counter if self._total_counter is None else self._total_counter + new
         self._total_counter = total
-        taken = min(new, count)
+        taken = min(new, len(read.counts))  # the last read's length (count may have grown after it)
         lost = new - taken
         if taken == 0:
             self._book(0, lost, 0, math.nan, math.nan, received_s)

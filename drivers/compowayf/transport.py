@@ -16,6 +16,7 @@ request timed out and after the next request's input flush would be taken as the
 from __future__ import annotations
 
 import contextlib
+import select
 import threading
 import time
 from collections.abc import Callable
@@ -34,6 +35,9 @@ from drivers.compowayf.errors import (
     ResponseTimeoutError,
 )
 from drivers.compowayf.urls import SerialSettings, parse_device_url
+
+READ_CHUNK_BYTES = 4096
+"""Most bytes taken in one read once data is waiting (a CompoWay/F frame is far shorter)."""
 
 
 class SerialLike(Protocol):
@@ -116,6 +120,7 @@ class CompowayFPort:
         self._opener = opener or self._open_with_pyserial
         self._lock = threading.RLock()
         self._port: SerialLike | None = None
+        self._descriptor: int | None = None
         self._closed = False
         self._port = self._open()
 
@@ -128,11 +133,40 @@ class CompowayFPort:
         )
         return port
 
+    @staticmethod
+    def _waitable(port: SerialLike) -> int | None:
+        """The port's file descriptor when reads can wait on it with select (serial devices, ptys, TCP
+        sockets): the port is then switched to non-blocking reads. None for anything else (loop://,
+        rfc2217://, test doubles), which keeps the port's own read timeout."""
+        fileno = getattr(port, "fileno", None)
+        if fileno is None or not isinstance(port, serial.SerialBase):
+            return None
+        try:
+            descriptor = int(fileno())
+            select.select([descriptor], [], [], 0)
+            port.timeout = 0
+        except (OSError, ValueError, TypeError, AttributeError, serial.SerialException):
+            return None
+        return descriptor
+
+    def _read_available(self, port: SerialLike, deadline: float) -> bytes:
+        """Whatever has arrived, waiting up to poll_s (and never past the deadline) for the first byte.
+        Waits on the descriptor where there is one, and then takes every byte there in one read (a
+        pyserial socket's in_waiting says 1 whatever is queued, so reading in_waiting bytes would
+        fetch a reply byte by byte)."""
+        if self._descriptor is None:
+            return port.read(max(1, port.in_waiting))
+        wait_s = max(0.0, min(self.link.poll_s, deadline - time.monotonic()))
+        ready, _, _ = select.select([self._descriptor], [], [], wait_s)
+        return port.read(READ_CHUNK_BYTES) if ready else b""
+
     def _open(self) -> SerialLike:
         try:
-            return self._opener()
+            port = self._opener()
         except (serial.SerialException, OSError, ValueError) as exc:
             raise PortOpenError(f"cannot open {self.pyserial_url}: {exc}") from exc
+        self._descriptor = self._waitable(port)
+        return port
 
     @property
     def is_open(self) -> bool:
@@ -206,7 +240,7 @@ class CompowayFPort:
                     return reply
                 if time.monotonic() >= deadline:
                     break
-                received += port.read(max(1, port.in_waiting))
+                received += self._read_available(port, deadline)
         except (serial.SerialException, OSError) as exc:
             self._drop_port()
             raise PortLostError(f"{label}: port lost ({exc})") from exc

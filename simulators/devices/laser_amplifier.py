@@ -40,6 +40,8 @@ from dataclasses import dataclass
 from enum import StrEnum
 from typing import Self
 
+import numpy as np
+
 from drivers.compowayf.amplifier import COUNTER_MODULUS, AmplifierConfig, MeasuredArea
 from drivers.compowayf.codec import (
     STX,
@@ -116,7 +118,9 @@ class SimulatedAmplifier:
         config: AmplifierConfig | None = None,
         model_name: str = "ZX-LDA11-N",
         parameters: Mapping[tuple[int, int], int] | None = None,
+        origin_s: float | None = None,
     ) -> None:
+        """origin_s: where a streaming amplifier's sample clock starts (bench seconds; default now)."""
         self.head = head
         self.config = config or AmplifierConfig()
         self.model_name = model_name
@@ -128,7 +132,7 @@ class SimulatedAmplifier:
         self._zero_m = 0.0
         self._zero_active = False
         self._last_out_of_range = False
-        self._origin_s = head.bench.clock.now_s()
+        self._origin_s = head.bench.clock.now_s() if origin_s is None else origin_s
         self._samples_taken = 0
 
     @classmethod
@@ -143,6 +147,7 @@ class SimulatedAmplifier:
         noise_sigma_m: float | None = None,
         static_offset_m: float = 0.0,
         sign: int = 1,
+        origin_s: float | None = None,
     ) -> SimulatedAmplifier:
         """An amplifier with a `model` head on `channel` of `bench` (noise from a Generator seeded `seed`)."""
         head = SimulatedHead(
@@ -154,7 +159,7 @@ class SimulatedAmplifier:
             noise_sigma_m=noise_sigma_m,
             seed=seed,
         )
-        return cls(head, config=config)
+        return cls(head, config=config, origin_s=origin_s)
 
     # --- measuring -------------------------------------------------------------------------------------
 
@@ -169,6 +174,16 @@ class SimulatedAmplifier:
             return measured.out_of_range_marker
         return counts
 
+    def _counts_many(self, readings_m: np.ndarray) -> list[int]:
+        """_counts_for of many readings (NaN = out of range), vectorised."""
+        measured = self.config.measured
+        bits = 4 * measured.element_width
+        with np.errstate(invalid="ignore"):
+            counts = np.round((readings_m - self._zero_m) / measured.count_unit.metres)
+            fits = (counts >= -(2 ** (bits - 1))) & (counts < 2**bits)
+        marker = measured.out_of_range_marker
+        return [int(c) if ok else marker for c, ok in zip(counts.tolist(), fits.tolist(), strict=True)]
+
     def _take(self, at_s: float | None = None) -> None:
         reading_m = self.head.measure_m(at_s)
         self._last_reading_m = reading_m
@@ -182,8 +197,11 @@ class SimulatedAmplifier:
         assert period_s is not None
         due = int((now_s - self._origin_s) / period_s + 1e-9) + 1
         first = max(self._samples_taken, due - self.config.measured.buffer_length)
-        for index in range(first, due):
-            self._take(self._origin_s + index * period_s)
+        if due > first:
+            readings = self.head.measure_many_m(self._origin_s + np.arange(first, due) * period_s)
+            self._buffer.extendleft(self._counts_many(readings))
+            self._last_reading_m = None if np.isnan(readings[-1]) else float(readings[-1])
+            self._last_out_of_range = self._last_reading_m is None
         self._samples_taken = max(self._samples_taken, due)
 
     @property

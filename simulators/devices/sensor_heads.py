@@ -93,6 +93,16 @@ class SimulatedHead:
         step = self.model.resolution_m
         return round(value_m / step) * step
 
+    def measure_many_m(self, times_s: np.ndarray) -> np.ndarray:
+        """Readings at many recent instants at once (as measure_m, vectorised); NaN where out of range."""
+        deviation_m = self.static_offset_m + self.sign * self.bench.positions_m(self.channel, times_s)
+        inside = np.abs(deviation_m) <= self.model.half_range_m
+        if self.noise_sigma_m > 0:
+            with self._lock:
+                deviation_m = deviation_m + self._rng.normal(0.0, self.noise_sigma_m, deviation_m.shape)
+        step = self.model.resolution_m
+        return np.where(inside, np.round(deviation_m / step) * step, np.nan)
+
     def measure_m(self, at_s: float | None = None) -> float | None:
         """One reading (now, or at the past instant at_s): deviation + Gaussian noise, quantised to the
         resolution; None when out of range."""

@@ -278,6 +278,7 @@ class SimulatedBench:
                 config=self._amplifier_config(),
                 seed=int(seeds[index]),
                 noise_sigma_m=self.noise_sigma_m,
+                origin_s=self.physics.time_origin_s,  # samples on the integration grid: exact states
             )
             node = index + 1
             use_pty = self.laser_transport == "pty" or (self.laser_transport == "mixed" and index % 2 == 1)
