@@ -14,7 +14,6 @@ instant: `position_m(channel, at_s)` interpolates linearly between the two steps
 
 from __future__ import annotations
 
-import bisect
 import itertools
 import math
 import threading
@@ -113,24 +112,8 @@ class VehicleBench:
 
     def position_m(self, channel: str, at_s: float | None = None) -> float:
         """Displacement of `channel` (m) now, or at the past instant at_s (s) within the kept history."""
-        with self._lock:
-            self._advance()
-            if channel.startswith("x_r") and channel in self._channels:
-                return float(self.plate.position_m(at_s))
-            try:
-                column = self._output_names.index(channel)
-            except ValueError:
-                raise KeyError(
-                    f"unknown channel {channel!r}; this bench has {sorted(self._channels)}"
-                ) from None
-            t = self.clock.now_s() if at_s is None else at_s
-            if t > self._time_s + 1e-12:  # inside the step under way
-                weight = min(1.0, (t - self._time_s) / self.step_s)
-                after = self._next_step()[1][column]
-                return float((1.0 - weight) * self._history_outputs[-1][column] + weight * after)
-            if t >= self._time_s - 1e-12:
-                return float(self._history_outputs[-1][column])
-            return self._past_output(column, t)
+        t = self.clock.now_s() if at_s is None else at_s
+        return float(self.positions_m(channel, np.array([t]))[0])
 
     def positions_m(self, channel: str, times_s: np.ndarray) -> np.ndarray:
         """Displacements of `channel` (m) at many recent instants (ascending, none after the present): what
@@ -163,18 +146,6 @@ class VehicleBench:
                 hist_t.append(self._time_s + self.step_s)
                 hist_v.append(float(self._next_step()[1][column]))
             return np.interp(times_s, hist_t, hist_v)
-
-    def _past_output(self, column: int, at_s: float) -> float:
-        times = self._history_times_s
-        if at_s < times[0]:
-            raise ValueError(
-                f"position at t = {at_s:.6f} s asked for; the history starts at {times[0]:.6f} s"
-            )
-        upper = min(max(1, bisect.bisect_right(times, at_s)), len(times) - 1)
-        t0, t1 = times[upper - 1], times[upper]
-        weight = 0.0 if t1 <= t0 else (at_s - t0) / (t1 - t0)
-        before, after = self._history_outputs[upper - 1][column], self._history_outputs[upper][column]
-        return float((1.0 - weight) * before + weight * after)
 
     def start_sweep(self, settings: SweepSettings) -> None:
         with self._lock:

@@ -286,47 +286,43 @@ class ZxlAmplifier:
 
     # --- measured value --------------------------------------------------------------------------------
 
-    def read_counts(self, count: int = 1) -> list[int]:
-        """The newest `count` samples as raw counts, newest first, as the amplifier holds them (markers
-        included). Timed for read_rate(); count may not exceed the configured buffer_length."""
+    def _read_measured(self, address: int, count: int, samples: int) -> list[int]:
+        """`count` elements of the measured area from `address`, timed for read_rate() as `samples`."""
         measured = self.config.measured
-        if not 1 <= count <= measured.buffer_length:
-            raise ValueError(f"count must be 1..{measured.buffer_length} (buffer_length), got {count}")
         started_s = self._rate.clock()
         ok = False
         try:
             if measured.area is MeasuredArea.VARIABLE:
-                values = self.read_variable_area(measured.area_type, measured.address, count)
+                values = self.read_variable_area(measured.area_type, address, count)
             else:
-                values = self.read_parameter_area(measured.area_type, measured.address, count)
+                values = self.read_parameter_area(measured.area_type, address, count)
             ok = True
             return values
         finally:
-            self._rate.record(started_s, self._rate.clock(), count, ok)
+            self._rate.record(started_s, self._rate.clock(), samples, ok)
+
+    def _check_count(self, count: int) -> None:
+        length = self.config.measured.buffer_length
+        if not 1 <= count <= length:
+            raise ValueError(f"count must be 1..{length} (buffer_length), got {count}")
+
+    def read_counts(self, count: int = 1) -> list[int]:
+        """The newest `count` samples as raw counts, newest first, as the amplifier holds them (markers
+        included). Timed for read_rate(); count may not exceed the configured buffer_length."""
+        self._check_count(count)
+        return self._read_measured(self.config.measured.address, count, count)
 
     def read_stream(self, count: int) -> StreamRead:
         """Counter and newest `count` samples in one request (streaming layout only, count <= buffer_length).
         Timed for read_rate() like read_counts."""
-        measured = self.config.measured
-        if measured.counter_address is None:
+        counter_address = self.config.measured.counter_address
+        if counter_address is None:
             raise ValueError("this amplifier's configuration has no sample counter (not a streaming layout)")
-        if not 1 <= count <= measured.buffer_length:
-            raise ValueError(f"count must be 1..{measured.buffer_length} (buffer_length), got {count}")
-        started_s = self._rate.clock()
-        ok = False
-        try:
-            if measured.area is MeasuredArea.VARIABLE:
-                values = self.read_variable_area(measured.area_type, measured.counter_address, count + 1)
-            else:
-                values = self.read_parameter_area(measured.area_type, measured.counter_address, count + 1)
-            if not 0 <= values[0] < COUNTER_MODULUS:
-                raise UnexpectedResponseError(
-                    f"node {self.node:02d}: sample counter {values[0]} out of range"
-                )
-            ok = True
-            return StreamRead(values[0], values[1:])
-        finally:
-            self._rate.record(started_s, self._rate.clock(), count, ok)
+        self._check_count(count)
+        values = self._read_measured(counter_address, count + 1, count)
+        if not 0 <= values[0] < COUNTER_MODULUS:
+            raise UnexpectedResponseError(f"node {self.node:02d}: sample counter {values[0]} out of range")
+        return StreamRead(values[0], values[1:])
 
     def read_position_m(self) -> float:
         """The current measured value in metres. Raises MeasurementOutOfRangeError on the marker."""
