@@ -12,6 +12,7 @@ recording is kept, closed as complete or as incomplete with the reason:
 
 * the sweep and settling ran out: a stop command as a matter of course, complete;
 * `abort` set (operator, service) or the task cancelled (Ctrl-C): controlled stop, "aborted ...";
+* `emergency` set (the service's emergency stop): emergency stop, "emergency stop by the operator";
 * a source silent for `silence_timeout_s` (no new samples: the line is down, the amplifier stopped
   answering or sampling): controlled stop, "sensor silence: ...";
 * the exciter's link lost (status cannot be read): controlled stop attempted, "lost link to exciter ...";
@@ -93,10 +94,15 @@ async def run_sweep(
     pacing: Pacing | None = None,
     progress: Callable[[SweepProgress], None] | None = None,
     abort: threading.Event | None = None,
+    emergency: threading.Event | None = None,
     silence_timeout_s: float = DEFAULT_SILENCE_TIMEOUT_S,
 ) -> SweepOutcome:
-    """Run one sweep on the bench `config` describes and record it at out_path (HDF5). See the module."""
+    """Run one sweep on the bench `config` describes and record it at out_path (HDF5). See the module.
+
+    abort: set it to end the sweep with a controlled stop; emergency: set it for an emergency stop (both
+    are looked at every orchestration cycle, STEP_S)."""
     run = _SweepRun(config, request, Path(out_path), pacing or RealtimePacing(), progress, abort)
+    run.emergency = emergency or threading.Event()
     run.silence_timeout_s = silence_timeout_s
     return await run.run()
 
@@ -143,6 +149,7 @@ class _SweepRun:
         self.clock = pacing.host_clock
         self.on_progress = progress
         self.abort = abort or threading.Event()
+        self.emergency = threading.Event()
         self.silence_timeout_s = DEFAULT_SILENCE_TIMEOUT_S
         self.ports: list[CompowayFPort] = []
         self.sources: list[LaserSource] = []
@@ -321,6 +328,8 @@ class _SweepRun:
         total_s = self.request.recorded_s
         self.phase = SweepPhase.SWEEPING
         while (elapsed := self.clock() - self.started_s) < total_s - TIME_TOLERANCE_S:
+            if self.emergency.is_set():
+                raise SweepFaultError("emergency stop by the operator", emergency=True)
             if self.abort.is_set():
                 raise SweepAbortedError()
             if elapsed >= self.request.sweep.duration_s:

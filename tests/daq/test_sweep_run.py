@@ -219,3 +219,22 @@ def test_polled_amplifiers_record_their_real_rate_and_identify_refuses_the_resul
     with pytest.raises(InsufficientBandwidthError, match=r"sampled at 50\.0 Hz.*at least 100 Hz"):
         check_bandwidth(read_recording_csv(csv))
     assert recording.time_s.size == outcome.rows
+
+
+def test_the_operators_emergency_stop_halts_the_plate_at_once(bench: SimulatedBench, tmp_path: Path) -> None:
+    out = tmp_path / "run.h5"
+    emergency = threading.Event()
+    outcome = asyncio.run(
+        run_sweep(
+            bench.config,
+            SweepRequest(SHORT),
+            out,
+            pacing=SimulatedPacing(bench),
+            progress=at(0.5, emergency.set),
+            emergency=emergency,
+        )
+    )
+    assert outcome.reason == "emergency stop by the operator" and outcome.stop is StopKind.EMERGENCY
+    assert bench.drive.commands[-1] is CommandCode.EMERGENCY_STOP
+    assert bench.physics.plate_status().state == "idle"
+    assert load_recording(out).metadata["status"] == "incomplete"

@@ -1,0 +1,194 @@
+"""The one bench a service owns: its devices, one sweep at a time, the emergency stop.
+
+`BenchController` is what the API (and the inspection-line scheduler) talks to. It never blocks the caller's
+event loop: a sweep runs in a thread of its own with its own asyncio loop (daq.sweep.run.run_sweep), and
+the state the API reads (busy, the running sweep's latest progress, the last outcome) is kept under a lock
+and copied out, so the status endpoint costs microseconds.
+
+With `simulated=True` and no configuration, the controller starts a SimulatedBench (simulated lasers and a
+Modbus plate drive on loopback, the preset vehicle of the bench model) on a manual clock that each sweep
+moves (SimulatedPacing): sweeps are deterministic and run as fast as the machine allows. With a bench
+configuration the devices run on their own and sweeps follow the wall clock.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from daq.bench_config import BenchConfig
+from daq.sweep.model import SweepOutcome, SweepProgress, SweepRequest
+from daq.sweep.pacing import Pacing, RealtimePacing, SimulatedPacing
+from daq.sweep.run import SweepError, check_request, run_sweep
+from drivers.exciter.urls import open_exciter
+from simulators.devices.sim_bench import SimulatedBench, vehicle_preset
+
+SweepDone = Callable[[str, SweepOutcome | None, str], None]
+"""Called in the sweep's thread when it ends: (sweep id, outcome or None, error message if it never began)."""
+
+
+class BenchBusyError(RuntimeError):
+    """A sweep is already running on this bench."""
+
+
+@dataclass(frozen=True)
+class BenchState:
+    """A snapshot for the status endpoint."""
+
+    name: str
+    model: str
+    simulated: bool
+    busy: bool
+    sweep_id: str | None
+    progress: SweepProgress | None
+    devices: list[dict[str, str]] = field(default_factory=list)
+
+
+class BenchController:
+    def __init__(
+        self, config: BenchConfig | None = None, *, simulated: bool = False, model: str = "quarter-car"
+    ):
+        if config is None and not simulated:
+            raise ValueError("a bench needs a configuration, or simulated=True")
+        self.simulated = simulated and config is None
+        self._bench: SimulatedBench | None = None
+        if self.simulated:
+            self._bench = SimulatedBench(vehicle_preset(model), name="simulated bench")
+            config = self._bench.start()
+        assert config is not None
+        self.config = config
+        self._lock = threading.Lock()
+        self._thread: threading.Thread | None = None
+        self._sweep_id: str | None = None
+        self._progress: SweepProgress | None = None
+        self._abort = threading.Event()
+        self._emergency = threading.Event()
+
+    def close(self) -> None:
+        """Abort a running sweep (controlled stop, recording kept), wait for it, stop simulated devices."""
+        self._abort.set()
+        thread = self._thread
+        if thread is not None:
+            thread.join(timeout=30)
+        if self._bench is not None:
+            self._bench.close()
+            self._bench = None
+
+    # ---- state ----------------------------------------------------------------------------------------
+
+    def state(self) -> BenchState:
+        with self._lock:
+            return BenchState(
+                name=self.config.name,
+                model=str(self.config.model),
+                simulated=self.simulated,
+                busy=self._thread is not None,
+                sweep_id=self._sweep_id,
+                progress=self._progress,
+                devices=self.devices(),
+            )
+
+    def devices(self) -> list[dict[str, str]]:
+        """What the configuration names (a live check of each device is `shockbench probe`'s job)."""
+        found = [{"name": self.config.exciter.name, "kind": "exciter", "url": self.config.exciter.url}]
+        for laser in self.config.lasers:
+            found.append(
+                {
+                    "name": laser.name,
+                    "kind": "laser",
+                    "url": laser.url,
+                    "channel": laser.channel,
+                    "head": laser.head,
+                }
+            )
+        return found
+
+    @property
+    def busy(self) -> bool:
+        with self._lock:
+            return self._thread is not None
+
+    # ---- sweeps ---------------------------------------------------------------------------------------
+
+    def check(self, request: SweepRequest, out_path: Path) -> None:
+        """Everything checkable before starting (SweepError, one line), e.g. the envelope."""
+        check_request(self.config, request, out_path)
+
+    def start_sweep(self, sweep_id: str, request: SweepRequest, out_path: Path, done: SweepDone) -> None:
+        """Start a sweep in its own thread; BenchBusyError if one runs, SweepError if it cannot begin."""
+        with self._lock:
+            if self._thread is not None:
+                raise BenchBusyError(f"bench {self.config.name!r} is running sweep {self._sweep_id}")
+            check_request(self.config, request, out_path)
+            self._abort.clear()
+            self._emergency.clear()
+            self._sweep_id, self._progress = sweep_id, None
+            self._thread = threading.Thread(
+                target=self._run,
+                args=(sweep_id, request, out_path, done),
+                name=f"sweep {sweep_id}",
+                daemon=True,
+            )
+            self._thread.start()
+
+    def _pacing(self) -> Pacing:
+        return SimulatedPacing(self._bench) if self._bench is not None else RealtimePacing()
+
+    def _on_progress(self, progress: SweepProgress) -> None:
+        with self._lock:
+            self._progress = progress
+
+    def _run(self, sweep_id: str, request: SweepRequest, out_path: Path, done: SweepDone) -> None:
+        outcome: SweepOutcome | None = None
+        error = ""
+        try:
+            outcome = asyncio.run(
+                run_sweep(
+                    self.config,
+                    request,
+                    out_path,
+                    pacing=self._pacing(),
+                    progress=self._on_progress,
+                    abort=self._abort,
+                    emergency=self._emergency,
+                )
+            )
+        except SweepError as exc:
+            error = str(exc)
+        except Exception as exc:  # the thread must report, whatever happened
+            error = f"{type(exc).__name__}: {exc}"
+        finally:
+            with self._lock:
+                self._thread = None
+                self._sweep_id = None
+            done(sweep_id, outcome, error)
+
+    def abort(self, sweep_id: str) -> bool:
+        """Controlled stop of the running sweep if it is `sweep_id`; False if that sweep is not running."""
+        with self._lock:
+            if self._sweep_id != sweep_id:
+                return False
+            self._abort.set()
+            return True
+
+    def emergency_stop(self) -> str:
+        """Emergency stop: the running sweep ends with one (recording kept); with no sweep running, the
+        command goes straight to the drive. Returns what was done, in words."""
+        with self._lock:
+            running = self._thread is not None
+            if running:
+                self._emergency.set()
+        if running:
+            return "emergency stop requested from the running sweep"
+        asyncio.run(self._direct_emergency_stop())
+        return "emergency stop sent to the drive"
+
+    async def _direct_emergency_stop(self) -> None:
+        exciter = await open_exciter(self.config.exciter.url, envelope=self.config.safety_envelope())
+        try:
+            await exciter.emergency_stop()
+        finally:
+            await exciter.close()
