@@ -5,10 +5,10 @@ Two kinds of amplifier, told apart by the bench configuration (`LaserConfig.samp
 
 * Streaming: the amplifier samples on its own clock into a buffer behind a sample counter
   (drivers.compowayf.amplifier.streaming_measured_config). Each `poll` reads the counter and as many of the
-  newest samples as can have come in since the last poll (a few more for safety, and a second read if
-  still short), so every sample arrives once, stamped with its device time (sample number x period,
-  `Clock.DEVICE`). Samples that left the amplifier's buffer before a poll got them are counted in
-  `lost_samples` and are simply absent from the ring buffer: the recorder sees the hole and marks a gap.
+  newest samples as can have come in since the last poll (a few more for safety; if that was still short,
+  a second read of the whole buffer), so every sample arrives once, stamped with its device time (sample
+  number x period, `Clock.DEVICE`). Samples that left the amplifier's buffer before a poll got them are
+  counted in `lost_samples` and are absent from the ring buffer: the recorder sees the hole, marks a gap.
 * Polled: the amplifier holds only its present value. Each `poll` reads it once and stamps it with the
   host's clock at the middle of the request (`Clock.HOST_MONOTONIC`). The rate is whatever the line allows;
   `statistics().achieved_rate_Hz` says what it was, and the recording carries it.
@@ -37,8 +37,6 @@ from drivers.compowayf.amplifier import COUNTER_MODULUS, ZxlAmplifier
 
 STREAM_MARGIN_SAMPLES = 8
 """Samples read beyond those expected since the last poll, for the jitter of the poll timing."""
-STREAM_READ_ATTEMPTS = 3
-"""Reads per poll at most when the first was too short (more samples came in than expected)."""
 DEFAULT_CAPACITY = 1 << 16
 """Ring-buffer samples per source: 65 s at 1 kHz, far more than a recorder ever falls behind."""
 
@@ -145,13 +143,13 @@ class LaserSource:
         else:
             expected = math.ceil(max(0.0, now_s - self._last_poll_host_s) / period_s)
             count = min(capacity, max(1, expected + STREAM_MARGIN_SAMPLES))
-        for _ in range(STREAM_READ_ATTEMPTS):
+        while True:  # at most twice: a read found short is followed by one of the whole buffer
             read = self.amplifier.read_stream(count)
             received_s = self.host_clock()
             new = 1 if self._total_counter is None else (read.counter - self._total_counter) % COUNTER_MODULUS
             if new <= count or count == capacity:
                 break
-            count = min(capacity, new + STREAM_MARGIN_SAMPLES)
+            count = capacity
         self._last_poll_host_s = received_s
         total = read.counter if self._total_counter is None else self._total_counter + new
         self._total_counter = total

@@ -67,6 +67,10 @@ micrometres off it during a 20 Hz sweep) for about half the CPU, so that the sim
 time on a loaded machine (one that falls behind makes every read wait for it) and a manual-clock sweep runs
 about as fast as real time."""
 START_TIMEOUT_S = 10.0
+SIMULATED_BUFFER_LENGTH = 1000
+"""Samples a simulated streaming amplifier keeps (1 s at 1 kHz). A real amplifier samples in hardware
+whatever the host does; a simulated one samples only when its process gets the CPU, so it is given the
+longest buffer a bench configuration allows, for the moments a loaded machine starves the simulator."""
 
 
 def head_for_channel(channel: str) -> HeadModel:
@@ -306,7 +310,9 @@ class SimulatedBench:
     def _amplifier_config(self) -> AmplifierConfig:
         if self.laser_sample_period_s is None:
             return AmplifierConfig()
-        return AmplifierConfig(measured=streaming_measured_config(self.laser_sample_period_s))
+        return AmplifierConfig(
+            measured=streaming_measured_config(self.laser_sample_period_s, SIMULATED_BUFFER_LENGTH)
+        )
 
     def _start_exciter(self) -> ExciterConfig:
         if self.exciter_kind == "modbus":

@@ -73,12 +73,13 @@ def test_a_pause_longer_than_the_amplifier_buffer_loses_exactly_the_overwritten_
     source.poll()
     bench.clock.advance(0.02)
     source.poll()
-    bench.clock.advance(0.400)  # 400 samples taken, the amplifier keeps buffer_length of them
+    pause = buffer_length + 300  # samples taken meanwhile; the amplifier keeps buffer_length of them
+    bench.clock.advance(pause * 1e-3)
     source.poll()
     times, _ = _drain(source)
-    assert source.statistics().lost_samples == 400 - buffer_length
+    assert source.statistics().lost_samples == pause - buffer_length
     steps = np.round(np.diff(times) * 1e3).astype(int)
-    assert sorted(set(steps)) == [1, 400 - buffer_length + 1]  # one hole, exactly as long as the loss
+    assert sorted(set(steps)) == [1, pause - buffer_length + 1]  # one hole, exactly as long as the loss
 
 
 def test_failed_reads_are_counted_and_the_next_read_catches_up_without_loss(bench: SimulatedBench) -> None:
