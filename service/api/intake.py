@@ -1,0 +1,133 @@
+"""Taking in a job: check its input the way the worker will read it, so that a job that cannot run is
+refused at submit (422 naming the field) instead of failing in the queue; then store it.
+
+Two ways in: `accept_upload` (recording CSV and vehicle file uploaded with the request; they are kept in
+the job's folder) and `accept_recording` (a recording already on disk, e.g. a sweep's, with a vehicle
+file: the files stay where they are). Both are synchronous (file I/O, parsing): call them in a thread.
+"""
+
+from __future__ import annotations
+
+import csv
+import secrets
+import shutil
+import tempfile
+from pathlib import Path
+from typing import BinaryIO
+
+from pydantic import BaseModel
+
+from daq.formats.recording_csv import read_recording_csv
+from daq.formats.vehicle_file import parse_vehicle
+from estimator.recording import Recording
+from estimator.vehicle import VehicleParameters
+from service.access import Principal
+from service.api.errors import ApiError
+from service.api.settings import ServiceSettings
+from service.jobs.context import InputError
+from service.jobs.kinds import JobKindSpec
+from service.store.jobs import JobFiles, JobRecord, JobStore
+
+RECORDING_FILE = "recording.csv"
+VEHICLE_FILE = "vehicle.toml"
+
+
+def _read_inputs(
+    recording_path: Path, recording_name: str, vehicle_path: Path, vehicle_name: str
+) -> tuple[Recording, VehicleParameters]:
+    try:
+        recording = read_recording_csv(recording_path)
+    except (ValueError, csv.Error) as exc:  # RecordingFormatError, bad text encoding, NUL bytes ...
+        message = str(exc).replace(str(recording_path), recording_name) or "not a recording CSV"
+        if isinstance(exc, UnicodeDecodeError):
+            message = f"{recording_name}: not a text file (UTF-8 expected)"
+        raise ApiError(422, message, field="recording") from None
+    try:
+        text = vehicle_path.read_text(encoding="utf-8")
+        vehicle = parse_vehicle(text, source=vehicle_name)
+    except UnicodeDecodeError:
+        raise ApiError(422, f"{vehicle_name}: not a text file (UTF-8 expected)", field="vehicle") from None
+    except ValueError as exc:  # VehicleFileError
+        raise ApiError(422, str(exc), field="vehicle") from None
+    return recording, vehicle
+
+
+def _check(spec: JobKindSpec, options: BaseModel, recording: Recording, vehicle: VehicleParameters) -> None:
+    try:
+        spec.check(options, recording, vehicle)
+    except InputError as exc:
+        raise ApiError(422, str(exc), field=exc.field) from None
+
+
+def _job_folder(settings: ServiceSettings, job_id: int) -> Path:
+    """Unique even when a new database starts numbering again over an old data directory."""
+    return settings.jobs_dir / f"{job_id:06d}-{secrets.token_hex(4)}"
+
+
+def accept_upload(
+    settings: ServiceSettings,
+    store: JobStore,
+    spec: JobKindSpec,
+    options: BaseModel,
+    recording: tuple[str | None, BinaryIO],
+    vehicle: tuple[str | None, BinaryIO],
+    principal: Principal,
+) -> JobRecord:
+    """Check the uploaded files (file name, content), then create the queued job, its folder holding them."""
+    settings.uploads_dir.mkdir(parents=True, exist_ok=True)
+    staging = Path(tempfile.mkdtemp(prefix="upload-", dir=settings.uploads_dir))
+    try:
+        recording_path, vehicle_path = staging / RECORDING_FILE, staging / VEHICLE_FILE
+        for (_, source), target in ((recording, recording_path), (vehicle, vehicle_path)):
+            with target.open("wb") as out:
+                shutil.copyfileobj(source, out, 1 << 20)
+        parsed = _read_inputs(
+            recording_path, recording[0] or "recording", vehicle_path, vehicle[0] or "vehicle"
+        )
+        _check(spec, options, *parsed)
+
+        def place(job_id: int) -> JobFiles:
+            folder = _job_folder(settings, job_id)
+            settings.jobs_dir.mkdir(parents=True, exist_ok=True)
+            staging.rename(folder)
+            return JobFiles(folder / RECORDING_FILE, folder / VEHICLE_FILE, folder)
+
+        return store.create(
+            spec.name,
+            options.model_dump(mode="json"),
+            place,
+            input_source="upload",
+            submitted_by=principal.key_id,
+        )
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)  # gone already when the job took it
+
+
+def accept_recording(
+    settings: ServiceSettings,
+    store: JobStore,
+    spec: JobKindSpec,
+    options: BaseModel,
+    recording_path: Path,
+    vehicle_path: Path,
+    principal: Principal | None,
+    *,
+    sweep_id: int | None = None,
+) -> JobRecord:
+    """A job on a recording already on disk (a sweep's): checked alike, the files stay where they are."""
+    parsed = _read_inputs(recording_path, recording_path.name, vehicle_path, vehicle_path.name)
+    _check(spec, options, *parsed)
+
+    def place(job_id: int) -> JobFiles:
+        folder = _job_folder(settings, job_id)
+        folder.mkdir(parents=True)
+        return JobFiles(recording_path, vehicle_path, folder)
+
+    return store.create(
+        spec.name,
+        options.model_dump(mode="json"),
+        place,
+        input_source="sweep" if sweep_id is not None else "recording",
+        sweep_id=sweep_id,
+        submitted_by=principal.key_id if principal else None,
+    )

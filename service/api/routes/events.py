@@ -1,0 +1,96 @@
+"""GET /api/v1/jobs/{id}/events: a job's progress as Server-Sent Events.
+
+The stream opens with `state` (the job as GET returns it), then `progress` events (stage, generation,
+best objective, ETA) while the job runs, and a `state` event when it starts; it ends with exactly one
+final event named for the outcome, `succeeded`, `failed` or `cancelled`, whose data is the job with its
+result or reason. A comment line every 15 s keeps proxies from closing a quiet stream. For a job already
+finished the stream is `state` then the final event. When the service stops, open streams end with a
+`closing` event (reconnect, or poll). Polling GET /jobs/{id} gives the same information.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+from collections.abc import AsyncIterator
+from typing import Annotated
+
+from fastapi import APIRouter, Path, Request
+from fastapi.responses import StreamingResponse
+
+from service.api.auth import Viewer
+from service.api.errors import ApiError, responses
+from service.api.routes.jobs import job_out
+from service.api.schemas import ProgressOut
+from service.jobs.broker import JobEvent
+
+KEEPALIVE_S = 15.0
+
+router = APIRouter(tags=["jobs"])
+
+
+def sse(event: str, data: dict, event_id: int) -> str:
+    return f"id: {event_id}\nevent: {event}\ndata: {json.dumps(data, separators=(',', ':'))}\n\n"
+
+
+@router.get(
+    "/jobs/{job_id}/events",
+    response_class=StreamingResponse,
+    responses={200: {"content": {"text/event-stream": {}}, "description": "the event stream"}}
+    | responses(401, 403, 404, 422),
+)
+async def job_events(
+    request: Request, job_id: Annotated[int, Path(ge=1, le=2**62)], _principal: Viewer
+) -> StreamingResponse:
+    """Progress and outcome of a job as Server-Sent Events (see the module text for the event names)."""
+    services = request.app.state.services
+    queue = services.manager.broker.subscribe(job_id)  # before reading: no event can fall in between
+    try:
+        record = await asyncio.to_thread(services.jobs.get, job_id)
+    except BaseException:
+        services.manager.broker.unsubscribe(job_id, queue)
+        raise
+    if record is None:
+        services.manager.broker.unsubscribe(job_id, queue)
+        raise ApiError(404, f"no job {job_id}")
+
+    async def stream() -> AsyncIterator[str]:
+        sequence = 0
+
+        def next_id() -> int:
+            nonlocal sequence
+            sequence += 1
+            return sequence
+
+        try:
+            yield sse("state", job_out(request, record).model_dump(mode="json"), next_id())
+            if record.status.finished:
+                yield sse(record.status.value, job_out(request, record).model_dump(mode="json"), next_id())
+                return
+            while True:
+                try:
+                    event: JobEvent = await asyncio.wait_for(queue.get(), KEEPALIVE_S)
+                except TimeoutError:
+                    yield ": keep-alive\n\n"
+                    continue
+                if event.name == "closing":
+                    yield sse("closing", {"job_id": job_id, "reason": "the service is stopping"}, next_id())
+                    return
+                if event.name == "progress" and event.progress is not None:
+                    progress = ProgressOut.of(event.progress)
+                    data = {"job_id": job_id, **(progress.model_dump(mode="json") if progress else {})}
+                    yield sse("progress", data, next_id())
+                elif event.record is not None:
+                    out = job_out(request, event.record).model_dump(mode="json")
+                    if event.name == "finished":
+                        yield sse(event.record.status.value, out, next_id())
+                        return
+                    yield sse("state", out, next_id())
+        finally:
+            services.manager.broker.unsubscribe(job_id, queue)
+
+    return StreamingResponse(
+        stream(),
+        media_type="text/event-stream",
+        headers={"Cache-Control": "no-cache", "X-Accel-Buffering": "no"},
+    )

@@ -1,0 +1,38 @@
+"""GET /api/v1/status: the service at a glance. Answers from memory only (no database, no worker round
+trip), so it stays fast while a DE job runs."""
+
+from __future__ import annotations
+
+import time
+
+from fastapi import APIRouter, Request
+
+from service.api.auth import Viewer
+from service.api.errors import responses
+from service.api.schemas import CurrentJobOut, ProgressOut, StatusOut, WorkerOut
+
+router = APIRouter(tags=["status"])
+
+
+@router.get("/status", response_model=StatusOut, responses=responses(401, 403))
+async def get_status(request: Request, _principal: Viewer) -> StatusOut:
+    """Version, worker process, queue and the job that runs now."""
+    services = request.app.state.services
+    s = services.manager.status()
+    current = (
+        CurrentJobOut(
+            id=s.current_job_id, kind=s.current_kind or "", progress=ProgressOut.of(s.current_progress)
+        )
+        if s.current_job_id is not None
+        else None
+    )
+    return StatusOut(
+        version=services.version,
+        uptime_s=time.monotonic() - services.started_at,
+        worker=WorkerOut(
+            alive=s.worker_alive, ready=s.worker_ready, pid=s.worker_pid, restarts=s.worker_restarts
+        ),
+        queue_length=s.queue_length,
+        current_job=current,
+        bench=None,
+    )

@@ -1,0 +1,68 @@
+"""Serving the app: the listening socket, and uvicorn's server told to end the job event streams as soon
+as a stop begins (uvicorn waits for open connections before the lifespan shutdown, and an event stream
+of a running job stays open for as long as the job runs)."""
+
+from __future__ import annotations
+
+import socket
+from types import FrameType
+
+import uvicorn
+from fastapi import FastAPI
+
+SHUTDOWN_GRACE_S = 5.0
+"""On a stop, open requests get this long before they are cancelled."""
+
+
+def bind(host: str, port: int) -> socket.socket:
+    """The listening socket, bound here so that port 0 can be reported as the port it became. (TCP as the
+    protocol, not 0: asyncio sets TCP_NODELAY on accepted sockets only then; without it every answer
+    waits ~40 ms for a delayed ACK.)"""
+    host = host.strip("[]")
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    sock = socket.socket(family, socket.SOCK_STREAM, socket.IPPROTO_TCP)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    try:
+        sock.bind((host, port))
+    except OSError:
+        sock.close()
+        raise
+    sock.listen(128)
+    sock.set_inheritable(True)
+    return sock
+
+
+def url_of(sock: socket.socket) -> str:
+    host, port = sock.getsockname()[:2]
+    return f"http://[{host}]:{port}" if ":" in host else f"http://{host}:{port}"
+
+
+def begin_shutdown(app: FastAPI) -> None:
+    """Thread-safe: end the app's event streams (each gets a `closing` event)."""
+    services = getattr(app.state, "services", None)
+    if services is not None:
+        services.manager.close_streams_threadsafe()
+
+
+class ServiceServer(uvicorn.Server):
+    def __init__(self, app: FastAPI, log_level: str = "info") -> None:
+        super().__init__(
+            uvicorn.Config(
+                app,
+                lifespan="on",
+                log_level=log_level,
+                access_log=False,
+                timeout_graceful_shutdown=SHUTDOWN_GRACE_S,
+            )
+        )
+        self.service_app = app
+
+    def handle_exit(self, sig: int, frame: FrameType | None) -> None:
+        """A signal (Ctrl-C, SIGTERM): uvicorn's handler runs on the main thread, the loop's."""
+        begin_shutdown(self.service_app)
+        super().handle_exit(sig, frame)
+
+    def stop(self) -> None:
+        """Stop from another thread."""
+        begin_shutdown(self.service_app)
+        self.should_exit = True

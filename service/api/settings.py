@@ -1,0 +1,43 @@
+"""Everything the service is started with, in one object that `shockbench serve` (or a test) builds and
+`create_app` takes."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from service.access import KeyRing
+from service.jobs.manager import WorkerSettings
+from service.store.database import default_database_url
+
+DEFAULT_MAX_UPLOAD_BYTES = 64 * 1024 * 1024
+"""64 MiB: a 20 s quarter-car recording at 1 kHz is about 1 MB of CSV, a 10-minute axle recording ~40 MB."""
+
+
+@dataclass(frozen=True)
+class ServiceSettings:
+    data_dir: Path
+    """Uploaded inputs and job artefacts (jobs/<id>/), and the SQLite database unless database_url says
+    otherwise."""
+    keys: KeyRing
+    database_url: str | None = None
+    """Any SQLAlchemy URL; None: SQLite in data_dir."""
+    bench_config: Path | None = None
+    """Bench configuration (TOML), for the acquisition layer."""
+    simulated: bool = False
+    """Start simulated devices, so that the whole service runs with nothing attached."""
+    max_upload_bytes: int = DEFAULT_MAX_UPLOAD_BYTES
+    worker: WorkerSettings = field(default_factory=WorkerSettings)
+
+    @property
+    def resolved_database_url(self) -> str:
+        return self.database_url or default_database_url(self.data_dir)
+
+    @property
+    def jobs_dir(self) -> Path:
+        return self.data_dir / "jobs"
+
+    @property
+    def uploads_dir(self) -> Path:
+        """Uploads land here while they are checked, then move to their job's folder."""
+        return self.data_dir / "uploads"

@@ -1,0 +1,103 @@
+"""Running the service in-process, for tests and benchmarks: the real uvicorn server on a free loopback
+port in a background thread (`LiveServer`), a deadline-bounded `wait_until`, and simulated input files
+(`simulated_inputs`) whose truth is known."""
+
+from __future__ import annotations
+
+import tempfile
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from functools import cache
+from pathlib import Path
+from typing import TypeVar
+
+import numpy as np
+from fastapi import FastAPI
+
+from service.api.server import ServiceServer, bind, url_of
+
+T = TypeVar("T")
+
+
+def wait_until(condition: Callable[[], T | None], timeout_s: float, what: str, poll_s: float = 0.05) -> T:
+    """Poll `condition` until it returns something truthy (returned) or the deadline passes (TimeoutError
+    naming `what`)."""
+    deadline = time.monotonic() + timeout_s
+    while True:
+        value = condition()
+        if value:
+            return value
+        if time.monotonic() > deadline:
+            raise TimeoutError(f"{what}: not within {timeout_s:g} s")
+        time.sleep(poll_s)
+
+
+class LiveServer:
+    """`with LiveServer(app) as server:` serves `app` (lifespan included) at `server.url`."""
+
+    def __init__(self, app: FastAPI, startup_timeout_s: float = 60.0) -> None:
+        self.app = app
+        self._timeout = startup_timeout_s
+        self._server: ServiceServer | None = None
+        self._thread: threading.Thread | None = None
+        self.url = ""
+
+    def __enter__(self) -> LiveServer:
+        sock = bind("127.0.0.1", 0)
+        self.url = url_of(sock)
+        self._server = server = ServiceServer(self.app, log_level="warning")
+        self._thread = threading.Thread(
+            target=server.run, kwargs={"sockets": [sock]}, name="live-server", daemon=True
+        )
+        self._thread.start()
+        thread = self._thread
+        wait_until(lambda: server.started or not thread.is_alive(), self._timeout, "service start-up")
+        if not server.started:
+            raise RuntimeError("the service did not start (see the log above)")
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        if self._server is not None and self._thread is not None:
+            self._server.stop()
+            self._thread.join(timeout=30)
+
+
+@dataclass(frozen=True)
+class SimulatedInputs:
+    recording: Path
+    vehicle: Path
+    true_curve: Callable[[np.ndarray], np.ndarray]
+    """Velocity (m/s) -> force (N) of the simulated damper."""
+    suspension_velocity_m_s: np.ndarray
+    """Noise-free ẋ_s − ẋ_t at the samples: the excited velocity range."""
+
+
+@cache
+def _simulated(seconds: float, seed: int) -> tuple[str, str, Callable, np.ndarray]:
+    from daq.formats.recording_csv import write_recording_csv
+    from daq.formats.vehicle_file import format_vehicle
+    from drivers.exciter.sweep import SweepSettings
+    from simulators.vehicle_sim import SimulationSettings, default_quarter_car, simulate, true_damper
+
+    vehicle = default_quarter_car()
+    sim = simulate(vehicle, SimulationSettings(sweep=SweepSettings(duration_s=seconds), seed=seed))
+    with tempfile.TemporaryDirectory() as folder:
+        path = Path(folder) / "recording.csv"
+        write_recording_csv(path, sim.recording)
+        csv_text = path.read_text()
+    velocity = sim.truth_states[:, 1] - sim.truth_states[:, 3]
+    return csv_text, format_vehicle(vehicle.known), true_damper(vehicle.dampers[0]).force, velocity
+
+
+def simulated_inputs(folder: Path, seconds: float = 6.0, seed: int = 1) -> SimulatedInputs:
+    """A quarter-car recording CSV and its vehicle file from the physics simulator (embedded default car,
+    valve-model damper, 5 µm sensor noise), with the truth to compare against. Simulated once per
+    process for each (seconds, seed): a sweep takes seconds to integrate."""
+    csv_text, vehicle_text, truth, velocity = _simulated(seconds, seed)
+    folder.mkdir(parents=True, exist_ok=True)
+    recording, vehicle_file = folder / f"sim-{seconds:g}s-{seed}.csv", folder / "vehicle.toml"
+    recording.write_text(csv_text)
+    vehicle_file.write_text(vehicle_text)
+    return SimulatedInputs(recording, vehicle_file, truth, velocity)

@@ -1,0 +1,135 @@
+"""`shockbench serve`: run the bench service (FastAPI under uvicorn, with its worker process).
+
+    shockbench serve [--config BENCH.toml] [--simulated] [--host H] [--port P] [--keys KEYS.toml]
+                     [--data DIR] [--database URL] [--max-upload-mb N]
+
+Listens on loopback by default; any other address needs a keys file. Without a keys file an operator key
+is generated and printed at start-up (as Jupyter prints its token). Port 0 takes a free port; the line
+"listening on http://HOST:PORT" says which. Also runnable as `python -m service.cli.serve ...`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import ipaddress
+import logging
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+from service.access import KeyRing, load_keys
+from service.cli.errors import EXIT_BAD_INPUT, EXIT_FAILED, CliError
+
+DEFAULT_PORT = 8000
+
+
+def is_loopback(host: str) -> bool:
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host.strip("[]")).is_loopback
+    except ValueError:
+        return False
+
+
+def run_serve(args: argparse.Namespace) -> int:
+    if not 0 <= args.port <= 65535:
+        raise CliError("--port must lie between 0 and 65535")
+    if not is_loopback(args.host) and args.keys is None:
+        raise CliError(
+            f"--host {args.host} is not a loopback address: serving beyond this machine needs --keys"
+        )
+    if args.config is not None and not Path(args.config).is_file():
+        raise CliError(f"{args.config}: no such bench configuration")
+    if not args.max_upload_mb > 0:
+        raise CliError("--max-upload-mb must be > 0")
+    generated_key = None
+    if args.keys is not None:
+        keys = load_keys(args.keys)
+    else:
+        keys, generated_key = KeyRing.generated()
+    # loaded after the checks of the arguments: a mistake is reported without loading the service
+    from service.api import ServiceSettings, create_app
+    from service.api.server import ServiceServer, bind, url_of
+    from service.jobs.manager import WorkerSettings
+    from service.store.database import Database
+
+    settings = ServiceSettings(
+        data_dir=Path(args.data).resolve(),
+        keys=keys,
+        database_url=args.database,
+        bench_config=Path(args.config).resolve() if args.config else None,
+        simulated=args.simulated,
+        max_upload_bytes=int(args.max_upload_mb * 2**20),
+        worker=WorkerSettings(nice=args.worker_nice),
+    )
+    database = Database(settings.resolved_database_url)  # a bad URL or an unreachable server: one line now
+    try:
+        database.create_tables()
+    finally:
+        database.dispose()
+    logging.basicConfig(level=args.log_level.upper(), format="%(levelname)-9s %(name)s: %(message)s")
+    try:
+        sock = bind(args.host, args.port)
+    except OSError as exc:
+        raise CliError(f"cannot listen on {args.host}:{args.port} ({exc.strerror or exc})") from None
+    url = url_of(sock)
+    print(f"shockbench serve: listening on {url} (API {url}/api/v1, docs {url}/docs)", flush=True)
+    print(f"shockbench serve: data in {settings.data_dir}, database {database.safe_url}", flush=True)
+    if generated_key is not None:
+        print(
+            "shockbench serve: no keys file, so this operator key was generated for this run; send it as "
+            f"'Authorization: Bearer KEY':\n    {generated_key}",
+            flush=True,
+        )
+    server = ServiceServer(create_app(settings), log_level=args.log_level)
+    with contextlib.suppress(KeyboardInterrupt):  # uvicorn stops gracefully on Ctrl-C, then re-raises it
+        server.run(sockets=[sock])
+    return 0 if server.started else EXIT_FAILED
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "serve",
+        help="run the bench service (REST API under /api/v1, docs at /docs)",
+        description="Run the bench service: REST API, identification jobs in a worker process, "
+        "persistent jobs, live progress.",
+    )
+    p.add_argument("--config", default=None, help="bench configuration (TOML)")
+    p.add_argument("--simulated", action="store_true", help="start simulated devices (nothing attached)")
+    p.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1)")
+    p.add_argument(
+        "--port", type=int, default=DEFAULT_PORT, help=f"port (default {DEFAULT_PORT}; 0: any free)"
+    )
+    p.add_argument(
+        "--keys",
+        default=None,
+        help="keys file (TOML: viewer/operator/admin = [keys]); required off loopback; without it an "
+        "operator key is generated and printed",
+    )
+    p.add_argument("--data", default="shockbench-data", help="data directory (default ./shockbench-data)")
+    p.add_argument("--database", default=None, help="SQLAlchemy URL (default: SQLite in the data directory)")
+    p.add_argument("--max-upload-mb", type=float, default=64.0, help="upload size limit in MiB (default 64)")
+    p.add_argument("--worker-nice", type=int, default=5, help="nice increment of the worker (default 5)")
+    p.add_argument("--log-level", default="info", choices=["critical", "error", "warning", "info", "debug"])
+    p.set_defaults(handler=run_serve)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """`python -m service.cli.serve ...`, with the CLI's one-line errors."""
+    parser = argparse.ArgumentParser(prog="shockbench")
+    register(parser.add_subparsers(dest="command", required=True))
+    args = parser.parse_args(["serve", *(sys.argv[1:] if argv is None else argv)])
+    try:
+        return int(args.handler(args))
+    except KeyboardInterrupt:
+        return 130
+    except (CliError, ValueError, OSError) as exc:
+        message = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        print(f"shockbench serve: error: {message}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,84 @@
+"""The identification job: its options as the API takes them, the checks at submit, and the function the
+worker runs (estimator.identify.identify, then the curve plots as PNG and SVG artefacts)."""
+
+from __future__ import annotations
+
+from pydantic import BaseModel, Field
+
+from estimator.identify import IdentifyOptions, Solver
+from estimator.recording import Recording
+from estimator.solvers.differential_evolution import DESettings
+from estimator.vehicle import ModelKind, TyreModel, VehicleParameters
+from service.jobs.context import InputError, JobContext, JobOutcome, finite_json
+
+PLOT_FORMATS = ("png", "svg")
+
+
+class IdentifyJobOptions(BaseModel):
+    """Options of an identification job (the same as `shockbench identify`). Unknown fields are refused
+    by the submit endpoint."""
+
+    model: ModelKind | None = Field(
+        None, description="quarter-car or axle; when given it must be what the vehicle file says"
+    )
+    tyre: TyreModel = Field(TyreModel.MAXWELL, description="tyre model")
+    solver: Solver = Field(Solver.EXACT, description="exact (default) or de (differential evolution)")
+    points: int | None = Field(
+        None, ge=3, le=60, description="damper curve points (default 20; axle 10 per side)"
+    )
+    generations: int = Field(3000, ge=1, le=200_000, description="DE generations (solver de)")
+    seed: int = Field(0, ge=0, le=2**31 - 1, description="DE seed (solver de)")
+    refine: bool = Field(False, description="refine the curve by DE on the output-error gap")
+    output_error: bool = Field(
+        True, description="simulate the identified model for the output-error gap (off saves seconds)"
+    )
+
+    def identify_options(self) -> IdentifyOptions:
+        return IdentifyOptions(
+            tyre=self.tyre,
+            points=self.points,
+            solver=self.solver,
+            de=DESettings(generations=self.generations, seed=self.seed),
+            output_error=self.output_error or self.refine,
+            refine_output_error=self.refine,
+        )
+
+
+def check_identify_inputs(options: BaseModel, recording: Recording, vehicle: VehicleParameters) -> None:
+    if not isinstance(options, IdentifyJobOptions):
+        raise TypeError("check_identify_inputs needs IdentifyJobOptions")
+    if options.model is not None and options.model is not vehicle.model:
+        raise InputError(
+            "model", f"model is {options.model.value} but the vehicle file says {vehicle.model.value}"
+        )
+    if vehicle.is_axle != recording.is_axle:
+        has = "axle" if recording.is_axle else "quarter-car"
+        raise InputError(
+            "recording",
+            f"the recording has {has} channels but the vehicle file is for a {vehicle.model.value}",
+        )
+
+
+def run(job: JobContext) -> JobOutcome:
+    """Runs in the worker process: identify, then plot. Raises InterruptedError when cancelled."""
+    from estimator.identify import identify
+    from service.plots import curve_plot_bytes  # matplotlib: loaded in the worker only
+
+    options = IdentifyJobOptions.model_validate(job.options)
+    job.progress.stage("differential evolution" if options.solver is Solver.DE else "identifying")
+    result = identify(
+        job.recording,
+        job.vehicle,
+        options.identify_options(),
+        progress=job.progress.generation,
+        cancel=job.cancel,
+    )
+    if job.cancel.is_set():
+        raise InterruptedError("identification cancelled")
+    job.progress.stage("plotting")
+    artefacts = {}
+    for fmt in PLOT_FORMATS:
+        name = f"plot.{fmt}"
+        (job.output_dir / name).write_bytes(curve_plot_bytes(result, fmt))
+        artefacts[name] = name
+    return JobOutcome(finite_json(result.to_json()), artefacts)

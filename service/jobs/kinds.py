@@ -1,0 +1,69 @@
+"""The kinds of job the worker runs, as a small registry: adding a kind is one entry in KINDS.
+
+An entry says how the API validates the kind's options (a pydantic model, also the multipart form the
+submit endpoint documents), which cross-checks of options, recording and vehicle run at submit (so a job
+that cannot run is refused with 422 before it is queued), and which function the worker calls
+("module:function", imported in the worker process only, so the service never loads the estimator's
+heavy parts or matplotlib).
+
+Every kind takes a recording and a vehicle file. The worker function receives a JobContext and returns a
+JobOutcome (service.jobs.context).
+
+Planned second entry, once estimator/doctor exists:
+
+    JobKind.DIAGNOSE: JobKindSpec(
+        name="diagnose", summary="Diagnose the model ...", submit_path="/diagnoses",
+        options_model=DiagnoseJobOptions, check=check_diagnose_inputs,
+        runner="service.jobs.diagnose_job:run",
+    )
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from pydantic import BaseModel
+
+from estimator.recording import Recording
+from estimator.vehicle import VehicleParameters
+from service.jobs.context import InputError
+from service.jobs.identify_job import IdentifyJobOptions, check_identify_inputs
+from service.store.models import JobKind
+
+__all__ = ["KINDS", "InputError", "JobKindSpec", "kind_spec"]
+
+
+@dataclass(frozen=True)
+class JobKindSpec:
+    name: str
+    summary: str
+    submit_path: str
+    """Path (under /api/v1) that accepts an upload of this kind."""
+    options_model: type[BaseModel]
+    check: Callable[[BaseModel, Recording, VehicleParameters], None]
+    """Raises InputError(field, message) when options, recording and vehicle do not go together."""
+    runner: str
+    """'module:function' run in the worker: function(JobContext) -> JobOutcome."""
+    preload: tuple[str, ...] = ()
+    """Modules the worker imports at its start, so that the first job does not wait for them."""
+
+
+KINDS: dict[str, JobKindSpec] = {
+    JobKind.IDENTIFY.value: JobKindSpec(
+        name=JobKind.IDENTIFY.value,
+        summary="Identify the damper curve(s), masses, tyre damping and inspection figures",
+        submit_path="/jobs",
+        options_model=IdentifyJobOptions,
+        check=check_identify_inputs,
+        runner="service.jobs.identify_job:run",
+        preload=("estimator.identify", "service.plots"),
+    ),
+}
+
+
+def kind_spec(name: str) -> JobKindSpec:
+    try:
+        return KINDS[name]
+    except KeyError:
+        raise ValueError(f"unknown job kind {name!r} (known: {', '.join(KINDS)})") from None

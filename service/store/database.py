@@ -1,0 +1,81 @@
+"""The database connection: an SQLAlchemy engine and short-lived sessions.
+
+SQLite by default (a file in the data directory: embedded, no server to install), opened in WAL mode so
+that readers never wait for the writer; any other SQLAlchemy URL (e.g. postgresql+psycopg://...) works
+unchanged with the same models. Tables are created when missing.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+from sqlalchemy import create_engine, event
+from sqlalchemy.engine import URL, Engine, make_url
+from sqlalchemy.exc import ArgumentError, NoSuchModuleError, SQLAlchemyError
+from sqlalchemy.orm import Session, sessionmaker
+
+from service.store.models import Base
+
+DATABASE_FILE = "shockbench.sqlite3"
+
+
+class DatabaseError(ValueError):
+    """The database URL is unusable or the database cannot be opened; one line, no password."""
+
+
+def default_database_url(data_dir: Path) -> str:
+    return f"sqlite:///{(Path(data_dir) / DATABASE_FILE).resolve()}"
+
+
+def _sqlite_pragmas(dbapi_connection: Any, _record: Any) -> None:
+    cursor = dbapi_connection.cursor()
+    cursor.execute("PRAGMA journal_mode=WAL")
+    cursor.execute("PRAGMA synchronous=NORMAL")
+    cursor.execute("PRAGMA foreign_keys=ON")
+    cursor.close()
+
+
+class Database:
+    """Engine plus session factory. Sessions are short (one unit of work each) and may be used from any
+    thread; the API calls them from worker threads, never holding one across an await."""
+
+    def __init__(self, url: str) -> None:
+        try:
+            parsed: URL = make_url(url)
+        except ArgumentError:
+            raise DatabaseError(f"database URL {url!r} is not a valid SQLAlchemy URL") from None
+        self.url = parsed
+        kwargs: dict[str, Any] = {}
+        if parsed.get_backend_name() == "sqlite":
+            if parsed.database and parsed.database != ":memory:":
+                Path(parsed.database).parent.mkdir(parents=True, exist_ok=True)
+            kwargs["connect_args"] = {"check_same_thread": False, "timeout": 30}
+        try:
+            self.engine: Engine = create_engine(parsed, **kwargs)
+        except (NoSuchModuleError, ModuleNotFoundError, ArgumentError) as exc:
+            raise DatabaseError(f"database {self.safe_url}: {str(exc).splitlines()[0]}") from None
+        if parsed.get_backend_name() == "sqlite":
+            event.listen(self.engine, "connect", _sqlite_pragmas)
+        self.sessions = sessionmaker(self.engine, expire_on_commit=False)
+
+    @property
+    def safe_url(self) -> str:
+        return self.url.render_as_string(hide_password=True)
+
+    def create_tables(self) -> None:
+        try:
+            Base.metadata.create_all(self.engine)
+        except SQLAlchemyError as exc:
+            raise DatabaseError(f"database {self.safe_url}: {str(exc).splitlines()[0]}") from None
+
+    @contextmanager
+    def transaction(self) -> Iterator[Session]:
+        """A session in a transaction: committed on success, rolled back on error."""
+        with self.sessions.begin() as session:
+            yield session
+
+    def dispose(self) -> None:
+        self.engine.dispose()

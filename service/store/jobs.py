@@ -1,0 +1,222 @@
+"""Jobs in the database: submit, move through their states, read back.
+
+Every state change is one conditional UPDATE (`... WHERE status = 'queued'` etc.), so a cancel racing the
+start of a job has exactly one winner. Methods are synchronous and short; the asyncio side calls them in a
+thread. JobRecord is a detached snapshot of a row, safe to pass around after the session closed.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from datetime import datetime
+from pathlib import Path
+from typing import Any
+
+from sqlalchemy import func, select, update
+
+from service.store.database import Database
+from service.store.models import JobRow, JobStatus, utcnow
+
+RESTART_REASON = "service restarted while the job ran"
+
+
+@dataclass(frozen=True)
+class JobFiles:
+    """Where a job's input is and where its artefacts go."""
+
+    recording_path: Path
+    vehicle_path: Path
+    output_dir: Path
+
+
+@dataclass(frozen=True)
+class JobRecord:
+    id: int
+    kind: str
+    status: JobStatus
+    options: dict[str, Any]
+    input_source: str
+    recording_path: str
+    vehicle_path: str
+    sweep_id: int | None
+    output_dir: str
+    result: dict[str, Any] | None
+    artefacts: dict[str, Any]
+    error: str | None
+    progress: dict[str, Any] | None
+    submitted_by: str | None
+    created_at: datetime
+    started_at: datetime | None
+    finished_at: datetime | None
+
+    @classmethod
+    def of(cls, row: JobRow) -> JobRecord:
+        return cls(
+            id=row.id,
+            kind=row.kind,
+            status=JobStatus(row.status),
+            options=dict(row.options or {}),
+            input_source=row.input_source,
+            recording_path=row.recording_path,
+            vehicle_path=row.vehicle_path,
+            sweep_id=row.sweep_id,
+            output_dir=row.output_dir,
+            result=row.result,
+            artefacts=dict(row.artefacts or {}),
+            error=row.error,
+            progress=row.progress,
+            submitted_by=row.submitted_by,
+            created_at=row.created_at,
+            started_at=row.started_at,
+            finished_at=row.finished_at,
+        )
+
+
+class JobStore:
+    def __init__(self, database: Database) -> None:
+        self.db = database
+
+    def create(
+        self,
+        kind: str,
+        options: dict[str, Any],
+        place: Callable[[int], JobFiles],
+        *,
+        input_source: str = "upload",
+        sweep_id: int | None = None,
+        submitted_by: str | None = None,
+    ) -> JobRecord:
+        """Insert a queued job. `place(job_id)` puts the input where the job will read it (e.g. moves the
+        uploaded files into the job's folder) and says where; if it raises, no job is created."""
+        with self.db.transaction() as session:
+            row = JobRow(
+                kind=kind,
+                status=JobStatus.QUEUED.value,
+                options=options,
+                input_source=input_source,
+                sweep_id=sweep_id,
+                submitted_by=submitted_by,
+                recording_path="",
+                vehicle_path="",
+                output_dir="",
+                artefacts={},
+            )
+            session.add(row)
+            session.flush()
+            files = place(row.id)
+            row.recording_path = str(files.recording_path)
+            row.vehicle_path = str(files.vehicle_path)
+            row.output_dir = str(files.output_dir)
+            session.flush()
+            return JobRecord.of(row)
+
+    def get(self, job_id: int) -> JobRecord | None:
+        with self.db.sessions() as session:
+            row = session.get(JobRow, job_id)
+            return JobRecord.of(row) if row is not None else None
+
+    def list_jobs(
+        self, *, status: JobStatus | None = None, kind: str | None = None, limit: int = 50, offset: int = 0
+    ) -> tuple[list[JobRecord], int]:
+        """Newest first, and the total count that matches."""
+        query = select(JobRow)
+        count = select(func.count()).select_from(JobRow)
+        if status is not None:
+            query, count = (
+                query.where(JobRow.status == status.value),
+                count.where(JobRow.status == status.value),
+            )
+        if kind is not None:
+            query, count = query.where(JobRow.kind == kind), count.where(JobRow.kind == kind)
+        with self.db.sessions() as session:
+            rows = session.scalars(query.order_by(JobRow.id.desc()).limit(limit).offset(offset)).all()
+            return [JobRecord.of(r) for r in rows], int(session.scalar(count) or 0)
+
+    def queued_ids(self) -> list[int]:
+        """Queued jobs in the order they were submitted."""
+        with self.db.sessions() as session:
+            query = select(JobRow.id).where(JobRow.status == JobStatus.QUEUED.value).order_by(JobRow.id)
+            return list(session.scalars(query).all())
+
+    def _transition(self, job_id: int, from_status: tuple[JobStatus, ...], **values: Any) -> bool:
+        with self.db.transaction() as session:
+            done = session.execute(
+                update(JobRow)
+                .where(JobRow.id == job_id, JobRow.status.in_([s.value for s in from_status]))
+                .values(**values)
+            )
+            return done.rowcount == 1
+
+    def mark_running(self, job_id: int) -> bool:
+        """queued -> running; False when the job is no longer queued (cancelled meanwhile)."""
+        return self._transition(
+            job_id, (JobStatus.QUEUED,), status=JobStatus.RUNNING.value, started_at=utcnow(), progress=None
+        )
+
+    def requeue(self, job_id: int) -> bool:
+        """running -> queued: the job never really started (its worker died before taking it), or the
+        service is stopping and will resume it at its next start."""
+        return self._transition(
+            job_id, (JobStatus.RUNNING,), status=JobStatus.QUEUED.value, started_at=None, progress=None
+        )
+
+    def start(self, job_id: int) -> JobRecord | None:
+        """mark_running, then the job as it now is; None when it was no longer queued."""
+        return self.get(job_id) if self.mark_running(job_id) else None
+
+    def set_progress(self, job_id: int, progress: dict[str, Any]) -> None:
+        self._transition(job_id, (JobStatus.RUNNING,), progress=progress)
+
+    def succeed(
+        self, job_id: int, result: dict[str, Any], artefacts: dict[str, Any], progress: dict[str, Any] | None
+    ) -> bool:
+        return self._transition(
+            job_id,
+            (JobStatus.RUNNING,),
+            status=JobStatus.SUCCEEDED.value,
+            result=result,
+            artefacts=artefacts,
+            progress=progress,
+            finished_at=utcnow(),
+        )
+
+    def fail(self, job_id: int, reason: str, progress: dict[str, Any] | None = None) -> bool:
+        values: dict[str, Any] = {"status": JobStatus.FAILED.value, "error": reason, "finished_at": utcnow()}
+        if progress is not None:
+            values["progress"] = progress
+        return self._transition(job_id, (JobStatus.QUEUED, JobStatus.RUNNING), **values)
+
+    def cancel(
+        self,
+        job_id: int,
+        reason: str = "cancelled",
+        *,
+        running: bool = False,
+        progress: dict[str, Any] | None = None,
+    ) -> bool:
+        """Queued (or, with running=True, running) -> cancelled."""
+        allowed = (JobStatus.QUEUED, JobStatus.RUNNING) if running else (JobStatus.QUEUED,)
+        values: dict[str, Any] = {
+            "status": JobStatus.CANCELLED.value,
+            "error": reason,
+            "finished_at": utcnow(),
+        }
+        if progress is not None:
+            values["progress"] = progress
+        return self._transition(job_id, allowed, **values)
+
+    def recover_interrupted(self, reason: str = RESTART_REASON) -> list[int]:
+        """At start-up: jobs left 'running' by a crash or a kill of the service are marked failed with the
+        reason. (Queued jobs stay queued and are resumed in order.)"""
+        with self.db.transaction() as session:
+            ids = list(
+                session.scalars(select(JobRow.id).where(JobRow.status == JobStatus.RUNNING.value)).all()
+            )
+            if ids:
+                session.execute(
+                    update(JobRow)
+                    .where(JobRow.id.in_(ids))
+                    .values(status=JobStatus.FAILED.value, error=reason, finished_at=utcnow())
+                )
+            return ids

@@ -1,0 +1,154 @@
+"""The tables: jobs (identification and diagnosis), sweeps and scheduled tests.
+
+SQLAlchemy 2.x declarative models with portable column types only (strings, integers, floats, booleans,
+JSON, timestamps), so the same models work on SQLite and PostgreSQL. Statuses are stored as their string
+values. Timestamps are UTC; SQLite forgets the zone, so `UTCDateTime` puts it back on reading.
+"""
+
+from __future__ import annotations
+
+from datetime import UTC, datetime
+from enum import StrEnum
+from typing import Any
+
+from sqlalchemy import JSON, Boolean, DateTime, ForeignKey, Index, Integer, String, Text
+from sqlalchemy.engine import Dialect
+from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
+from sqlalchemy.types import TypeDecorator
+
+
+def utcnow() -> datetime:
+    return datetime.now(UTC)
+
+
+class UTCDateTime(TypeDecorator[datetime]):
+    """A timezone-aware UTC timestamp on every back end."""
+
+    impl = DateTime(timezone=True)
+    cache_ok = True
+
+    def process_bind_param(self, value: datetime | None, dialect: Dialect) -> datetime | None:
+        if value is not None and value.tzinfo is None:
+            raise ValueError("naive datetime given to a UTC column")
+        return value.astimezone(UTC) if value is not None else None
+
+    def process_result_value(self, value: datetime | None, dialect: Dialect) -> datetime | None:
+        if value is not None and value.tzinfo is None:
+            return value.replace(tzinfo=UTC)
+        return value
+
+
+class JobKind(StrEnum):
+    IDENTIFY = "identify"
+    DIAGNOSE = "diagnose"
+
+
+class JobStatus(StrEnum):
+    QUEUED = "queued"
+    RUNNING = "running"
+    SUCCEEDED = "succeeded"
+    FAILED = "failed"
+    CANCELLED = "cancelled"
+
+    @property
+    def finished(self) -> bool:
+        return self in (JobStatus.SUCCEEDED, JobStatus.FAILED, JobStatus.CANCELLED)
+
+
+class SweepStatus(StrEnum):
+    REQUESTED = "requested"
+    RUNNING = "running"
+    COMPLETE = "complete"
+    FAILED = "failed"
+    ABORTED = "aborted"
+
+
+class ScheduleStatus(StrEnum):
+    WAITING = "waiting"
+    RUNNING = "running"
+    DONE = "done"
+    FAILED = "failed"
+    CANCELLED = "cancelled"
+
+
+class Base(DeclarativeBase):
+    type_annotation_map = {datetime: UTCDateTime, dict[str, Any]: JSON}  # noqa: RUF012 - SQLAlchemy API
+
+
+class SweepRow(Base):
+    """A sweep on the bench (filled in by the acquisition layer). The recording stays in its file."""
+
+    __tablename__ = "sweeps"
+    __table_args__ = {"sqlite_autoincrement": True}  # noqa: RUF012 - SQLAlchemy API; ids are never reused
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=True)
+    bench: Mapped[str] = mapped_column(String(100), default="default")
+    status: Mapped[str] = mapped_column(String(16), default=SweepStatus.REQUESTED.value)
+    settings: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
+    """Sweep settings as submitted (frequencies, amplitude, duration ...)."""
+    vehicle_file: Mapped[str | None] = mapped_column(Text, default=None)
+    recording_path: Mapped[str | None] = mapped_column(Text, default=None)
+    complete: Mapped[bool] = mapped_column(Boolean, default=False)
+    """True when the recording holds the whole sweep without gaps."""
+    reason: Mapped[str | None] = mapped_column(Text, default=None)
+    """Why the sweep failed or was aborted (emergency stop, device fault, restart)."""
+    operator: Mapped[str | None] = mapped_column(String(64), default=None)
+    """Key id of who requested it (service.access.key_id)."""
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+    started_at: Mapped[datetime | None] = mapped_column(default=None)
+    finished_at: Mapped[datetime | None] = mapped_column(default=None)
+
+
+class JobRow(Base):
+    """An identification or diagnosis job. Its input is either uploaded files (kept in the job's folder in
+    the data directory) or a sweep's recording; the result is the estimator's JSON."""
+
+    __tablename__ = "jobs"
+    __table_args__ = (Index("ix_jobs_status", "status"), {"sqlite_autoincrement": True})
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=True)
+    """Increasing: the submission order, which is the order jobs run in (FIFO)."""
+    kind: Mapped[str] = mapped_column(String(16), default=JobKind.IDENTIFY.value)
+    status: Mapped[str] = mapped_column(String(16), default=JobStatus.QUEUED.value)
+    options: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
+    input_source: Mapped[str] = mapped_column(String(16), default="upload")
+    """'upload' (files in the job folder) or 'sweep' (the recording of sweep_id)."""
+    recording_path: Mapped[str] = mapped_column(Text)
+    vehicle_path: Mapped[str] = mapped_column(Text)
+    sweep_id: Mapped[int | None] = mapped_column(ForeignKey("sweeps.id"), default=None)
+    output_dir: Mapped[str] = mapped_column(Text)
+    """Folder for the job's artefacts (plots)."""
+    result: Mapped[dict[str, Any] | None] = mapped_column(JSON, default=None)
+    artefacts: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
+    """Artefact name -> file name inside output_dir (e.g. {"plot.png": "plot.png"})."""
+    error: Mapped[str | None] = mapped_column(Text, default=None)
+    progress: Mapped[dict[str, Any] | None] = mapped_column(JSON, default=None)
+    submitted_by: Mapped[str | None] = mapped_column(String(64), default=None)
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+    started_at: Mapped[datetime | None] = mapped_column(default=None)
+    finished_at: Mapped[datetime | None] = mapped_column(default=None)
+
+
+class ScheduleRow(Base):
+    """A scheduled inspection-line test: a vehicle file and sweep settings, to run at `run_at` or, when
+    that is None, as soon as the bench is free. One test runs at a time per bench."""
+
+    __tablename__ = "schedules"
+    __table_args__ = (Index("ix_schedules_bench_status", "bench", "status"), {"sqlite_autoincrement": True})
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=True)
+    bench: Mapped[str] = mapped_column(String(100), default="default")
+    vehicle_file: Mapped[str] = mapped_column(Text)
+    sweep_settings: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
+    job_options: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
+    """Options of the identification job run on the sweep's recording."""
+    run_at: Mapped[datetime | None] = mapped_column(default=None)
+    """When to run; None = when the bench is free."""
+    status: Mapped[str] = mapped_column(String(16), default=ScheduleStatus.WAITING.value)
+    sweep_id: Mapped[int | None] = mapped_column(ForeignKey("sweeps.id"), default=None)
+    job_id: Mapped[int | None] = mapped_column(ForeignKey("jobs.id"), default=None)
+    reason: Mapped[str | None] = mapped_column(Text, default=None)
+    created_by: Mapped[str | None] = mapped_column(String(64), default=None)
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+    started_at: Mapped[datetime | None] = mapped_column(default=None)
+    finished_at: Mapped[datetime | None] = mapped_column(default=None)
