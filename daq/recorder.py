@@ -31,6 +31,9 @@ from daq.storage.hdf5_recording import RecordingWriter
 STREAMING_GAP_PERIODS = 1.5
 """A device-clocked source has a gap where two samples are more than this many periods apart."""
 POLLED_GAP_INTERVALS = 2.5
+LIVE_SPREAD_S = 0.2
+"""At finish, a channel whose newest sample is within this of the newest of all still counts as delivering:
+the recording ends where all of those have data, rather than with gap rows for a channel one read behind."""
 """A polled source has a gap where two samples are more than this many typical intervals apart."""
 
 
@@ -140,14 +143,15 @@ class Recorder:
         return self._write_until(self._row_at_or_before(final_s))
 
     def finish(self, end_s: float) -> int:
-        """Drain and write every row up to end_s (host time), or up to the newest sample of any channel if
-        that is earlier, with whatever data there is: rows a channel has no data for are gaps. Closes the
+        """Drain and write every row up to end_s (host time), or up to where every channel still
+        delivering has data if that is earlier; rows a silent channel has no data for are gaps. Closes the
         readers; the writer is the caller's to close."""
         if self.finished:
             return 0
         self._drain()
-        newest_s = max(aligner.newest_s for aligner in self._aligners)  # no row beyond every channel's data
-        written = self._write_until(self._row_at_or_before(min(end_s, newest_s)))
+        newest = [aligner.newest_s for aligner in self._aligners]
+        live = [n for n in newest if n >= max(newest) - LIVE_SPREAD_S]  # the channels still delivering
+        written = self._write_until(self._row_at_or_before(min(end_s, *live)))
         for reader in self._readers:
             reader.close()
         self.finished = True
