@@ -20,12 +20,14 @@ from fastapi import APIRouter, FastAPI
 from service.access import KeyRing
 from service.api.errors import install_error_handlers
 from service.api.limits import UploadSizeLimit
-from service.api.routes import events, jobs, status
+from service.api.routes import bench, events, jobs, status, sweeps
 from service.api.schemas import API_PREFIX
 from service.api.settings import ServiceSettings
+from service.bench_control import BenchController
 from service.jobs.manager import JobManager
 from service.store.database import Database
 from service.store.jobs import JobStore
+from service.store.sweeps import SweepStore
 
 log = logging.getLogger("shockbench.api")
 
@@ -50,6 +52,21 @@ class Services:
     version: str
     started_at: float
     """time.monotonic() at start-up."""
+    sweeps: SweepStore | None = None
+    bench: BenchController | None = None
+    """None when the service was started without --simulated or --config: bench endpoints answer 503."""
+
+
+def open_bench(settings: ServiceSettings) -> BenchController | None:
+    """The bench of `--config` (loaded and checked), else the in-process simulated bench of `--simulated`,
+    else None. Blocking (files, simulated devices starting): call it in a thread."""
+    if settings.bench_config is not None:
+        from daq.bench_config import load_bench_config
+
+        return BenchController(load_bench_config(settings.bench_config))
+    if settings.simulated:
+        return BenchController(simulated=True)
+    return None
 
 
 Lifespan = Callable[[FastAPI], AbstractAsyncContextManager[None]]
@@ -70,15 +87,30 @@ def lifespan_factory(settings: ServiceSettings) -> Lifespan:
 
         database = await asyncio.to_thread(prepare)
         store = JobStore(database)
+        sweep_store = SweepStore(database)
+        failed_sweeps = await asyncio.to_thread(sweep_store.recover_interrupted)
+        if failed_sweeps:
+            log.warning("sweeps %s were cut off by a restart; marked failed", failed_sweeps)
+        bench = await asyncio.to_thread(open_bench, settings)
         manager = JobManager(store, settings.worker)
         app.state.services = Services(
-            settings, settings.keys, database, store, manager, service_version(), time.monotonic()
+            settings,
+            settings.keys,
+            database,
+            store,
+            manager,
+            service_version(),
+            time.monotonic(),
+            sweeps=sweep_store,
+            bench=bench,
         )
         try:
             await manager.start()
             log.info("shockbench service up; database %s, data in %s", database.safe_url, settings.data_dir)
             yield
         finally:
+            if bench is not None:
+                await asyncio.to_thread(bench.close)  # a running sweep ends (and is stored) first
             await manager.stop()
             database.dispose()
 
@@ -90,6 +122,8 @@ def api_router() -> APIRouter:
     router.include_router(status.router)
     router.include_router(jobs.router())
     router.include_router(events.router)
+    router.include_router(bench.router)
+    router.include_router(sweeps.router)
     return router
 
 

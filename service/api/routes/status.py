@@ -9,6 +9,7 @@ from fastapi import APIRouter, Request
 
 from service.api.auth import Viewer
 from service.api.errors import responses
+from service.api.routes.bench import bench_summary
 from service.api.schemas import CurrentJobOut, ProgressOut, StatusOut, WorkerOut
 
 router = APIRouter(tags=["status"])
@@ -16,7 +17,7 @@ router = APIRouter(tags=["status"])
 
 @router.get("/status", response_model=StatusOut, responses=responses(401, 403))
 async def get_status(request: Request, _principal: Viewer) -> StatusOut:
-    """Version, worker process, queue and the job that runs now."""
+    """Version, worker process, queue, the job that runs now, and the bench (null without one)."""
     services = request.app.state.services
     s = services.manager.status()
     current = (
@@ -34,5 +35,5 @@ async def get_status(request: Request, _principal: Viewer) -> StatusOut:
         ),
         queue_length=s.queue_length,
         current_job=current,
-        bench=None,
+        bench=bench_summary(request),
     )
