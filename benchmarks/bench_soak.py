@@ -3,11 +3,14 @@
     .venv/bin/python benchmarks/bench_soak.py                 # 600 s (the issue's 10 minutes)
     .venv/bin/python benchmarks/bench_soak.py --seconds 60    # a shorter run
 
-`shockbench sim-devices --vehicle-preset axle` serves a simulated axle bench in a separate process on the
-wall clock: six streaming ZX-L amplifiers (1 kHz on their own clocks) on loopback TCP sockets and a Modbus
-TCP plate drive. This process then runs one sweep through the normal path (`daq.sweep.run.run_sweep` with
-real-time pacing: one polling thread per amplifier line, the recorder, the HDF5 writer) for the whole soak:
-a linear 0-20 Hz sweep of `--seconds` at 4 mm.
+`shockbench sim-devices --vehicle-preset axle --step-s 0.002` serves a simulated axle bench in a separate
+process on the wall clock (a 2 ms integration step: at 1 ms the axle's Python integration alone takes 0.74
+of a core, and with six amplifier servers and the Modbus drive on one interpreter the simulator falls behind
+real time and starves its own drive of keep-alives; what the soak measures is the acquisition): six
+streaming ZX-L amplifiers (1 kHz on their own clocks) on loopback TCP sockets and a Modbus TCP plate drive.
+This process then runs one sweep through the normal path (`daq.sweep.run.run_sweep` with real-time pacing:
+one polling thread per amplifier line, the recorder, the HDF5 writer) for the whole soak: a linear 0-20 Hz
+sweep of `--seconds` at 4 mm.
 
 Reported: rows and gap rows in the recording, ring-buffer overruns, samples lost by the amplifiers' buffers,
 failed reads, each channel's achieved rate, and the CPU of this process (acquisition and recording
@@ -47,7 +50,16 @@ def process_cpu_s(pid: int) -> float:
 def start_simulator(config: Path) -> subprocess.Popen[bytes]:
     shockbench = Path(sys.executable).with_name("shockbench")
     process = subprocess.Popen(
-        [str(shockbench), "sim-devices", "--config", str(config), "--vehicle-preset", "axle"],
+        [
+            str(shockbench),
+            "sim-devices",
+            "--config",
+            str(config),
+            "--vehicle-preset",
+            "axle",
+            "--step-s",
+            "0.002",
+        ],
         stdout=subprocess.DEVNULL,
     )
     deadline = time.monotonic() + START_TIMEOUT_S
