@@ -92,9 +92,14 @@ class CurveBatch:
         self.velocity_m_s = np.asarray(velocity_m_s, dtype=float)
         self.force_N = np.asarray(force_N, dtype=float)
         self._columns = np.arange(self.force_N.shape[1])
+        # segment j runs from knot j to j+1; searching the interior knots gives it without clipping, and
+        # the end segments extend linearly
+        self._interior = self.velocity_m_s[1:-1]
+        self._slopes = np.diff(self.force_N, axis=0) / np.diff(self.velocity_m_s)[:, None]
 
     def force(self, velocity_m_s: np.ndarray) -> np.ndarray:
-        g = self.velocity_m_s
-        seg = np.clip(np.searchsorted(g, velocity_m_s, side="right") - 1, 0, g.size - 2)
-        w = (velocity_m_s - g[seg]) / (g[seg + 1] - g[seg])
-        return self.force_N[seg, self._columns] * (1.0 - w) + self.force_N[seg + 1, self._columns] * w
+        seg = np.searchsorted(self._interior, velocity_m_s, side="right")
+        return (
+            self.force_N[seg, self._columns]
+            + (velocity_m_s - self.velocity_m_s[seg]) * self._slopes[seg, self._columns]
+        )

@@ -17,7 +17,7 @@ acts with equal and opposite forces on the wheels and on the body: no net heave 
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Protocol
 
 import numpy as np
@@ -39,26 +39,48 @@ class CornerPhysics:
     tyre_damping_Ns_per_m: C_d; maxwell_time_constant_s: τ = C_d/K_d (Maxwell only).
     Effects (0/False = absent): coulomb_friction_N (strut and seal friction, F_c), cubic_spring_N_per_m3
     (progressive spring / bump stop: + k3·ζ³), tyre_liftoff (contact force cannot go below zero; needs
-    static_wheel_load_N).
+    static_wheel_load_N), tyre_dashpot_Ns_per_m (a Kelvin-Voigt dashpot in parallel with whatever
+    tyre_model says, e.g. beside a Maxwell element).
+
+    Every number (and tyre_liftoff) may also be an array of the state's trailing shape, one value per
+    column, so that a population of different models is integrated at once (the model doctor does).
     """
 
     damper: ForceCurve
     spring_stiffness_N_per_m: float
     tyre_stiffness_N_per_m: float
     tyre_model: TyreModel = TyreModel.MAXWELL
-    tyre_damping_Ns_per_m: float = 0.0
+    tyre_damping_Ns_per_m: float | np.ndarray = 0.0
     maxwell_time_constant_s: float = 0.032
-    coulomb_friction_N: float = 0.0
-    cubic_spring_N_per_m3: float = 0.0
-    tyre_liftoff: bool = False
+    coulomb_friction_N: float | np.ndarray = 0.0
+    cubic_spring_N_per_m3: float | np.ndarray = 0.0
+    tyre_liftoff: bool | np.ndarray = False
     static_wheel_load_N: float = 0.0
+    tyre_dashpot_Ns_per_m: float | np.ndarray = 0.0
+    _friction: bool = field(init=False, repr=False, compare=False, default=False)
+    _cubic: bool = field(init=False, repr=False, compare=False, default=False)
+    _dashpot: bool = field(init=False, repr=False, compare=False, default=False)
+    _liftoff_all: bool = field(init=False, repr=False, compare=False, default=False)
+    _liftoff_any: bool = field(init=False, repr=False, compare=False, default=False)
+
+    def __post_init__(self) -> None:
+        # which optional terms are present, decided once (the derivatives are evaluated millions of times)
+        flags = {
+            "_friction": bool(np.any(self.coulomb_friction_N)),
+            "_cubic": bool(np.any(self.cubic_spring_N_per_m3)),
+            "_dashpot": bool(np.any(self.tyre_dashpot_Ns_per_m)),
+            "_liftoff_all": bool(np.all(self.tyre_liftoff)),
+            "_liftoff_any": bool(np.any(self.tyre_liftoff)),
+        }
+        for name, value in flags.items():
+            object.__setattr__(self, name, value)
 
     def suspension_force_N(self, deflection_m: np.ndarray, velocity_m_s: np.ndarray) -> np.ndarray:
         """Q: force pushing the wheel up and the body down (damper + spring + friction + progression)."""
         force = self.damper.force(velocity_m_s) + self.spring_stiffness_N_per_m * deflection_m
-        if self.coulomb_friction_N:
+        if self._friction:
             force = force + self.coulomb_friction_N * np.tanh(velocity_m_s / COULOMB_SMOOTHING_M_S)
-        if self.cubic_spring_N_per_m3:
+        if self._cubic:
             force = force + self.cubic_spring_N_per_m3 * deflection_m**3
         return force
 
@@ -72,9 +94,13 @@ class CornerPhysics:
             viscous = maxwell_force_N
         else:
             viscous = 0.0
+        if self._dashpot:
+            viscous = viscous + self.tyre_dashpot_Ns_per_m * rate_m_s
         force = -self.tyre_stiffness_N_per_m * deflection_m - viscous
-        if self.tyre_liftoff:
+        if self._liftoff_all:
             force = np.maximum(force, -self.static_wheel_load_N)
+        elif self._liftoff_any:
+            force = np.where(self.tyre_liftoff, np.maximum(force, -self.static_wheel_load_N), force)
         return force
 
     def maxwell_rate(self, rate_m_s: np.ndarray, maxwell_force_N: np.ndarray) -> np.ndarray:
@@ -99,15 +125,13 @@ class QuarterCarPhysics:
         x_s, v_s, x_t, v_t, f_v = state
         q = self.corner.suspension_force_N(x_s - x_t, v_s - v_t)
         tyre = self.corner.tyre_force_N(x_t - plate_m, v_t - plate_rate_m_s, f_v)
-        return np.stack(
-            [
-                v_s,
-                -q / self.sprung_mass_kg,
-                v_t,
-                (q + tyre) / self.unsprung_mass_kg,
-                self.corner.maxwell_rate(v_t - plate_rate_m_s, f_v),
-            ]
-        )
+        rates = np.empty_like(state)  # filled row by row: cheaper than stacking, this runs every stage
+        rates[0] = v_s
+        rates[1] = -q / self.sprung_mass_kg
+        rates[2] = v_t
+        rates[3] = (q + tyre) / self.unsprung_mass_kg
+        rates[4] = self.corner.maxwell_rate(v_t - plate_rate_m_s, f_v)
+        return rates
 
     def outputs(self, state: np.ndarray) -> dict[str, np.ndarray]:
         return {"x_s": state[0], "x_t": state[2]}
@@ -155,20 +179,18 @@ class AxlePhysics:
         tyre_l = self.left.tyre_force_N(x_tl - plate_m[0], v_tl - plate_rate_m_s[0], fv_l)
         tyre_r = self.right.tyre_force_N(x_tr - plate_m[1], v_tr - plate_rate_m_s[1], fv_r)
         half = 0.5 * self.track_m
-        return np.stack(
-            [
-                v_g,
-                -(q_l + q_r) / self.sprung_mass_kg,
-                roll_rate,
-                -half * (q_l - q_r) / self.roll_inertia_kg_m2,
-                v_tl,
-                (q_l + tyre_l) / self.unsprung_mass_kg,
-                v_tr,
-                (q_r + tyre_r) / self.unsprung_mass_kg,
-                self.left.maxwell_rate(v_tl - plate_rate_m_s[0], fv_l),
-                self.right.maxwell_rate(v_tr - plate_rate_m_s[1], fv_r),
-            ]
-        )
+        rates = np.empty_like(state)
+        rates[0] = v_g
+        rates[1] = -(q_l + q_r) / self.sprung_mass_kg
+        rates[2] = roll_rate
+        rates[3] = -half * (q_l - q_r) / self.roll_inertia_kg_m2
+        rates[4] = v_tl
+        rates[5] = (q_l + tyre_l) / self.unsprung_mass_kg
+        rates[6] = v_tr
+        rates[7] = (q_r + tyre_r) / self.unsprung_mass_kg
+        rates[8] = self.left.maxwell_rate(v_tl - plate_rate_m_s[0], fv_l)
+        rates[9] = self.right.maxwell_rate(v_tr - plate_rate_m_s[1], fv_r)
+        return rates
 
     def outputs(self, state: np.ndarray) -> dict[str, np.ndarray]:
         half = 0.5 * self.track_m

@@ -155,15 +155,20 @@ def build_quarter_car(
     points: int = 20,
     nsample: int | None = 5000,
     filters: FilterChoice | None = None,
+    grids: list[np.ndarray] | None = None,
 ) -> LinearResiduals:
-    """f1 = M_s·ẍ_s + F_d(v) + K·ζ ; f2 = (M − M_s)·ẍ_t − F_d(v) − K·ζ + C·g + K_t·δ (paper eqs 6-7)."""
+    """f1 = M_s·ẍ_s + F_d(v) + K·ζ ; f2 = (M − M_s)·ẍ_t − F_d(v) − K·ζ + C·g + K_t·δ (paper eqs 6-7).
+
+    grids: the damper velocity grid to use instead of one spanning the measured velocities (so that systems
+    built from corrected versions of one recording share their unknowns)."""
     recording.require(QUARTER_CAR_CHANNELS)
     filters = filters or choose_filters(recording.channels, recording.sample_time_s)
     index = select_samples(recording.time_s.size, recording.sample_time_s, nsample)
     cols = _Columns(recording, filters, index)
     ch = recording.channels
     v = cols.velocity("x_s") - cols.velocity("x_t")
-    grid = velocity_grid(v[index], points)
+    grid = grids[0] if grids is not None else velocity_grid(v[index], points)
+    points = grid.size
     phi = cols.damper_basis(v, grid)
     a_s, a_t = cols.acceleration("x_s"), cols.acceleration("x_t")
     zeta = cols.eq(ch["x_s"] - ch["x_t"])
@@ -205,8 +210,10 @@ def build_axle(
     points: int = 10,
     nsample: int | None = 5000,
     filters: FilterChoice | None = None,
+    grids: list[np.ndarray] | None = None,
 ) -> LinearResiduals:
     """Wheel equations f1 (left), f2 (right), heave f3, roll f4/(b/2); θ = [M_s, I, C, left pts, right pts].
+    grids: (left, right) damper velocity grids to use, as for build_quarter_car.
 
     Q_side = F_d(v_side) + K·ζ_side ± K_e·(ζ_l − ζ_r) (+ left, − right) is the suspension force;
     f_wheel = M_u·ẍ_t − Q + C·g + K_t·δ, M_u = (M − M_s)/2; f3 = M_s·ẍ_G + Q_l + Q_r;
@@ -224,13 +231,16 @@ def build_axle(
     bar = ke * (zeta["l"] - zeta["r"])
     # per side: the part of Q that is known (spring + bar), and the damper basis
     q_known = {"l": k * zeta["l"] + bar, "r": k * zeta["r"] - bar}
-    vel, grids, phis = [], [], {}
-    for s in "lr":
+    vel, used_grids, phis = [], [], {}
+    for number, s in enumerate("lr"):
         v = cols.velocity(f"x_s_{s}") - cols.velocity(f"x_t_{s}")
-        grid = velocity_grid(v[index], points)
+        grid = grids[number] if grids is not None else velocity_grid(v[index], points)
         phis[s] = cols.damper_basis(v, grid)
-        grids.append(grid)
+        used_grids.append(grid)
         vel.append(v[index])
+    points = used_grids[0].size
+    if used_grids[1].size != points:
+        raise ValueError("the left and right damper grids must have the same number of points")
     a_t = {s: cols.acceleration(f"x_t_{s}") for s in "lr"}
     a_s = {s: cols.acceleration(f"x_s_{s}") for s in "lr"}
     a_heave = 0.5 * (a_s["l"] + a_s["r"])
@@ -276,7 +286,7 @@ def build_axle(
         matrix=np.stack([f1, f2, f3, f4]),
         offset=offset,
         parameter_names=names,
-        grids_m_s=grids,
+        grids_m_s=used_grids,
         curve_slices=[slice(start, start + points), slice(start + points, start + 2 * points)],
         tyre_model=tyre,
         filters=filters,
@@ -292,8 +302,11 @@ def build(
     tyre: TyreModel,
     points: int | None = None,
     nsample: int | None = 5000,
+    filters: FilterChoice | None = None,
+    grids: list[np.ndarray] | None = None,
 ) -> LinearResiduals:
-    """The residual system for the vehicle's model (default points: 20 for a quarter car, 10 for an axle)."""
+    """The residual system for the vehicle's model (default points: 20 for a quarter car, 10 for an axle).
+    filters and grids, when given, are used instead of being chosen from the recording."""
     if vehicle.is_axle:
-        return build_axle(recording, vehicle, tyre, points or 10, nsample)
-    return build_quarter_car(recording, vehicle, tyre, points or 20, nsample)
+        return build_axle(recording, vehicle, tyre, points or 10, nsample, filters, grids)
+    return build_quarter_car(recording, vehicle, tyre, points or 20, nsample, filters, grids)

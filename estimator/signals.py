@@ -25,6 +25,7 @@ test_signals.py): velocity and acceleration bias at 17-19.5 Hz about 0.03%.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 from scipy import signal
@@ -85,9 +86,15 @@ def choose_filters(channels: dict[str, np.ndarray], sample_time_s: float) -> Fil
     )
 
 
+@lru_cache(maxsize=64)
+def _butterworth(cutoff_Hz: float, sample_time_s: float) -> np.ndarray:
+    """The low-pass's second-order sections, designed once per cutoff and sample time."""
+    return signal.butter(FILTER_ORDER, cutoff_Hz, btype="low", fs=1.0 / sample_time_s, output="sos")
+
+
 def lowpass(x: np.ndarray, cutoff_Hz: float, sample_time_s: float, axis: int = 0) -> np.ndarray:
     """Zero-phase Butterworth low-pass (FILTER_ORDER, forward and backward)."""
-    sos = signal.butter(FILTER_ORDER, cutoff_Hz, btype="low", fs=1.0 / sample_time_s, output="sos")
+    sos = _butterworth(float(cutoff_Hz), float(sample_time_s)).copy()  # a copy: scipy wants it writable
     return signal.sosfiltfilt(sos, x, axis=axis)
 
 

@@ -43,13 +43,67 @@ class SensorModel:
 
 @dataclass(frozen=True)
 class HiddenEffects:
-    """Physical effects beyond the paper's model, off by default (the model doctor looks for them)."""
+    """Physical effects beyond the paper's model, off by default (the model doctor looks for them).
+
+    In the model doctor's catalog: coulomb_friction_N (strut and seal friction), cubic_spring_N_per_m3
+    (progressive spring, bump stop), tyre_liftoff, channel_delay_s (channel name -> lag, s),
+    sensor_offset_m (channel name -> zero error, m), tyre_dashpot_Ns_per_m (a Kelvin-Voigt dashpot in the
+    tyre besides whatever SimulatedVehicle.tyre_model says). The tyre's damping is also hidden through
+    SimulatedVehicle.tyre_model (a Kelvin-Voigt or Maxwell tyre measured with a model that lacks it), the
+    anti-roll bar through a vehicle file without it.
+
+    Outside the catalog (for testing that the doctor says "unexplained"):
+    - sensor_gain: channel name -> scale factor of the reading (a laser's calibration error);
+    - body_mode_mass_kg, body_mode_frequency_Hz, body_mode_damping_ratio: part of the sprung mass (an
+      engine on its mounts) hangs on a spring and damper tuned to that frequency and ratio instead of
+      moving rigidly with the body (axle: on the body's heave). The vehicle's total mass is unchanged.
+    """
 
     coulomb_friction_N: float = 0.0
     cubic_spring_N_per_m3: float = 0.0
     tyre_liftoff: bool = False
     channel_delay_s: dict[str, float] = field(default_factory=dict)
     sensor_offset_m: dict[str, float] = field(default_factory=dict)
+    tyre_dashpot_Ns_per_m: float = 0.0
+    sensor_gain: dict[str, float] = field(default_factory=dict)
+    body_mode_mass_kg: float = 0.0
+    body_mode_frequency_Hz: float = 12.0
+    body_mode_damping_ratio: float = 0.15
+
+
+@dataclass(frozen=True)
+class BodyModePhysics:
+    """A vehicle model plus a mass hanging on the body by a spring and a damper (the body's heave):
+    state = [the base model's state, x_e, ẋ_e]. The mass is taken out of the base model's sprung mass."""
+
+    base: QuarterCarPhysics | AxlePhysics
+    mass_kg: float
+    stiffness_N_per_m: float
+    damping_Ns_per_m: float
+
+    @property
+    def state_size(self) -> int:
+        return self.base.state_size + 2
+
+    @property
+    def output_names(self) -> tuple[str, ...]:
+        return self.base.output_names
+
+    def derivatives(self, state: np.ndarray, plate_m: np.ndarray, plate_rate_m_s: np.ndarray) -> np.ndarray:
+        base_state, x_e, v_e = state[:-2], state[-2], state[-1]
+        rates = self.base.derivatives(base_state, plate_m, plate_rate_m_s)
+        # the body's heave position and velocity are the first two states of both base models
+        force = self.stiffness_N_per_m * (x_e - base_state[0]) + self.damping_Ns_per_m * (v_e - base_state[1])
+        rates[1] = rates[1] + force / self.base.sprung_mass_kg
+        return np.concatenate([rates, np.stack([v_e, -force / self.mass_kg])])
+
+    def outputs(self, state: np.ndarray) -> dict[str, np.ndarray]:
+        return self.base.outputs(state[:-2])
+
+    def contact_forces_N(
+        self, state: np.ndarray, plate_m: np.ndarray, plate_rate_m_s: np.ndarray
+    ) -> dict[str, np.ndarray]:
+        return self.base.contact_forces_N(state[:-2], plate_m, plate_rate_m_s)
 
 
 @dataclass(frozen=True)
@@ -82,22 +136,36 @@ class SimulatedVehicle:
             cubic_spring_N_per_m3=e.cubic_spring_N_per_m3,
             tyre_liftoff=e.tyre_liftoff,
             static_wheel_load_N=self.known.static_wheel_load_N,
+            tyre_dashpot_Ns_per_m=e.tyre_dashpot_Ns_per_m,
         )
 
-    def physics(self, sample_time_s: float) -> QuarterCarPhysics | AxlePhysics:
+    def physics(self, sample_time_s: float) -> QuarterCarPhysics | AxlePhysics | BodyModePhysics:
+        e = self.effects
+        rigid_mass = self.sprung_mass_kg - e.body_mode_mass_kg
+        base: QuarterCarPhysics | AxlePhysics
         if not self.known.is_axle:
-            return QuarterCarPhysics(
-                self.corner(self.dampers[0], sample_time_s), self.sprung_mass_kg, self.unsprung_mass_kg
+            base = QuarterCarPhysics(
+                self.corner(self.dampers[0], sample_time_s), rigid_mass, self.unsprung_mass_kg
             )
-        left, right = self.dampers
-        return AxlePhysics(
-            left=self.corner(left, sample_time_s),
-            right=self.corner(right, sample_time_s),
-            sprung_mass_kg=self.sprung_mass_kg,
-            unsprung_mass_kg=self.unsprung_mass_kg,
-            roll_inertia_kg_m2=self.roll_inertia_kg_m2,
-            track_m=float(self.known.track_m or 0.0),
-            anti_roll_bar_N_per_m=self.known.anti_roll_bar_stiffness_N_per_m,
+        else:
+            left, right = self.dampers
+            base = AxlePhysics(
+                left=self.corner(left, sample_time_s),
+                right=self.corner(right, sample_time_s),
+                sprung_mass_kg=rigid_mass,
+                unsprung_mass_kg=self.unsprung_mass_kg,
+                roll_inertia_kg_m2=self.roll_inertia_kg_m2,
+                track_m=float(self.known.track_m or 0.0),
+                anti_roll_bar_N_per_m=self.known.anti_roll_bar_stiffness_N_per_m,
+            )
+        if not e.body_mode_mass_kg:
+            return base
+        omega = 2.0 * np.pi * e.body_mode_frequency_Hz
+        return BodyModePhysics(
+            base,
+            e.body_mode_mass_kg,
+            e.body_mode_mass_kg * omega**2,
+            2.0 * e.body_mode_damping_ratio * e.body_mode_mass_kg * omega,
         )
 
 
@@ -206,6 +274,7 @@ def simulate(
         delay = vehicle.effects.channel_delay_s.get(name, 0.0)
         if delay:
             true = np.interp(t - delay, t, true, left=true[0])
+        true = true * vehicle.effects.sensor_gain.get(name, 1.0)
         true = true + vehicle.effects.sensor_offset_m.get(name, 0.0)
         channels[name] = settings.sensor.measure(true, rng)
     recording = Recording(t, channels, metadata={"source": "simulated", "seed": str(settings.seed)})

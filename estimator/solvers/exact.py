@@ -67,15 +67,25 @@ def _weighted_least_squares(a: np.ndarray, c: np.ndarray, weights: np.ndarray) -
 
 
 def solve_exact(
-    system: LinearResiduals, tolerance: float = 1e-10, max_iterations: int = 500
+    system: LinearResiduals,
+    tolerance: float = 1e-10,
+    max_iterations: int = 500,
+    initial: np.ndarray | None = None,
+    certify: bool = True,
 ) -> ExactSolution:
-    """Minimise GF by IRLS; stops when GF improves by less than `tolerance` (relative) per iteration."""
+    """Minimise GF by IRLS; stops when GF improves by less than `tolerance` (relative) per iteration.
+
+    initial: a starting θ (default: the least-squares solution), e.g. the solution of a similar system;
+    certify=False skips the dual bound (lower_bound is then −inf), for callers that solve many systems."""
     a, c = _stacked(system)
     e = system.matrix.shape[0]
     column_scale = np.linalg.norm(a, axis=0)
     column_scale[column_scale == 0] = 1.0
     a_scaled = a / column_scale  # conditioning: masses, coefficients and forces differ by orders of magnitude
-    z, *_ = np.linalg.lstsq(a_scaled, -c, rcond=None)
+    if initial is not None:
+        z = np.asarray(initial, dtype=float) * column_scale
+    else:
+        z, *_ = np.linalg.lstsq(a_scaled, -c, rcond=None)
     previous = np.inf
     objective = np.inf
     iterations = 0
@@ -90,4 +100,5 @@ def solve_exact(
         z = _weighted_least_squares(a_scaled, c, np.repeat(1.0 / np.maximum(norms, floor), e))
     theta = z / column_scale
     objective = float(system.objective(theta))
-    return ExactSolution(theta, objective, dual_lower_bound(system, theta), iterations)
+    bound = dual_lower_bound(system, theta) if certify else -np.inf
+    return ExactSolution(theta, objective, bound, iterations)

@@ -1,0 +1,267 @@
+"""The catalog of candidate effects: each a named extension of the model that the estimator can fit, with the
+signature it leaves in the residuals of a model that lacks it.
+
+Two kinds of extension:
+
+- *force* effects add unknowns that enter the equations of motion linearly (a column each, see
+  estimator.doctor.columns), so the paper's objective stays convex and the exact solver fits them with the
+  damper curve: tyre_damping, tyre_viscoelastic, coulomb_friction, progressive_spring, anti_roll_bar.
+  tyre_liftoff has no unknown: where the tyre would pull on the plate the tyre force is replaced by the
+  static wheel load (the contact force cannot go below zero).
+- *channel* effects correct one sensor channel before the equations are built: channel_delay (the channel
+  lags the others by delay_s) and sensor_offset (its zero is off by offset_m). They are fitted by
+  Gauss-Newton steps on the objective (estimator.doctor.model).
+
+The names are stable: they are what `shockbench diagnose --json` prints.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from enum import StrEnum
+
+import numpy as np
+
+from estimator.doctor.columns import EquationSignals
+from estimator.dynamics import COULOMB_SMOOTHING_M_S
+from estimator.recording import Recording
+from estimator.vehicle import VehicleParameters
+
+
+class EffectName(StrEnum):
+    TYRE_DAMPING = "tyre_damping"
+    TYRE_VISCOELASTIC = "tyre_viscoelastic"
+    COULOMB_FRICTION = "coulomb_friction"
+    TYRE_LIFTOFF = "tyre_liftoff"
+    PROGRESSIVE_SPRING = "progressive_spring"
+    ANTI_ROLL_BAR = "anti_roll_bar"
+    CHANNEL_DELAY = "channel_delay"
+    SENSOR_OFFSET = "sensor_offset"
+
+
+@dataclass(frozen=True, order=True)
+class EffectInstance:
+    """An effect as added to a model; channel effects name their channel."""
+
+    name: EffectName
+    channel: str | None = None
+
+    @property
+    def label(self) -> str:
+        return f"{self.name.value}({self.channel})" if self.channel else self.name.value
+
+
+MAX_DELAY_S = 0.02
+"""A channel delay is searched in [0, this]."""
+MIN_DELAY_S = 1e-4
+"""A fitted delay below this (a tenth of a sample at 1 kHz) does not count as a delay."""
+MIN_AIRBORNE_FRACTION = 0.002
+"""tyre_liftoff needs the tyre off the plate during at least this fraction of the recording."""
+
+
+@dataclass(frozen=True)
+class Effect:
+    """One catalog entry. `summary`: what it is physically; `signature`: what a model that lacks it leaves
+    in the residuals; `signal`: in words, the signal the residual follows when the effect is missing
+    ({channel} stands for the channel of a channel effect)."""
+
+    name: EffectName
+    summary: str
+    signature: str
+    signal: str
+    channel_kind: str | None = None
+    """"delay" or "offset" for channel effects, None for force effects."""
+
+    def instances(self, vehicle: VehicleParameters, recording: Recording) -> list[EffectInstance]:
+        """The ways this effect can be added to a model of this vehicle and recording."""
+        if self.name is EffectName.ANTI_ROLL_BAR:
+            known_bar = vehicle.anti_roll_bar_stiffness_N_per_m > 0
+            return [EffectInstance(self.name)] if vehicle.is_axle and not known_bar else []
+        if self.channel_kind is None:
+            return [EffectInstance(self.name)]
+        names = sorted(recording.channels)
+        if self.channel_kind == "offset":
+            # a zero error of a body channel only shifts the damper curve by a constant force (the curve's
+            # basis sums to one): it changes neither the residuals nor the gap, so it cannot be diagnosed
+            names = [n for n in names if not n.startswith("x_s")]
+        return [EffectInstance(self.name, n) for n in names]
+
+    def columns(self, signals: EquationSignals, airborne: list[np.ndarray]) -> dict[str, np.ndarray]:
+        """Unknown name -> (equations, samples) column, for force effects; airborne: per corner, where the
+        tyre has left the plate (tyre forces are zero there)."""
+        corners = signals.corners
+        contact = [1.0 - a for a in airborne]
+        if self.name is EffectName.TYRE_DAMPING:
+            series = [c.tyre_rate_m_s * k for c, k in zip(corners, contact, strict=True)]
+            return {"tyre_dashpot_Ns_per_m": signals.tyre_column(series)}
+        if self.name is EffectName.TYRE_VISCOELASTIC:
+            series = [
+                signals.maxwell_regressor(c.tyre_rate_m_s) * k for c, k in zip(corners, contact, strict=True)
+            ]
+            return {"maxwell_damping_Ns_per_m": signals.tyre_column(series)}
+        if self.name is EffectName.COULOMB_FRICTION:
+            series = [np.tanh(c.velocity_m_s / COULOMB_SMOOTHING_M_S) for c in corners]
+            return {"coulomb_friction_N": signals.suspension_column(series)}
+        if self.name is EffectName.PROGRESSIVE_SPRING:
+            return {"cubic_spring_N_per_m3": signals.suspension_column([c.deflection_m**3 for c in corners])}
+        if self.name is EffectName.ANTI_ROLL_BAR:
+            roll = corners[0].deflection_m - corners[1].deflection_m
+            return {"anti_roll_bar_N_per_m": signals.suspension_column([roll, -roll])}
+        return {}
+
+    def offset_change(self, signals: EquationSignals, airborne: list[np.ndarray]) -> np.ndarray | None:
+        """tyre_liftoff: while airborne the wheel equation's tyre spring K_t·δ becomes the static load."""
+        if self.name is not EffectName.TYRE_LIFTOFF:
+            return None
+        load = signals.vehicle.static_wheel_load_N
+        stiffness = signals.vehicle.tyre_stiffness_N_per_m
+        series = [
+            a * (load - stiffness * c.tyre_deflection_m)
+            for c, a in zip(signals.corners, airborne, strict=True)
+        ]
+        return signals.tyre_column(series)
+
+    def report(
+        self, instance: EffectInstance, values: dict[str, float], context: FitContext
+    ) -> dict[str, float | str]:
+        """The fitted parameters as shown to the user (SI units in the names)."""
+        if self.name is EffectName.TYRE_DAMPING:
+            return {"tyre_dashpot_Ns_per_m": values["tyre_dashpot_Ns_per_m"]}
+        if self.name is EffectName.TYRE_VISCOELASTIC:
+            return {
+                "tyre_damping_Ns_per_m": values["maxwell_damping_Ns_per_m"],
+                "relaxation_time_s": context.maxwell_time_constant_s,
+            }
+        if self.name is EffectName.COULOMB_FRICTION:
+            return {"coulomb_friction_N": values["coulomb_friction_N"]}
+        if self.name is EffectName.PROGRESSIVE_SPRING:
+            k3 = values["cubic_spring_N_per_m3"]
+            peak = context.peak_deflection_m
+            return {
+                "cubic_spring_N_per_m3": k3,
+                "stiffening_at_peak_deflection_percent": 100.0
+                * 3.0
+                * k3
+                * peak**2
+                / context.spring_stiffness,
+                "peak_deflection_m": peak,
+            }
+        if self.name is EffectName.ANTI_ROLL_BAR:
+            return {"anti_roll_bar_stiffness_N_per_m": values["anti_roll_bar_N_per_m"]}
+        if self.name is EffectName.TYRE_LIFTOFF:
+            return {
+                "static_wheel_load_N": context.static_wheel_load_N,
+                "airborne_fraction": context.airborne_fraction,
+            }
+        if self.name is EffectName.CHANNEL_DELAY:
+            return {"channel": str(instance.channel), "delay_s": values["delay_s"]}
+        return {"channel": str(instance.channel), "offset_m": values["offset_m"]}
+
+    def implausible(self, values: dict[str, float], context: FitContext) -> str | None:
+        """Why the fitted values cannot be this effect (None if they can): a dissipative element must
+        dissipate, a bump stop must stiffen, a lag must lag, a lift-off must happen."""
+        if self.name is EffectName.TYRE_DAMPING:
+            value = values["tyre_dashpot_Ns_per_m"]
+            return (
+                None if 0.0 < value < 20_000.0 else f"fitted tyre dashpot {value:.0f} N·s/m is not a damper"
+            )
+        if self.name is EffectName.TYRE_VISCOELASTIC:
+            value = values["maxwell_damping_Ns_per_m"]
+            return (
+                None
+                if 0.0 < value < 50_000.0
+                else f"fitted Maxwell damping {value:.0f} N·s/m is not a damper"
+            )
+        if self.name is EffectName.COULOMB_FRICTION:
+            value = values["coulomb_friction_N"]
+            limit = context.static_wheel_load_N
+            return (
+                None if 0.0 < value < limit else f"fitted friction {value:.0f} N does not oppose the motion"
+            )
+        if self.name is EffectName.PROGRESSIVE_SPRING:
+            value = values["cubic_spring_N_per_m3"]
+            return (
+                None if value > 0.0 else "the fitted cubic term softens the spring instead of stiffening it"
+            )
+        if self.name is EffectName.ANTI_ROLL_BAR:
+            value = values["anti_roll_bar_N_per_m"]
+            return None if value > 0.0 else f"fitted bar stiffness {value:.0f} N/m is negative"
+        if self.name is EffectName.TYRE_LIFTOFF:
+            if context.airborne_fraction < MIN_AIRBORNE_FRACTION:
+                return "the tyre never leaves the plate in the fitted model"
+            return None
+        if self.name is EffectName.CHANNEL_DELAY:
+            value = values["delay_s"]
+            if value < MIN_DELAY_S:
+                return f"fitted delay {value * 1e3:.2f} ms is not a lag"
+            return None if value < MAX_DELAY_S * 0.99 else "fitted delay runs into the search limit"
+        return None
+
+
+@dataclass(frozen=True)
+class FitContext:
+    """What reports and plausibility checks need to know about the fitted model besides its values."""
+
+    spring_stiffness: float
+    static_wheel_load_N: float
+    maxwell_time_constant_s: float
+    peak_deflection_m: float
+    airborne_fraction: float
+
+
+CATALOG: dict[EffectName, Effect] = {
+    effect.name: effect
+    for effect in (
+        Effect(
+            EffectName.TYRE_DAMPING,
+            "Kelvin-Voigt dashpot in the tyre, parallel to its spring",
+            "wheel-equation residual in phase with the tyre deflection rate, growing with frequency",
+            "the tyre deflection rate",
+        ),
+        Effect(
+            EffectName.TYRE_VISCOELASTIC,
+            "Maxwell element in the tyre (dashpot in series with a spring, relaxation time from ϑ)",
+            "wheel-equation residual following the low-passed tyre deflection rate: damper-like below the "
+            "relaxation frequency, spring-like above",
+            "the low-passed (Maxwell-filtered) tyre deflection rate",
+        ),
+        Effect(
+            EffectName.COULOMB_FRICTION,
+            "strut and seal friction: a force of constant size opposing the suspension velocity",
+            "suspension residual that steps where the suspension velocity changes sign",
+            "the sign of the suspension velocity",
+        ),
+        Effect(
+            EffectName.TYRE_LIFTOFF,
+            "the tyre leaves the plate: the contact force cannot go below zero",
+            "wheel-equation residual confined to the moments the tyre would pull on the plate",
+            "the tyre deflection beyond the static deflection",
+        ),
+        Effect(
+            EffectName.PROGRESSIVE_SPRING,
+            "bump stop or progressive spring: a cubic stiffening k3·ζ³",
+            "suspension residual growing with the cube of the suspension deflection",
+            "the cube of the suspension deflection",
+        ),
+        Effect(
+            EffectName.ANTI_ROLL_BAR,
+            "anti-roll bar of an axle: a spring on the difference of left and right deflections",
+            "opposite suspension residuals left and right following the deflection difference",
+            "the difference of the left and right suspension deflections",
+        ),
+        Effect(
+            EffectName.CHANNEL_DELAY,
+            "one sensor channel lags the others",
+            "residual following the channel's rate, growing with frequency",
+            "the rate of {channel}",
+            channel_kind="delay",
+        ),
+        Effect(
+            EffectName.SENSOR_OFFSET,
+            "a channel's zero is off",
+            "a constant residual in the wheel equation and a constant output-error offset",
+            "a constant (the zero error of {channel})",
+            channel_kind="offset",
+        ),
+    )
+}

@@ -1,0 +1,515 @@
+"""The model doctor: find where the identified model and the measurement disagree, name the missing effect,
+add it, re-identify, and repeat until no candidate shrinks the gap significantly.
+
+Every round:
+
+1. *Fit each candidate* of the catalog that the model lacks (estimator.doctor.catalog): the current model
+   plus that effect, identified on all samples (the paper's objective, exact solver; channel effects by
+   Gauss-Newton steps). Candidates whose objective falls by less than `screen_reduction` after a first
+   step are not pursued further.
+2. *Held-out data*: the sweep is cut into blocks of `block_s`; every model is also fitted on the even
+   blocks only and its objective measured on the odd ones.
+3. *Output error*: the remaining candidates are simulated from the measured plate (all in one run) and
+   their gap measured. The information criterion is BIC on the output error,
+   n_eff·ln(gap²) + k·ln(n_eff), with n_eff the current residual's effective number of independent
+   samples (estimator.doctor.residuals.effective_samples) and k the number of unknowns.
+4. *Name* the candidate with the smallest gap among those that (a) shrink the gap by at least
+   `min_gap_reduction`, (b) improve the held-out objective by at least `min_heldout_reduction`, (c) lower
+   BIC by at least `bic_margin`, (d) have physically possible parameters (a damper dissipates, a bump stop
+   stiffens, a lag lags, the tyre does leave the plate), (e) explain a residual that follows the effect's
+   signal (correlation at least `min_correlation`) and (f) are the same effect over the whole sweep: fitted
+   on its first and on its second half, the parameters differ by at most `max_parameter_spread` (relative)
+   unless the candidate is strong (objective down by `strong_objective_reduction` and gap by
+   `strong_gap_reduction`; a second missing effect can pull a half's estimate).
+   Candidates that tie on the gap (within `tie_tolerance`: an offset of the wheel sensor and the opposite
+   offset of the plate sensor are indistinguishable in the equations) are told apart by the plate, which
+   oscillates about its zero unless its own sensor is off.
+
+When no candidate qualifies, the final model is compared with what a model without missing effects
+achieves on this sweep and noise: the final model, its damper curve made smooth, is simulated from the
+measured plate, the measured noise is added, and the same structure is identified on that and simulated
+again (estimator.doctor.expected). The disagreement is clear, and the diagnosis "unexplained" instead of
+naming the nearest candidate, when the paper's objective of the final model is more than
+`unexplained_residual_ratio` times that of the re-identified one (the equations of motion do not hold as
+well as noise and the curve's discretisation allow), when its gap is more than `unexplained_gap_ratio`
+times the re-identified one's, or when the model diverges.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from estimator.doctor.catalog import CATALOG, EffectInstance
+from estimator.doctor.columns import restrict
+from estimator.doctor.evidence import gather, sentence
+from estimator.doctor.expected import refit_on, smooth_truth, synthetic_recording
+from estimator.doctor.model import (
+    FitSettings,
+    FittedModel,
+    ModelStructure,
+    Reference,
+    fit,
+    starting_structure,
+)
+from estimator.doctor.residuals import Localisation, effective_samples, locate, sweep_frequency_Hz
+from estimator.doctor.result import CandidateScore, DiagnosisResult, DiagnosisStep
+from estimator.doctor.simulation import BatchOutputError, simulate_models
+from estimator.recording import Recording
+from estimator.vehicle import TyreModel, VehicleParameters
+
+SCREEN_ITERATIONS = 1
+"""Gauss-Newton steps a channel effect gets before the screen decides whether to pursue it."""
+DEFAULT_POINTS = {"quarter-car": 30, "axle": 15}
+"""Damper curve points per side, 1.5 times identify's default. With 20 points the piecewise-linear curve
+cannot follow the knee a real damper table has near zero velocity (the SUV table's at ±0.04 m/s) and the gap
+of a model with nothing missing is dominated by that (up to 40 µm instead of about 12 µm on the tests' 8 s
+sweeps with a Maxwell tyre), which hides smaller effects. With many more points the curve gets steep enough
+at zero velocity to stand in for Coulomb friction, whose gap then hardly changes when friction is added."""
+
+
+@dataclass(frozen=True)
+class DiagnoseOptions:
+    """tyre, points, nsample: the starting model, as for identify, except that the damper curve has
+    DEFAULT_POINTS (1.5 times identify's) unless `points` says otherwise. The rest: the thresholds of the
+    module docstring (ratios are relative reductions, 0.25 = 25%)."""
+
+    tyre: TyreModel = TyreModel.MAXWELL
+    points: int | None = None
+    nsample: int | None = 5000
+    max_steps: int = 4
+    block_s: float = 0.1
+    screen_reduction: float = 0.005
+    min_gap_reduction: float = 0.25
+    min_heldout_reduction: float = 0.01
+    bic_margin: float = 10.0
+    min_correlation: float = 0.2
+    tie_tolerance: float = 0.02
+    max_parameter_spread: float = 1.0
+    strong_objective_reduction: float = 0.1
+    strong_gap_reduction: float = 0.5
+    """A candidate this strong in the equations and in the gap is exempt from (f): a second missing effect
+    can pull its estimate on one half of the sweep (a bump stop's k3 when friction is missing too)."""
+    unexplained_residual_ratio: float = 1.5
+    unexplained_gap_ratio: float = 4.0
+    seed: int = 0
+    """Seed of the noise added to the simulated response for the expected gap."""
+
+
+@dataclass(frozen=True)
+class DiagnoseProgress:
+    step: int
+    stage: str
+
+
+@dataclass
+class _Candidates:
+    """One round's fits: trials (every candidate, channel effects after one Gauss-Newton step), their
+    objective ratios, the ones kept by the screen, those fitted fully and on the fitting blocks only."""
+
+    trials: dict[EffectInstance, FittedModel]
+    ratios: dict[EffectInstance, float]
+    kept: list[EffectInstance]
+    full: dict[EffectInstance, FittedModel]
+    held: dict[EffectInstance, FittedModel]
+
+
+@dataclass
+class _Simulated:
+    gap_m: float
+    residual: dict[str, np.ndarray]
+    predicted: dict[str, np.ndarray]
+
+
+def _column(batch: BatchOutputError, index: int, gaps: np.ndarray) -> _Simulated:
+    return _Simulated(
+        float(gaps[index]),
+        batch.column(index),
+        {name: p[:, index] for name, p in batch.predicted.items()},
+    )
+
+
+def _blocks(time_s: np.ndarray, block_s: float) -> np.ndarray:
+    """True on the even blocks (fitted), False on the odd ones (held out)."""
+    return (np.floor(time_s / block_s).astype(int) % 2) == 0
+
+
+def _heldout_objective(model: FittedModel, fitted_rows: np.ndarray) -> float:
+    return float(restrict(model.system, ~fitted_rows).objective(model.theta))
+
+
+PLATE_CENTRE_FROM = 0.4
+"""The plate's centre is its mean where the sweep is above this fraction of its top frequency (many cycles,
+so the mean of the sine is close to zero)."""
+
+
+def plate_centre_m(model: FittedModel, frequency_Hz: np.ndarray) -> float:
+    """RMS over the plate channels (as the model corrects them) of the centre the plate oscillates about.
+    The plate is driven about the static position, so this is zero unless the plate's zero is off; it
+    tells apart candidates that tie in the equations (an offset of the wheel sensor and the opposite offset
+    of the plate sensor give the same tyre deflection)."""
+    top = model.system.filters.excitation_top_Hz
+    fast = np.nan_to_num(frequency_Hz) >= PLATE_CENTRE_FROM * top
+    plates = [x for name, x in model.signals.recording.channels.items() if name.startswith("x_r")]
+    centres = [float(np.mean(x[fast])) if np.any(fast) else float(np.mean(x)) for x in plates]
+    return float(np.sqrt(np.mean(np.square(centres))))
+
+
+def _bic_change(current: _Simulated, gap_m: float, added_unknowns: int) -> float:
+    if not np.isfinite(current.gap_m):
+        return -np.inf if np.isfinite(gap_m) else np.inf
+    if not np.isfinite(gap_m):
+        return np.inf
+    n_eff = sum(effective_samples(r) for r in current.residual.values())
+    return float(n_eff * np.log(gap_m**2 / current.gap_m**2) + added_unknowns * np.log(n_eff))
+
+
+class _Doctor:
+    def __init__(
+        self,
+        recording: Recording,
+        vehicle: VehicleParameters,
+        options: DiagnoseOptions,
+        progress: Callable[[DiagnoseProgress], object] | None,
+        cancel: threading.Event | None,
+    ) -> None:
+        self.recording = recording
+        self.vehicle = vehicle
+        self.options = options
+        self.progress = progress
+        self.cancel = cancel
+        points = options.points or DEFAULT_POINTS[vehicle.model.value]
+        self.settings = FitSettings(points, options.nsample)
+        self.reference = Reference.of(recording, vehicle, self.settings)
+        plate = recording.channels["x_r_l" if vehicle.is_axle else "x_r"]
+        self.frequency = sweep_frequency_Hz(plate, recording.sample_time_s)
+
+    def report(self, step: int, stage: str) -> None:
+        if self.cancel is not None and self.cancel.is_set():
+            raise InterruptedError("diagnosis cancelled")
+        if self.progress is not None:
+            self.progress(DiagnoseProgress(step, stage))
+
+    def candidates(self, structure: ModelStructure) -> list[EffectInstance]:
+        present = set(structure.effects)
+        return [
+            instance
+            for effect in CATALOG.values()
+            for instance in effect.instances(self.vehicle, self.recording)
+            if instance not in present
+        ]
+
+    def run(self) -> DiagnosisResult:
+        options = self.options
+        structure = starting_structure(options.tyre)
+        start_labels = structure.labels
+        self.report(0, "identifying the starting model")
+        current = fit(self.reference, structure)
+        rows = _blocks(self.recording.time_s[current.system.sample_index], options.block_s)
+        current_held = fit(self.reference, structure, rows, warm=current)
+        simulated: _Simulated | None = None
+        initial: _Simulated | None = None
+        truth: _Simulated | None = None
+        located_before: Localisation | None = None
+        steps: list[DiagnosisStep] = []
+        rounds: list[list[CandidateScore]] = []
+        for step in range(options.max_steps + 1):
+            instances = self.candidates(structure) if step < options.max_steps else []
+            self.report(step, f"fitting {len(instances)} candidates")
+            fits = self.fit_candidates(structure, current, rows, instances)
+            models: list[FittedModel] = [] if simulated is not None else [current]
+            models += [fits.full[i] for i in fits.kept]
+            models.append(smooth_truth(current))
+            self.report(step, f"simulating {len(models)} models")
+            batch = simulate_models(models, self.recording)
+            gaps = batch.gap_m()
+            offset = 0
+            if simulated is None:
+                simulated = _column(batch, 0, gaps)
+                offset = 1
+            if initial is None:
+                initial = simulated
+                located_before = locate(current, simulated.residual, simulated.gap_m)
+            truth = _column(batch, len(models) - 1, gaps)
+            candidate_gaps = {i: float(gaps[offset + k]) for k, i in enumerate(fits.kept)}
+            heldout_base = _heldout_objective(current_held, rows)
+            scores, eligible = [], []
+            for instance in instances:
+                score, ok = self.score(
+                    instance,
+                    structure,
+                    current,
+                    simulated,
+                    fits,
+                    candidate_gaps.get(instance),
+                    heldout_base,
+                    rows,
+                )
+                scores.append(score)
+                if ok:
+                    eligible.append(instance)
+            chosen = self.choose(eligible, candidate_gaps, fits.full)
+            if chosen is not None:
+                scores = [s if s.effect != chosen.label else replace(s, verdict="named") for s in scores]
+            rounds.append(scores)
+            if chosen is None:
+                break
+            after = _column(batch, offset + fits.kept.index(chosen), gaps)
+            model = fits.full[chosen]
+            evidence = gather(chosen, current, model, self.frequency)
+            steps.append(
+                DiagnosisStep(
+                    effect=chosen.name.value,
+                    parameters=model.parameters(chosen),
+                    gap_before_m=simulated.gap_m,
+                    gap_after_m=after.gap_m,
+                    evidence=sentence(chosen, evidence, simulated.gap_m, after.gap_m),
+                    bic_change=_bic_change(simulated, after.gap_m, _added_unknowns(current, model)),
+                    heldout_ratio=_heldout_objective(fits.held[chosen], rows) / heldout_base,
+                    located_after=locate(model, after.residual, after.gap_m),
+                    predicted_after=after.predicted,
+                )
+            )
+            structure, current, current_held, simulated = (
+                structure.with_effect(chosen),
+                model,
+                fits.held[chosen],
+                after,
+            )
+        assert (
+            simulated is not None and initial is not None and truth is not None and located_before is not None
+        )
+        self.report(len(steps), "simulating the expected gap")
+        noise = self.reference.filters.noise_floor_m
+        synthetic = synthetic_recording(self.recording, truth.predicted, noise, options.seed)
+        refitted = refit_on(synthetic, current, self.settings)
+        expected = float(simulate_models([refitted], self.recording, [synthetic]).gap_m()[0])
+        residual_ratio = current.objective / refitted.objective
+        return self.conclude(
+            residual_ratio,
+            start_labels,
+            structure,
+            steps,
+            rounds,
+            initial,
+            simulated,
+            expected,
+            located_before,
+        )
+
+    def fit_candidates(
+        self,
+        structure: ModelStructure,
+        current: FittedModel,
+        rows: np.ndarray,
+        instances: list[EffectInstance],
+    ) -> _Candidates:
+        """Every candidate fitted (channel effects one Gauss-Newton step first); those whose objective falls
+        by at least screen_reduction fitted fully, and again on the fitting blocks only."""
+        trials = {
+            i: fit(self.reference, structure.with_effect(i), warm=current, iterations=SCREEN_ITERATIONS)
+            for i in instances
+        }
+        ratios = {i: m.objective / current.objective for i, m in trials.items()}
+        kept = [i for i in instances if ratios[i] <= 1.0 - self.options.screen_reduction]
+        full = {
+            i: fit(self.reference, structure.with_effect(i), warm=trials[i])
+            if trials[i].channel_values
+            else trials[i]
+            for i in kept
+        }
+        held = {i: fit(self.reference, structure.with_effect(i), rows, warm=full[i]) for i in kept}
+        return _Candidates(trials, ratios, kept, full, held)
+
+    def score(
+        self,
+        instance: EffectInstance,
+        structure: ModelStructure,
+        current: FittedModel,
+        simulated: _Simulated,
+        fits: _Candidates,
+        gap_m: float | None,
+        heldout_base: float,
+        rows: np.ndarray,
+    ) -> tuple[CandidateScore, bool]:
+        """A candidate's score and whether it qualifies to be named (criteria (a)-(f) of the module
+        docstring)."""
+        ratio, trial = fits.ratios[instance], fits.trials[instance]
+        full, held = fits.full.get(instance), fits.held.get(instance)
+        options = self.options
+        if full is None or held is None or gap_m is None:
+            verdict = f"screened out: the objective falls only {100 * (1 - ratio):.1f}%"
+            return CandidateScore(
+                instance.label, ratio, None, None, None, None, None, trial.parameters(instance), verdict
+            ), False
+        heldout = _heldout_objective(held, rows) / heldout_base
+        gap_ratio = (
+            gap_m / simulated.gap_m if np.isfinite(simulated.gap_m) else (0.0 if np.isfinite(gap_m) else 1.0)
+        )
+        bic = _bic_change(simulated, gap_m, _added_unknowns(current, full))
+        correlation = gather(instance, current, full, self.frequency).correlation
+        reasons = []
+        implausible = full.implausible(instance)
+        if implausible:
+            reasons.append(implausible)
+        if not np.isfinite(gap_m):
+            reasons.append("the model with it diverges")
+        elif gap_ratio > 1.0 - options.min_gap_reduction:
+            reasons.append(
+                f"the gap falls only {100 * (1 - gap_ratio):.0f}%"
+                if gap_ratio < 1.0
+                else "the gap does not fall"
+            )
+        if heldout > 1.0 - options.min_heldout_reduction:
+            reasons.append("no better on held-out data")
+        if bic > -options.bic_margin:
+            reasons.append("the information criterion does not favour it")
+        if correlation < options.min_correlation:
+            reasons.append(f"the residual does not follow its signal (correlation {correlation:.2f})")
+        spread = None
+        strong = (
+            ratio <= 1.0 - options.strong_objective_reduction
+            and gap_ratio <= 1.0 - options.strong_gap_reduction
+        )
+        if not reasons:
+            spread, described = self.parameter_spread(instance, structure, full)
+            if spread is not None and spread > options.max_parameter_spread and not strong:
+                reasons.append(f"its parameter is not the same over the sweep ({described})")
+        verdict = "qualifies" if not reasons else "rejected: " + "; ".join(reasons)
+        score = CandidateScore(
+            instance.label,
+            ratio,
+            heldout,
+            gap_m,
+            gap_ratio,
+            bic,
+            correlation,
+            full.parameters(instance),
+            verdict,
+            spread,
+        )
+        return score, not reasons
+
+    def parameter_spread(
+        self, instance: EffectInstance, structure: ModelStructure, full: FittedModel
+    ) -> tuple[float | None, str]:
+        """The effect fitted on the first and on the second half of the sweep: the largest difference of
+        its parameters relative to the whole-sweep value (None for an effect without parameters). A real
+        effect is the same over the whole sweep; a candidate that only stands in for something else (say a
+        resonance the model lacks) fits differently where that something is and where it is not."""
+        whole = full.effect_values(instance)
+        if not whole:
+            return None, ""
+        time_s = self.recording.time_s[full.system.sample_index]
+        first = time_s < np.median(time_s)
+        halves = [
+            fit(self.reference, structure.with_effect(instance), rows, warm=full).effect_values(instance)
+            for rows in (first, ~first)
+        ]
+        spread, described = 0.0, ""
+        for name, value in whole.items():
+            a, b = halves[0][name], halves[1][name]
+            relative = abs(a - b) / max(abs(value), 1e-300)
+            if relative >= spread:
+                spread, described = relative, f"{name} {a:.4g} in the first half, {b:.4g} in the second"
+        return spread, described
+
+    def choose(
+        self,
+        eligible: list[EffectInstance],
+        gaps: dict[EffectInstance, float],
+        full: dict[EffectInstance, FittedModel],
+    ) -> EffectInstance | None:
+        if not eligible:
+            return None
+        best = min(gaps[i] for i in eligible)
+        tied = [i for i in eligible if gaps[i] <= best * (1.0 + self.options.tie_tolerance)]
+        return min(tied, key=lambda i: (plate_centre_m(full[i], self.frequency), gaps[i]))
+
+    def conclude(
+        self,
+        residual_ratio: float,
+        start_labels: list[str],
+        structure: ModelStructure,
+        steps: list[DiagnosisStep],
+        rounds: list[list[CandidateScore]],
+        initial: _Simulated,
+        final: _Simulated,
+        expected: float,
+        located_before,
+    ) -> DiagnosisResult:
+        options = self.options
+        ratio = final.gap_m / expected if np.isfinite(final.gap_m) and expected > 0 else np.inf
+        unexplained = (
+            not np.isfinite(final.gap_m)
+            or residual_ratio > options.unexplained_residual_ratio
+            or ratio > options.unexplained_gap_ratio
+        )
+        named = ", ".join(s.effect for s in steps)
+        gap, expect = final.gap_m * 1e6, expected * 1e6
+        complete = (
+            f"a model without missing effects leaves on this sweep ({expect:.1f} µm; "
+            f"equation residual ratio {residual_ratio:.2f})"
+        )
+        if unexplained:
+            best = _best_rejected(rounds[-1]) if rounds else None
+            after = f"after {named} " if named else ""
+            conclusion = (
+                f"unexplained: {after}the equations of motion leave {residual_ratio:.1f}x the residual of a "
+                f"model without missing effects and the gap is {gap:.1f} µm ({ratio:.1f}x its "
+                f"{expect:.1f} µm); no candidate explains it" + (f" (nearest: {best})" if best else "")
+            )
+        elif steps:
+            before = initial.gap_m * 1e6
+            conclusion = f"named {named}: the gap fell from {before:.1f} µm to {gap:.1f} µm, what {complete}"
+        else:
+            conclusion = f"nothing missing: the gap {gap:.1f} µm is what {complete}"
+        recording = self.recording
+        names = list(initial.predicted)
+        return DiagnosisResult(
+            starting_effects=start_labels,
+            final_effects=structure.labels,
+            gap_before_m=initial.gap_m,
+            gap_after_m=final.gap_m,
+            steps=steps,
+            rounds=rounds,
+            unexplained=bool(unexplained),
+            conclusion=conclusion,
+            expected_gap_m=expected,
+            residual_ratio=residual_ratio,
+            noise_floor_m=self.reference.filters.noise_floor_m,
+            located_before=located_before,
+            measured={n: recording.channels[n] for n in names},
+            predicted_before=initial.predicted,
+            time_s=recording.time_s,
+            sweep_frequency_Hz=self.frequency,
+        )
+
+
+def _added_unknowns(current: FittedModel, candidate: FittedModel) -> int:
+    """How many more unknowns (θ and channel parameters) the candidate has than the current model."""
+    count = len(candidate.theta) + len(candidate.channel_values)
+    return count - len(current.theta) - len(current.channel_values)
+
+
+def _best_rejected(scores: list[CandidateScore]) -> str | None:
+    simulated = [s for s in scores if s.gap_ratio is not None]
+    if not simulated:
+        return None
+    best = min(simulated, key=lambda s: s.gap_ratio if s.gap_ratio is not None else np.inf)
+    return f"{best.effect}, {best.verdict}"
+
+
+def diagnose(
+    recording: Recording,
+    vehicle: VehicleParameters,
+    options: DiagnoseOptions = DiagnoseOptions(),
+    progress: Callable[[DiagnoseProgress], object] | None = None,
+    cancel: threading.Event | None = None,
+) -> DiagnosisResult:
+    """Find, name and add the effects the model lacks (see the module docstring); `progress` is called at
+    every stage, `cancel` (set from another thread) stops the diagnosis with InterruptedError."""
+    return _Doctor(recording, vehicle, options, progress, cancel).run()

@@ -1,0 +1,356 @@
+"""A model with candidate effects added, and how it is fitted.
+
+ModelStructure says which effects the model has beyond the vehicle file's constants (the starting tyre model
+counts: kelvin-voigt starts with tyre_damping, maxwell with tyre_viscoelastic). fit() identifies it:
+
+1. the recording is corrected for the model's channel effects (a delayed channel is advanced by its delay,
+   an offset is subtracted);
+2. the paper's equations are built on it (estimator.equations, with the damper grid and filters of the
+   uncorrected recording so that every candidate shares its unknowns) and each force effect appends its
+   column (estimator.doctor.catalog);
+3. the paper's objective is minimised exactly (estimator.solvers.exact). Channel parameters (delays,
+   offsets) are found by Gauss-Newton steps: the residual's change per unit of each channel parameter is
+   taken by finite differences at the current solution, appended as columns, solved jointly, repeated.
+   With tyre_liftoff the airborne samples come from the fitted tyre force and are re-determined once.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import ndimage
+
+from estimator.damper import PiecewiseLinearCurve
+from estimator.doctor.catalog import CATALOG, MAX_DELAY_S, EffectInstance, EffectName, FitContext
+from estimator.doctor.columns import EquationSignals, restrict, with_columns
+from estimator.equations import LinearResiduals, build
+from estimator.recording import Recording
+from estimator.signals import FilterChoice
+from estimator.solvers.exact import solve_exact
+from estimator.vehicle import TyreModel, VehicleParameters
+
+GAUSS_NEWTON_ITERATIONS = 4
+GAUSS_NEWTON_STEP = {"delay": 5e-4, "offset": 1e-4}
+"""Finite-difference step of each kind of channel parameter (s, m)."""
+GAUSS_NEWTON_TOLERANCE = {"delay": 2e-6, "offset": 1e-7}
+
+
+@dataclass(frozen=True)
+class ModelStructure:
+    """The effects a model has beyond the vehicle file's constants, in the order they were added."""
+
+    effects: tuple[EffectInstance, ...] = ()
+
+    def with_effect(self, effect: EffectInstance) -> ModelStructure:
+        return ModelStructure((*self.effects, effect))
+
+    def has(self, name: EffectName) -> bool:
+        return any(e.name is name for e in self.effects)
+
+    @property
+    def channel_effects(self) -> list[EffectInstance]:
+        return [e for e in self.effects if CATALOG[e.name].channel_kind is not None]
+
+    @property
+    def labels(self) -> list[str]:
+        return [e.label for e in self.effects]
+
+
+def starting_structure(tyre: TyreModel) -> ModelStructure:
+    """The structure a `--tyre` option stands for."""
+    if tyre is TyreModel.KELVIN_VOIGT:
+        return ModelStructure((EffectInstance(EffectName.TYRE_DAMPING),))
+    if tyre is TyreModel.MAXWELL:
+        return ModelStructure((EffectInstance(EffectName.TYRE_VISCOELASTIC),))
+    return ModelStructure()
+
+
+@dataclass(frozen=True)
+class ChannelCorrections:
+    """delay_s: channel -> how much the channel lags (s); offset_m: channel -> its zero error (m)."""
+
+    delay_s: dict[str, float] = field(default_factory=dict)
+    offset_m: dict[str, float] = field(default_factory=dict)
+
+    def correct(self, name: str, measured: np.ndarray, sample_time_s: float) -> np.ndarray:
+        """The true signal from the measured one: x(t) = x_measured(t + delay) − offset."""
+        x = measured
+        delay = self.delay_s.get(name, 0.0)
+        if delay:
+            x = ndimage.shift(x, -delay / sample_time_s, order=3, mode="nearest")
+        return x - self.offset_m.get(name, 0.0)
+
+    def distort(self, name: str, true: np.ndarray, sample_time_s: float) -> np.ndarray:
+        """What the sensor reads from a true signal: x_measured(t) = x(t − delay) + offset (columns of a
+        2-D array are signals)."""
+        x = true
+        delay = self.delay_s.get(name, 0.0)
+        if delay:
+            shift = (delay / sample_time_s, 0) if np.ndim(x) == 2 else delay / sample_time_s
+            x = ndimage.shift(x, shift, order=3, mode="nearest")
+        return x + self.offset_m.get(name, 0.0)
+
+    def apply(self, recording: Recording) -> Recording:
+        if not self.delay_s and not self.offset_m:
+            return recording
+        dt = recording.sample_time_s
+        channels = {name: self.correct(name, x, dt) for name, x in recording.channels.items()}
+        return Recording(recording.time_s, channels, dict(recording.metadata))
+
+
+@dataclass(frozen=True)
+class FitSettings:
+    points: int | None = None
+    """Damper curve points (default 20 for a quarter car, 10 per side for an axle)."""
+    nsample: int | None = 5000
+
+
+@dataclass
+class FittedModel:
+    """A structure identified on a recording: θ of the extended system (built on the corrected recording)."""
+
+    structure: ModelStructure
+    vehicle: VehicleParameters
+    theta: np.ndarray
+    system: LinearResiduals
+    """The extended system on all selected samples (also when the fit used only some of them)."""
+    signals: EquationSignals
+    channel_values: dict[EffectInstance, float]
+    """Fitted delay (s) or offset (m) per channel effect."""
+    airborne: list[np.ndarray]
+    """Per corner, where the fitted tyre force would pull on the plate (only with tyre_liftoff)."""
+    objective: float
+    curve_override: tuple[PiecewiseLinearCurve, ...] | None = None
+    """Damper curves to simulate instead of the fitted points (the expected-gap truth's smooth curves)."""
+
+    def value(self, name: str, default: float = 0.0) -> float:
+        names = self.system.parameter_names
+        return float(self.theta[names.index(name)]) if name in names else default
+
+    @property
+    def sprung_mass_kg(self) -> float:
+        return float(self.theta[0])
+
+    @property
+    def roll_inertia_kg_m2(self) -> float | None:
+        return float(self.theta[1]) if self.vehicle.is_axle else None
+
+    @property
+    def curves(self) -> tuple[PiecewiseLinearCurve, ...]:
+        if self.curve_override is not None:
+            return self.curve_override
+        return tuple(
+            PiecewiseLinearCurve(g, self.theta[s])
+            for g, s in zip(self.system.grids_m_s, self.system.curve_slices, strict=True)
+        )
+
+    @property
+    def maxwell_damping_Ns_per_m(self) -> float:
+        """C_d of the Maxwell element (0 without one)."""
+        return self.value("maxwell_damping_Ns_per_m")
+
+    @property
+    def corrections(self) -> ChannelCorrections:
+        delays = {e.channel: v for e, v in self.channel_values.items() if e.name is EffectName.CHANNEL_DELAY}
+        offsets = {e.channel: v for e, v in self.channel_values.items() if e.name is EffectName.SENSOR_OFFSET}
+        return ChannelCorrections(delays, offsets)  # type: ignore[arg-type]
+
+    def residuals(self) -> np.ndarray:
+        """(equations, selected samples) residual forces, N."""
+        return self.system.residuals(self.theta)
+
+    def context(self) -> FitContext:
+        dt = self.signals.sample_time_s
+        airborne = float(np.mean([a.mean() for a in self.airborne])) if self.airborne else 0.0
+        peak = max(float(np.quantile(np.abs(c.deflection_m), 0.999)) for c in self.signals.corners)
+        return FitContext(
+            spring_stiffness=self.vehicle.spring_stiffness_N_per_m,
+            static_wheel_load_N=self.vehicle.static_wheel_load_N,
+            maxwell_time_constant_s=self.vehicle.maxwell_time_constant_s(dt),
+            peak_deflection_m=peak,
+            airborne_fraction=airborne,
+        )
+
+    def effect_values(self, effect: EffectInstance) -> dict[str, float]:
+        """The fitted unknowns of one effect, by name (SI units)."""
+        if effect.name is EffectName.CHANNEL_DELAY:
+            return {"delay_s": self.channel_values[effect]}
+        if effect.name is EffectName.SENSOR_OFFSET:
+            return {"offset_m": self.channel_values[effect]}
+        if effect.name is EffectName.TYRE_VISCOELASTIC:
+            return {"maxwell_damping_Ns_per_m": self.maxwell_damping_Ns_per_m}
+        names = {
+            EffectName.TYRE_DAMPING: "tyre_dashpot_Ns_per_m",
+            EffectName.COULOMB_FRICTION: "coulomb_friction_N",
+            EffectName.PROGRESSIVE_SPRING: "cubic_spring_N_per_m3",
+            EffectName.ANTI_ROLL_BAR: "anti_roll_bar_N_per_m",
+        }
+        return {names[effect.name]: self.value(names[effect.name])} if effect.name in names else {}
+
+    def parameters(self, effect: EffectInstance) -> dict[str, float | str]:
+        return CATALOG[effect.name].report(effect, self.effect_values(effect), self.context())
+
+    def implausible(self, effect: EffectInstance) -> str | None:
+        return CATALOG[effect.name].implausible(self.effect_values(effect), self.context())
+
+
+@dataclass(frozen=True)
+class Reference:
+    """What every fit of one recording shares: the damper grid(s) and filters of the uncorrected recording."""
+
+    recording: Recording
+    vehicle: VehicleParameters
+    settings: FitSettings
+    grids: list[np.ndarray]
+    filters: FilterChoice
+
+    @staticmethod
+    def of(recording: Recording, vehicle: VehicleParameters, settings: FitSettings) -> Reference:
+        if vehicle.is_axle != recording.is_axle:
+            kind = "axle" if vehicle.is_axle else "quarter-car"
+            raise ValueError(f"the vehicle file is for a {kind} model but the recording's channels are not")
+        base = build(recording, vehicle, TyreModel.SPRING, settings.points, settings.nsample)
+        return Reference(recording, vehicle, settings, base.grids_m_s, base.filters)
+
+
+def _airborne(signals: EquationSignals, dashpot: float, maxwell: float) -> list[np.ndarray]:
+    """Per corner, 1.0 where the tyre force of the fitted tyre would pull on the plate, else 0.0."""
+    vehicle = signals.vehicle
+    masks = []
+    for corner in signals.corners:
+        force = vehicle.tyre_stiffness_N_per_m * corner.tyre_deflection_smooth_m
+        if dashpot:
+            force = force + dashpot * corner.tyre_rate_m_s
+        if maxwell:
+            force = force + maxwell * signals.maxwell_regressor(corner.tyre_rate_m_s)
+        masks.append((force > vehicle.static_wheel_load_N).astype(float))
+    return masks
+
+
+def _build(
+    reference: Reference,
+    structure: ModelStructure,
+    corrections: ChannelCorrections,
+    airborne: list[np.ndarray] | None,
+    tyre: tuple[float, float],
+) -> tuple[LinearResiduals, EquationSignals, list[np.ndarray]]:
+    recording = corrections.apply(reference.recording)
+    settings = reference.settings
+    base = build(
+        recording,
+        reference.vehicle,
+        TyreModel.SPRING,
+        settings.points,
+        settings.nsample,
+        reference.filters,
+        reference.grids,
+    )
+    signals = EquationSignals(recording, reference.vehicle, base)
+    corners = len(signals.corners)
+    if airborne is None:
+        airborne = (
+            _airborne(signals, *tyre)
+            if structure.has(EffectName.TYRE_LIFTOFF)
+            else [np.zeros(recording.time_s.size)] * corners
+        )
+    columns: dict[str, np.ndarray] = {}
+    offset = base.offset.copy()
+    for effect in structure.effects:
+        entry = CATALOG[effect.name]
+        columns.update(entry.columns(signals, airborne))
+        change = entry.offset_change(signals, airborne)
+        if change is not None:
+            offset = offset + change
+    return with_columns(base, columns, offset), signals, airborne
+
+
+def _tyre_coefficients(system: LinearResiduals, theta: np.ndarray) -> tuple[float, float]:
+    names = system.parameter_names
+    dashpot = float(theta[names.index("tyre_dashpot_Ns_per_m")]) if "tyre_dashpot_Ns_per_m" in names else 0.0
+    maxwell = (
+        float(theta[names.index("maxwell_damping_Ns_per_m")]) if "maxwell_damping_Ns_per_m" in names else 0.0
+    )
+    return dashpot, maxwell
+
+
+def _corrections(effects: list[EffectInstance], values: np.ndarray) -> ChannelCorrections:
+    delays, offsets = {}, {}
+    for effect, value in zip(effects, values, strict=True):
+        target = delays if effect.name is EffectName.CHANNEL_DELAY else offsets
+        target[str(effect.channel)] = float(value)
+    return ChannelCorrections(delays, offsets)
+
+
+def _initial(system: LinearResiduals, warm: FittedModel | None) -> np.ndarray | None:
+    """θ of a similar model, matched by unknown name (new unknowns start at zero)."""
+    if warm is None:
+        return None
+    known = dict(zip(warm.system.parameter_names, warm.theta, strict=True))
+    return np.array([known.get(name, 0.0) for name in system.parameter_names])
+
+
+def fit(
+    reference: Reference,
+    structure: ModelStructure,
+    rows: np.ndarray | None = None,
+    warm: FittedModel | None = None,
+    iterations: int = GAUSS_NEWTON_ITERATIONS,
+) -> FittedModel:
+    """Identify `structure` on the reference recording, using only the selected samples where `rows` is
+    True (all when None). warm: a fitted model of a similar structure to start from (its unknowns and
+    channel parameters; new ones start at zero). iterations: Gauss-Newton steps at most (channel effects)."""
+    channel_effects = structure.channel_effects
+    kinds = [CATALOG[e.name].channel_kind for e in channel_effects]
+    start = warm.channel_values if warm is not None else {}
+    values = np.array([start.get(e, 0.0) for e in channel_effects], dtype=float)
+    liftoff = structure.has(EffectName.TYRE_LIFTOFF)
+    tyre = (0.0, 0.0)
+    final_pass = False
+    previous = warm
+    for iteration in range(iterations + 1):
+        corrections = _corrections(channel_effects, values)
+        system, signals, airborne = _build(reference, structure, corrections, None, tyre)
+        used = restrict(system, rows) if rows is not None else system
+        solution = solve_exact(used, initial=_initial(used, previous), certify=False)
+        theta = solution.theta
+        tyre = _tyre_coefficients(system, theta)
+        previous = FittedModel(
+            structure, reference.vehicle, theta, system, signals, {}, [], solution.objective
+        )
+        if final_pass:
+            break
+        if not channel_effects:
+            if liftoff and iteration == 0:
+                continue  # once more with the airborne samples of the fitted tyre force
+            break
+        base_residual = used.residuals(theta)
+        jacobian = {}
+        for j, (effect, kind) in enumerate(zip(channel_effects, kinds, strict=True)):
+            step = np.zeros_like(values)
+            step[j] = GAUSS_NEWTON_STEP[str(kind)]
+            moved, _, _ = _build(
+                reference, structure, _corrections(channel_effects, values + step), airborne, tyre
+            )
+            moved_used = restrict(moved, rows) if rows is not None else moved
+            jacobian[f"step of {effect.label}"] = (moved_used.residuals(theta) - base_residual) / step[j]
+        augmented = with_columns(used, jacobian, used.offset)
+        initial = np.concatenate([theta, np.zeros(len(jacobian))])
+        increment = solve_exact(augmented, 1e-8, initial=initial, certify=False).theta[used.n_params :]
+        values = values + increment
+        for j, kind in enumerate(kinds):
+            if kind == "delay":
+                values[j] = float(np.clip(values[j], 0.0, MAX_DELAY_S))
+        small = all(abs(d) < GAUSS_NEWTON_TOLERANCE[str(k)] for d, k in zip(increment, kinds, strict=True))
+        affine = all(k == "offset" for k in kinds) and not liftoff
+        final_pass = small or affine or iteration == iterations - 1
+    return FittedModel(
+        structure=structure,
+        vehicle=reference.vehicle,
+        theta=solution.theta,
+        system=system,
+        signals=signals,
+        channel_values={e: float(v) for e, v in zip(channel_effects, values, strict=True)},
+        airborne=airborne if liftoff else [],
+        objective=float(solution.objective),
+    )

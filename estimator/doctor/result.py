@@ -1,0 +1,141 @@
+"""What a diagnosis returns: the steps taken (effect, fitted parameters, gap before and after, evidence), the
+candidates judged at every step, the residual analysis before and after, and the stable JSON shape of
+`shockbench diagnose --json`."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from estimator.doctor.residuals import Localisation
+
+
+def _finite_or_none(value: float) -> float | None:
+    return float(value) if value is not None and np.isfinite(value) else None
+
+
+@dataclass(frozen=True)
+class CandidateScore:
+    """How one candidate fared at one step.
+
+    objective_ratio: the paper's objective with the candidate over without (all samples);
+    heldout_ratio: the same on the held-out blocks, each model fitted on the other blocks;
+    gap_m: output-error gap with the candidate (None if not simulated: screened out);
+    bic_change: change of the information criterion (negative favours the candidate);
+    correlation: of the residual with what the candidate explains; parameter_spread: how much the effect's
+    parameter differs when fitted on the first and on the second half of the sweep, relative to its value
+    (None when not checked); verdict: "named" or why not.
+    """
+
+    effect: str
+    objective_ratio: float
+    heldout_ratio: float | None
+    gap_m: float | None
+    gap_ratio: float | None
+    bic_change: float | None
+    correlation: float | None
+    parameters: dict[str, float | str]
+    verdict: str
+    parameter_spread: float | None = None
+
+    def to_json(self) -> dict[str, object]:
+        return {
+            "effect": self.effect,
+            "objective_ratio": self.objective_ratio,
+            "heldout_ratio": self.heldout_ratio,
+            "gap_m": _finite_or_none(self.gap_m) if self.gap_m is not None else None,
+            "gap_ratio": _finite_or_none(self.gap_ratio) if self.gap_ratio is not None else None,
+            "bic_change": _finite_or_none(self.bic_change) if self.bic_change is not None else None,
+            "correlation": self.correlation,
+            "parameter_spread": self.parameter_spread,
+            "parameters": self.parameters,
+            "verdict": self.verdict,
+        }
+
+
+@dataclass
+class DiagnosisStep:
+    """One effect added: its stable name, the channel for channel effects, fitted parameters, the gap
+    before and after (m; inf = the model diverged), and the evidence in words."""
+
+    effect: str
+    parameters: dict[str, float | str]
+    gap_before_m: float
+    gap_after_m: float
+    evidence: str
+    bic_change: float
+    heldout_ratio: float
+    located_after: Localisation
+    predicted_after: dict[str, np.ndarray] = field(repr=False)
+
+    def to_json(self) -> dict[str, object]:
+        return {
+            "effect": self.effect,
+            "gap_before_m": _finite_or_none(self.gap_before_m),
+            "gap_after_m": _finite_or_none(self.gap_after_m),
+            "parameters": self.parameters,
+            "evidence": self.evidence,
+        }
+
+
+@dataclass
+class DiagnosisResult:
+    """The whole diagnosis.
+
+    starting_effects / final_effects: the model's effects beyond the vehicle file's constants before and
+    after (the tyre option counts: maxwell = tyre_viscoelastic); expected_gap_m: the gap a model without
+    missing effects reaches on this sweep and noise (the final model re-identified on its own simulated
+    response with the measured noise added); unexplained: a clear disagreement remains that no candidate
+    explains (see estimator.doctor.diagnose: residual_ratio or gap_after_m / expected_gap_m too large, or
+    a diverging model)."""
+
+    starting_effects: list[str]
+    final_effects: list[str]
+    gap_before_m: float
+    gap_after_m: float
+    steps: list[DiagnosisStep]
+    rounds: list[list[CandidateScore]]
+    """Per round of candidates (one per step, plus the last round that named nothing)."""
+    unexplained: bool
+    conclusion: str
+    expected_gap_m: float
+    residual_ratio: float
+    """The paper's objective of the final model over that of the same structure re-identified on its own
+    simulated response with the measured noise: about 1 when the equations hold as well as they can."""
+    noise_floor_m: float
+    located_before: Localisation
+    measured: dict[str, np.ndarray] = field(repr=False)
+    predicted_before: dict[str, np.ndarray] = field(repr=False)
+    time_s: np.ndarray = field(repr=False)
+    sweep_frequency_Hz: np.ndarray = field(repr=False)
+
+    @property
+    def effects_named(self) -> list[str]:
+        return [s.effect for s in self.steps]
+
+    @property
+    def located_after(self) -> Localisation:
+        return self.steps[-1].located_after if self.steps else self.located_before
+
+    @property
+    def predicted_after(self) -> dict[str, np.ndarray]:
+        return self.steps[-1].predicted_after if self.steps else self.predicted_before
+
+    def to_json(self) -> dict[str, object]:
+        """The stable JSON shape: gap_before_m, steps [{effect, gap_before_m, gap_after_m, parameters,
+        evidence}], gap_after_m, unexplained; plus the starting and final effects, the expected gap, the
+        conclusion in words and every candidate's score per round."""
+        return {
+            "gap_before_m": _finite_or_none(self.gap_before_m),
+            "steps": [s.to_json() for s in self.steps],
+            "gap_after_m": _finite_or_none(self.gap_after_m),
+            "unexplained": self.unexplained,
+            "conclusion": self.conclusion,
+            "starting_effects": self.starting_effects,
+            "final_effects": self.final_effects,
+            "expected_gap_m": _finite_or_none(self.expected_gap_m),
+            "residual_ratio": self.residual_ratio,
+            "noise_floor_m": self.noise_floor_m,
+            "candidates": [[c.to_json() for c in round_] for round_ in self.rounds],
+        }

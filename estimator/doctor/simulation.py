@@ -1,0 +1,162 @@
+"""Output error of many fitted models at once: each model is driven by the measured plate motion (as its
+channel effects correct it) and its predicted sensor readings are compared with the measured ones.
+
+The models become the columns of one population (estimator.dynamics takes arrays of parameters), so one
+Runge-Kutta run at the sample time simulates them all, as estimator.output_error does for one model. Every
+model is written with the general tyre (a Maxwell element and a parallel dashpot, either of which may be
+zero), so that models of different structure share one set of equations.
+
+The gap (m) is the RMS over every measured body and wheel channel of predicted minus measured reading.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from estimator.damper import CurveBatch
+from estimator.doctor.catalog import EffectName
+from estimator.doctor.model import FittedModel
+from estimator.dynamics import AxlePhysics, CornerPhysics, QuarterCarPhysics, integrate_rk4
+from estimator.output_error import DIVERGED_GAP_M
+from estimator.recording import Recording
+from estimator.vehicle import TyreModel
+
+
+@dataclass
+class BatchOutputError:
+    """Per model (column): predicted readings and their residuals, channel -> (samples, models), m."""
+
+    predicted: dict[str, np.ndarray]
+    residual: dict[str, np.ndarray]
+
+    def gap_m(self, samples: np.ndarray | None = None) -> np.ndarray:
+        """RMS over all channels of the residual, per model, on the samples where `samples` is True (all
+        when None); infinite where a model diverged."""
+        stacked = np.stack([r if samples is None else r[samples] for r in self.residual.values()])
+        with np.errstate(over="ignore", invalid="ignore"):
+            gap = np.sqrt(np.mean(stacked**2, axis=(0, 1)))
+        return np.where(np.isfinite(gap) & (gap < DIVERGED_GAP_M), gap, np.inf)
+
+    def column(self, index: int) -> dict[str, np.ndarray]:
+        return {name: r[:, index] for name, r in self.residual.items()}
+
+
+def _corner(models: list[FittedModel], side: int, sample_time_s: float) -> CornerPhysics:
+    vehicle = models[0].vehicle
+    # one grid for the whole population: the union of every model's knots, on which each piecewise-linear
+    # curve (with its linear extension) is represented exactly
+    grid = np.unique(np.concatenate([m.curves[side].velocity_m_s for m in models]))
+    grid = grid[np.concatenate([[True], np.diff(grid) > 1e-9])]
+    forces = np.stack([m.curves[side].force(grid) for m in models], axis=1)
+
+    def each(name: str) -> np.ndarray:
+        return np.array([m.value(name) for m in models])
+
+    return CornerPhysics(
+        damper=CurveBatch(grid, forces),
+        spring_stiffness_N_per_m=vehicle.spring_stiffness_N_per_m,
+        tyre_stiffness_N_per_m=vehicle.tyre_stiffness_N_per_m,
+        tyre_model=TyreModel.MAXWELL,
+        tyre_damping_Ns_per_m=np.array([m.maxwell_damping_Ns_per_m for m in models]),
+        maxwell_time_constant_s=vehicle.maxwell_time_constant_s(sample_time_s),
+        coulomb_friction_N=each("coulomb_friction_N"),
+        cubic_spring_N_per_m3=each("cubic_spring_N_per_m3"),
+        tyre_liftoff=np.array([m.structure.has(EffectName.TYRE_LIFTOFF) for m in models]),
+        static_wheel_load_N=vehicle.static_wheel_load_N,
+        tyre_dashpot_Ns_per_m=each("tyre_dashpot_Ns_per_m"),
+    )
+
+
+INITIAL_WINDOW_S = 0.2
+"""Longest stretch at the start of the recording a quadratic is fitted to for the initial state."""
+
+
+def _start(x: np.ndarray, sample_time_s: float, noise_m: float) -> tuple[float, float]:
+    """Position and velocity at the first sample: a quadratic fitted to the longest stretch from the start
+    (up to INITIAL_WINDOW_S, halved until it fits within twice the noise). The low-passed kinematics used by
+    estimator.output_error are least reliable at the very first sample (the filter's edge), and a wrong
+    initial velocity sets the body ringing for the first second of the simulation."""
+    window = max(8, round(INITIAL_WINDOW_S / sample_time_s))
+    while True:
+        t = np.arange(min(window, x.size)) * sample_time_s
+        coefficients = np.polyfit(t, x[: t.size], 2)
+        misfit = float(np.sqrt(np.mean((np.polyval(coefficients, t) - x[: t.size]) ** 2)))
+        if misfit <= 2.0 * noise_m or window <= 8:
+            return float(coefficients[2]), float(coefficients[1])
+        window //= 2
+
+
+def _drive(model: FittedModel) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Plate position and rate (the model's corrected plate channel(s), low-passed) and the initial state."""
+    vehicle = model.vehicle
+    kinematics = model.system.kinematics
+    plates = [kinematics[name] for name in (("x_r_l", "x_r_r") if vehicle.is_axle else ("x_r",))]
+    plate = np.stack([p.position_m for p in plates]) if vehicle.is_axle else plates[0].position_m
+    rate = np.stack([p.velocity_m_s for p in plates]) if vehicle.is_axle else plates[0].velocity_m_s
+    channels = model.signals.recording.channels
+    dt = model.signals.sample_time_s
+    noise = model.system.filters.noise_floor_m
+
+    def at0(name: str) -> tuple[float, float]:
+        return _start(channels[name], dt, noise)
+
+    if not vehicle.is_axle:
+        return plate, rate, np.array([*at0("x_s"), *at0("x_t"), 0.0])
+    (sl, vl), (sr, vr) = at0("x_s_l"), at0("x_s_r")
+    b = float(vehicle.track_m)
+    heave_roll = [0.5 * (sl + sr), 0.5 * (vl + vr), (sl - sr) / b, (vl - vr) / b]
+    return plate, rate, np.array([*heave_roll, *at0("x_t_l"), *at0("x_t_r"), 0.0, 0.0])
+
+
+def simulate_models(
+    models: list[FittedModel], recording: Recording, references: list[Recording | None] | None = None
+) -> BatchOutputError:
+    """Simulate every model from the measured plate; compare with `recording` (or, per model, with its own
+    reference recording where one is given)."""
+    vehicle = models[0].vehicle
+    dt = recording.sample_time_s
+    drives = [_drive(m) for m in models]
+    axis = 1 if vehicle.is_axle else 0
+    plate = np.stack([d[0] for d in drives], axis=axis)
+    rate = np.stack([d[1] for d in drives], axis=axis)
+    state0 = np.stack([d[2] for d in drives], axis=1)
+    sprung = np.array([m.sprung_mass_kg for m in models])
+    wheels = 2 if vehicle.is_axle else 1
+    unsprung = (vehicle.mass_kg - sprung) / wheels
+    physics: QuarterCarPhysics | AxlePhysics
+    if not vehicle.is_axle:
+        physics = QuarterCarPhysics(_corner(models, 0, dt), sprung, unsprung)
+    else:
+        physics = AxlePhysics(
+            _corner(models, 0, dt),
+            _corner(models, 1, dt),
+            sprung,
+            unsprung,
+            np.array([m.roll_inertia_kg_m2 or 0.0 for m in models]),
+            float(vehicle.track_m or 0.0),
+            vehicle.anti_roll_bar_stiffness_N_per_m
+            + np.array([m.value("anti_roll_bar_N_per_m") for m in models]),
+        )
+    with np.errstate(over="ignore", invalid="ignore"):  # an unstable model is reported as a diverged gap
+        states = integrate_rk4(physics.derivatives, state0, dt, plate, rate)
+        outputs = physics.outputs(np.moveaxis(states, 0, 1))
+    predicted: dict[str, np.ndarray] = {}
+    residual: dict[str, np.ndarray] = {}
+    for name, simulated in outputs.items():
+        columns = []
+        for index, model in enumerate(models):
+            column = simulated[:, index]
+            if not np.all(np.isfinite(column)):
+                columns.append(np.full_like(column, np.inf))
+                continue
+            columns.append(model.corrections.distort(name, column, dt))
+        predicted[name] = np.stack(columns, axis=1)
+        measured = [
+            (ref if ref is not None else recording).channels[name]
+            for ref in (references or [None] * len(models))
+        ]
+        with np.errstate(over="ignore", invalid="ignore"):
+            residual[name] = predicted[name] - np.stack(measured, axis=1)
+    return BatchOutputError(predicted, residual)

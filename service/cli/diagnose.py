@@ -1,0 +1,96 @@
+"""`shockbench diagnose`: the model doctor on a recording (estimator.doctor): where the identified model and
+the measurement disagree, which missing effect explains it, the gap before and after adding it."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from pathlib import Path
+
+from daq.formats.recording_csv import read_recording_csv
+from daq.formats.vehicle_file import read_vehicle
+from estimator.doctor.diagnose import DiagnoseOptions, DiagnoseProgress, diagnose
+from estimator.doctor.result import DiagnosisResult
+from estimator.vehicle import TyreModel
+from service.cli.errors import CliError
+from service.doctor_report import write_report
+
+
+def _micro(value: float) -> str:
+    return f"{value * 1e6:.1f} µm" if math.isfinite(value) else "diverged"
+
+
+def summary(result: DiagnosisResult) -> str:
+    """Readable report of a diagnosis."""
+    lines = [
+        f"starting model: {', '.join(result.starting_effects) or 'spring tyre, nothing else'} "
+        f"beyond the vehicle file",
+        f"gap before: {_micro(result.gap_before_m)} (sensor noise {_micro(result.noise_floor_m)})",
+        f"where: {result.located_before.describe()}",
+    ]
+    for number, step in enumerate(result.steps, start=1):
+        parameters = ", ".join(
+            f"{k} = {v:.4g}" if isinstance(v, float) else f"{k} = {v}" for k, v in step.parameters.items()
+        )
+        lines += [
+            f"\nstep {number}: {step.effect} ({parameters})",
+            f"  gap {_micro(step.gap_before_m)} -> {_micro(step.gap_after_m)}",
+            f"  evidence: {step.evidence}",
+        ]
+    lines += [
+        f"\ngap after: {_micro(result.gap_after_m)}; a model without missing effects reaches "
+        f"{_micro(result.expected_gap_m)} on this sweep",
+        f"conclusion: {result.conclusion}",
+    ]
+    return "\n".join(lines)
+
+
+def _progress(p: DiagnoseProgress) -> None:
+    sys.stderr.write(f"diagnose: step {p.step}: {p.stage}\n")
+    sys.stderr.flush()
+
+
+def run_diagnose(args: argparse.Namespace) -> int:
+    report = Path(args.report) if args.report else None
+    if report is not None and report.exists() and not report.is_dir():
+        raise CliError(f"--report {report}: exists and is not a folder")
+    recording = read_recording_csv(args.recording)
+    vehicle = read_vehicle(args.vehicle)
+    if args.points is not None and not 3 <= args.points <= 60:
+        raise CliError("--points must lie between 3 and 60")
+    options = DiagnoseOptions(tyre=TyreModel(args.tyre), points=args.points)
+    result = diagnose(recording, vehicle, options, progress=None if args.json else _progress)
+    if report is not None:
+        path = write_report(result, report, title=Path(args.recording).name)
+        if not args.json:
+            print(f"report: {path}", file=sys.stderr)
+    if args.json:
+        print(json.dumps(result.to_json()))
+    else:
+        print(summary(result))
+    return 0
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "diagnose",
+        help="find what the identified model lacks, name it, add it and show the gap shrink",
+        description="The model doctor: simulate the identified model from the measured plate, locate where "
+        "it disagrees with the measured x_s and x_t, fit every effect of the catalog, name the one that "
+        "explains the disagreement (information criterion, held-out data, signature), add it and repeat; "
+        "say 'unexplained' when a clear disagreement remains that no candidate explains.",
+    )
+    p.add_argument("recording", help="recording CSV")
+    p.add_argument("--vehicle", required=True, help="vehicle file (TOML)")
+    p.add_argument(
+        "--tyre",
+        choices=[t.value for t in TyreModel],
+        default="maxwell",
+        help="tyre of the starting model (default maxwell)",
+    )
+    p.add_argument("--points", type=int, default=None, help="curve points (default 20, axle 10 per side)")
+    p.add_argument("--report", default=None, help="folder for report.md and its PNG plots")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(handler=run_diagnose)

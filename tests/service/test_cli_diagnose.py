@@ -1,0 +1,111 @@
+"""`shockbench diagnose`: JSON of the documented shape, the Markdown report with its plots, the readable
+summary, and bad input as one line on stderr."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from daq.formats.recording_csv import write_recording_csv
+from daq.formats.vehicle_file import write_vehicle
+from drivers.exciter.sweep import SweepSettings
+from service.cli import diagnose as diagnose_command
+from service.cli import main as main_module
+from simulators.vehicle_sim import (
+    SimulationSettings,
+    default_axle,
+    default_quarter_car,
+    simulate,
+    with_effects,
+)
+
+PLATE_OFFSET_M = 0.0005
+PNG = b"\x89PNG\r\n\x1a\n"
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A 6 s sweep of the default quarter car whose plate laser reads 0.5 mm high."""
+    folder = tmp_path_factory.mktemp("diagnose")
+    vehicle = with_effects(default_quarter_car(), sensor_offset_m={"x_r": PLATE_OFFSET_M})
+    settings = SimulationSettings(sweep=SweepSettings(duration_s=6.0), seed=3, substeps=2)
+    write_recording_csv(folder / "rec.csv", simulate(vehicle, settings).recording)
+    write_vehicle(folder / "vehicle.toml", vehicle.known)
+    write_vehicle(folder / "axle.toml", default_axle().known)
+    return folder
+
+
+@pytest.fixture
+def cli(monkeypatch: pytest.MonkeyPatch):
+    """shockbench's main() with the diagnose subcommand registered."""
+    if diagnose_command not in main_module.MODULES:
+        monkeypatch.setattr(main_module, "MODULES", (*main_module.MODULES, diagnose_command))
+    return main_module.main
+
+
+def test_json_names_the_plate_offset_and_the_report_has_plots_and_tables(
+    files: Path, cli, capsys: pytest.CaptureFixture[str]
+) -> None:
+    report = files / "report"
+    code = cli(
+        [
+            "diagnose",
+            str(files / "rec.csv"),
+            "--vehicle",
+            str(files / "vehicle.toml"),
+            "--json",
+            "--report",
+            str(report),
+        ]
+    )
+    captured = capsys.readouterr()
+    assert code == 0, captured.err
+    out = json.loads(captured.out)
+    assert {"gap_before_m", "steps", "gap_after_m", "unexplained"} <= set(out)
+    assert [s["effect"] for s in out["steps"]] == ["sensor_offset"]
+    step = out["steps"][0]
+    assert set(step) == {"effect", "gap_before_m", "gap_after_m", "parameters", "evidence"}
+    assert step["parameters"]["channel"] == "x_r"
+    assert step["parameters"]["offset_m"] == pytest.approx(PLATE_OFFSET_M, rel=0.05)
+    assert out["gap_after_m"] <= 0.5 * out["gap_before_m"] and out["unexplained"] is False
+    text = (report / "report.md").read_text()
+    assert "| step | effect | fitted parameters | gap before | gap after | evidence |" in text
+    assert "sensor_offset" in text and "offset_m" in text
+    for image in ("gap_per_step.png", "measured_vs_simulated.png", "residual_spectra.png"):
+        assert f"]({image})" in text
+        assert (report / image).read_bytes()[:8] == PNG
+    assert not list(report.glob("*.part")), "no half-written files are left behind"
+
+
+def test_readable_summary_and_progress(files: Path, cli, capsys: pytest.CaptureFixture[str]) -> None:
+    code = cli(
+        ["diagnose", str(files / "rec.csv"), "--vehicle", str(files / "vehicle.toml"), "--tyre", "maxwell"]
+    )
+    captured = capsys.readouterr()
+    assert code == 0, captured.err
+    assert "step 1: sensor_offset" in captured.out and "conclusion: named sensor_offset" in captured.out
+    assert "evidence:" in captured.out and "diagnose: step 0" in captured.err
+
+
+@pytest.mark.parametrize(
+    ("arguments", "message"),
+    [
+        (["missing.csv", "--vehicle", "{files}/vehicle.toml"], "no such file"),
+        (["{files}/rec.csv", "--vehicle", "{files}/axle.toml"], "axle"),
+        (
+            ["{files}/rec.csv", "--vehicle", "{files}/vehicle.toml", "--report", "{files}/rec.csv"],
+            "not a folder",
+        ),
+        (["{files}/rec.csv", "--vehicle", "{files}/vehicle.toml", "--points", "2"], "--points"),
+    ],
+)
+def test_bad_input_is_one_line_and_exit_code_2(
+    files: Path, cli, capsys: pytest.CaptureFixture[str], arguments: list[str], message: str
+) -> None:
+    code = cli(["diagnose", *(a.format(files=files) for a in arguments)])
+    captured = capsys.readouterr()
+    assert code == 2
+    lines = captured.err.strip().splitlines()
+    assert len(lines) == 1 and message in lines[0] and lines[0].startswith("shockbench diagnose: error:")
