@@ -60,6 +60,7 @@ class BenchController:
             config = self._bench.start()
         assert config is not None
         self.config = config
+        self._devices = self._configured_devices(config)  # fixed with the configuration: built once
         self._lock = threading.Lock()
         self._thread: threading.Thread | None = None
         self._sweep_id: str | None = None
@@ -88,13 +89,17 @@ class BenchController:
                 busy=self._thread is not None,
                 sweep_id=self._sweep_id,
                 progress=self._progress,
-                devices=self.devices(),
+                devices=list(self._devices),
             )
 
     def devices(self) -> list[dict[str, str]]:
         """What the configuration names (a live check of each device is `shockbench probe`'s job)."""
-        found = [{"name": self.config.exciter.name, "kind": "exciter", "url": self.config.exciter.url}]
-        for laser in self.config.lasers:
+        return list(self._devices)
+
+    @staticmethod
+    def _configured_devices(config: BenchConfig) -> list[dict[str, str]]:
+        found = [{"name": config.exciter.name, "kind": "exciter", "url": config.exciter.url}]
+        for laser in config.lasers:
             found.append(
                 {
                     "name": laser.name,

@@ -28,6 +28,7 @@ one behaves as no reply).
 from __future__ import annotations
 
 import contextlib
+import math
 import os
 import select
 import selectors
@@ -52,7 +53,6 @@ from drivers.compowayf.codec import (
     build_response,
     decode_parameter_area_request,
     decode_variable_area_read,
-    encode_int,
     encode_values,
     is_hex,
     parameter_element_width,
@@ -164,18 +164,11 @@ class SimulatedAmplifier:
     # --- measuring -------------------------------------------------------------------------------------
 
     def _counts_for(self, reading_m: float | None) -> int:
-        measured = self.config.measured
-        if reading_m is None:
-            return measured.out_of_range_marker
-        counts = measured.m_to_counts(reading_m - self._zero_m)
-        try:  # saturate to the marker when the value does not fit the element width
-            encode_int(counts, measured.element_width)
-        except ValueError:
-            return measured.out_of_range_marker
-        return counts
+        return self._counts_many(np.array([math.nan if reading_m is None else reading_m]))[0]
 
     def _counts_many(self, readings_m: np.ndarray) -> list[int]:
-        """_counts_for of many readings (NaN = out of range), vectorised."""
+        """Counts of readings against the present zero (NaN = out of range); the out-of-range marker where
+        there is no reading or the value does not fit the element width."""
         measured = self.config.measured
         bits = 4 * measured.element_width
         with np.errstate(invalid="ignore"):
