@@ -35,11 +35,15 @@ class JobLinks(BaseModel):
     cancel: str
     plot_png: str | None = None
     plot_svg: str | None = None
+    files: dict[str, str] = Field(
+        default_factory=dict,
+        description="every file the job wrote, name -> link (a diagnosis: report.md and its PNG plots)",
+    )
 
 
 class JobOut(BaseModel):
     id: int
-    kind: str = Field(description="identify (or diagnose)")
+    kind: str = Field(description="identify or diagnose")
     status: JobStatus
     options: dict[str, Any]
     input_source: str = Field(description="upload, or sweep")
@@ -49,7 +53,9 @@ class JobOut(BaseModel):
         None,
         description="identify: curves (velocity_m_s, force_N, tanh parameters, outliers per corner), "
         "masses_kg, tyre_damping_Ns_per_m, inspection figures, objective, certified_gap, gap_m; the "
-        "shape of `shockbench identify --json`",
+        "shape of `shockbench identify --json`. diagnose: gap_before_m, steps (effect, gap_before_m, "
+        "gap_after_m, parameters, evidence), gap_after_m, unexplained; the shape of `shockbench diagnose "
+        "--json`",
     )
     error: str | None = Field(None, description="why the job failed or was cancelled")
     submitted_by: str | None = Field(None, description="id of the key that submitted it (a hash)")
@@ -81,6 +87,7 @@ class JobOut(BaseModel):
                 cancel=f"{base}/cancel",
                 plot_png=f"{base}/plot.png" if "plot.png" in record.artefacts else None,
                 plot_svg=f"{base}/plot.svg" if "plot.svg" in record.artefacts else None,
+                files={name: f"{base}/files/{name}" for name in record.artefacts},
             ),
         )
 

@@ -9,13 +9,7 @@ heavy parts or matplotlib).
 Every kind takes a recording and a vehicle file. The worker function receives a JobContext and returns a
 JobOutcome (service.jobs.context).
 
-Planned second entry, once estimator/doctor exists:
-
-    JobKind.DIAGNOSE: JobKindSpec(
-        name="diagnose", summary="Diagnose the model ...", submit_path="/diagnoses",
-        options_model=DiagnoseJobOptions, check=check_diagnose_inputs,
-        runner="service.jobs.diagnose_job:run",
-    )
+Two kinds: identify (`POST /jobs`) and diagnose, the model doctor (`POST /diagnoses`).
 """
 
 from __future__ import annotations
@@ -28,6 +22,7 @@ from pydantic import BaseModel
 from estimator.recording import Recording
 from estimator.vehicle import VehicleParameters
 from service.jobs.context import InputError
+from service.jobs.diagnose_job import DiagnoseJobOptions, check_diagnose_inputs
 from service.jobs.identify_job import IdentifyJobOptions, check_identify_inputs
 from service.store.models import JobKind
 
@@ -58,6 +53,16 @@ KINDS: dict[str, JobKindSpec] = {
         check=check_identify_inputs,
         runner="service.jobs.identify_job:run",
         preload=("estimator.identify", "service.plots"),
+    ),
+    JobKind.DIAGNOSE.value: JobKindSpec(
+        name=JobKind.DIAGNOSE.value,
+        summary="Diagnose the model: where the identified model and the measurement disagree, which missing "
+        "effect explains it, the gap before and after adding it (the model doctor)",
+        submit_path="/diagnoses",
+        options_model=DiagnoseJobOptions,
+        check=check_diagnose_inputs,
+        runner="service.jobs.diagnose_job:run",
+        preload=("estimator.doctor.diagnose", "service.doctor_report"),
     ),
 }
 

@@ -23,6 +23,11 @@ from service.store.models import JobStatus
 
 JobId = Annotated[int, Path(ge=1, le=2**62, description="job id")]
 PLOT_MEDIA = {"png": "image/png", "svg": "image/svg+xml"}
+FILE_MEDIA = {
+    ".md": "text/markdown; charset=utf-8",
+    ".json": "application/json",
+    **{f".{k}": v for k, v in PLOT_MEDIA.items()},
+}
 
 
 async def load_job(request: Request, job_id: int) -> JobRecord:
@@ -139,21 +144,46 @@ def router() -> APIRouter:
 
     for fmt, media in PLOT_MEDIA.items():
         _plot_endpoint(r, fmt, media)
+
+    @r.get(
+        "/jobs/{job_id}/files/{name}",
+        response_class=FileResponse,
+        responses={200: {"description": "the file"}} | responses(401, 403, 404, 409, 422),
+    )
+    async def job_file(
+        request: Request,
+        job_id: JobId,
+        name: Annotated[str, Path(max_length=100, description="a name from the job's links.files")],
+        _principal: Viewer,
+    ) -> FileResponse:
+        """A file the job wrote (its links.files): the plots of an identification; a diagnosis's report.md
+        and the PNG plots it shows."""
+        record = await load_job(request, job_id)
+        return await _artefact(record, name, f"job-{job_id}-{name}")
+
     return r
+
+
+async def _artefact(record: JobRecord, name: str, download_name: str) -> FileResponse:
+    """The artefact `name` of a succeeded job (only names the job recorded: nothing else on disk is
+    reachable)."""
+    if record.status is not JobStatus.SUCCEEDED:
+        raise ApiError(
+            409, f"job {record.id} is {record.status.value}; its files exist once it has succeeded"
+        )
+    if name not in record.artefacts:
+        raise ApiError(404, f"job {record.id} has no file {name!r}")
+    path = FilePath(record.output_dir) / record.artefacts[name]
+    if not await asyncio.to_thread(path.is_file):
+        raise ApiError(404, f"the file {name!r} of job {record.id} is no longer on disk")
+    media = FILE_MEDIA.get(path.suffix, "application/octet-stream")
+    return FileResponse(path, media_type=media, filename=download_name)
 
 
 def _plot_endpoint(r: APIRouter, fmt: str, media: str) -> None:
     async def plot(request: Request, job_id: JobId, _principal: Viewer) -> FileResponse:
         record = await load_job(request, job_id)
-        name = f"plot.{fmt}"
-        if record.status is not JobStatus.SUCCEEDED:
-            raise ApiError(409, f"job {job_id} is {record.status.value}; a plot exists once it has succeeded")
-        if name not in record.artefacts:
-            raise ApiError(404, f"job {job_id} has no {fmt.upper()} plot")
-        path = FilePath(record.output_dir) / record.artefacts[name]
-        if not await asyncio.to_thread(path.is_file):
-            raise ApiError(404, f"the plot of job {job_id} is no longer on disk")
-        return FileResponse(path, media_type=media, filename=f"job-{job_id}-curve.{fmt}")
+        return await _artefact(record, f"plot.{fmt}", f"job-{job_id}-curve.{fmt}")
 
     plot.__doc__ = f"The identified curve(s) with their tanh fit, as {fmt.upper()}."
     r.add_api_route(

@@ -1,0 +1,62 @@
+"""The diagnosis job (the model doctor as a service job): its options as the API takes them, the checks at
+submit, and the function the worker runs (estimator.doctor.diagnose, then the Markdown report with its
+PNG plots as artefacts)."""
+
+from __future__ import annotations
+
+from pydantic import BaseModel, Field
+
+from estimator.recording import Recording
+from estimator.vehicle import TyreModel, VehicleParameters
+from service.jobs.context import InputError, JobContext, JobOutcome, finite_json
+
+REPORT_FOLDER = "report"
+
+
+class DiagnoseJobOptions(BaseModel):
+    """Options of a diagnosis job (the same as `shockbench diagnose`). Unknown fields are refused by the
+    submit endpoint."""
+
+    tyre: TyreModel = Field(TyreModel.MAXWELL, description="tyre of the starting model")
+    points: int | None = Field(
+        None, ge=3, le=60, description="damper curve points (default 30; axle 15 per side)"
+    )
+    max_steps: int = Field(4, ge=1, le=8, description="at most this many effects are added")
+
+
+def check_diagnose_inputs(options: BaseModel, recording: Recording, vehicle: VehicleParameters) -> None:
+    if not isinstance(options, DiagnoseJobOptions):
+        raise TypeError("check_diagnose_inputs needs DiagnoseJobOptions")
+    if vehicle.is_axle != recording.is_axle:
+        has = "axle" if recording.is_axle else "quarter-car"
+        raise InputError(
+            "recording",
+            f"the recording has {has} channels but the vehicle file is for a {vehicle.model.value}",
+        )
+
+
+def run(job: JobContext) -> JobOutcome:
+    """Runs in the worker process: diagnose, then write the report. Raises InterruptedError when
+    cancelled."""
+    from estimator.doctor.diagnose import DiagnoseOptions, DiagnoseProgress, diagnose
+    from service.doctor_report import write_report  # matplotlib: loaded in the worker only
+
+    options = DiagnoseJobOptions.model_validate(job.options)
+
+    def progress(p: DiagnoseProgress) -> None:
+        job.progress.stage(f"step {p.step}: {p.stage}")
+
+    result = diagnose(
+        job.recording,
+        job.vehicle,
+        DiagnoseOptions(tyre=options.tyre, points=options.points, max_steps=options.max_steps),
+        progress=progress,
+        cancel=job.cancel,
+    )
+    if job.cancel.is_set():
+        raise InterruptedError("diagnosis cancelled")
+    job.progress.stage("writing the report")
+    folder = job.output_dir / REPORT_FOLDER
+    write_report(result, folder, title=f"job {job.job_id}")
+    artefacts = {path.name: f"{REPORT_FOLDER}/{path.name}" for path in sorted(folder.iterdir())}
+    return JobOutcome(finite_json(result.to_json()), artefacts)

@@ -1,0 +1,113 @@
+"""Diagnosis jobs (the model doctor) through the API on the real server, exposed as identification jobs
+are: multipart submit at /diagnoses checked at submit, progress, the result of `shockbench diagnose --json`,
+and the Markdown report with its PNG plots as the job's files."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import httpx
+import pytest
+
+from daq.formats.recording_csv import write_recording_csv
+from daq.formats.vehicle_file import write_vehicle
+from drivers.exciter.sweep import SweepSettings
+from service.access import KeyRing, Role
+from service.api import ServiceSettings, create_app
+from service.api.testing import LiveServer, wait_until
+from simulators.vehicle_sim import (
+    SimulationSettings,
+    default_axle,
+    default_quarter_car,
+    simulate,
+    with_effects,
+)
+
+OPERATOR = "operator-key-0123456789"
+VIEWER = "viewer-key-0123456789"
+PLATE_OFFSET_M = 0.0005
+PNG = b"\x89PNG\r\n\x1a\n"
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A 6 s sweep of the default quarter car whose plate laser reads 0.5 mm high (hidden from the job)."""
+    folder = tmp_path_factory.mktemp("diagnose-inputs")
+    vehicle = with_effects(default_quarter_car(), sensor_offset_m={"x_r": PLATE_OFFSET_M})
+    settings = SimulationSettings(sweep=SweepSettings(duration_s=6.0), seed=3, substeps=2)
+    write_recording_csv(folder / "rec.csv", simulate(vehicle, settings).recording)
+    write_vehicle(folder / "vehicle.toml", vehicle.known)
+    write_vehicle(folder / "axle.toml", default_axle().known)
+    return folder
+
+
+@pytest.fixture(scope="module")
+def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[LiveServer]:
+    keys = KeyRing({OPERATOR: Role.OPERATOR, VIEWER: Role.VIEWER})
+    settings = ServiceSettings(data_dir=tmp_path_factory.mktemp("diagnose"), keys=keys)
+    with LiveServer(create_app(settings)) as s:
+        yield s
+
+
+@pytest.fixture
+def client(server: LiveServer) -> Iterator[httpx.Client]:
+    with httpx.Client(base_url=server.url, headers={"Authorization": f"Bearer {OPERATOR}"}, timeout=60) as c:
+        yield c
+
+
+def submit(client: httpx.Client, files: Path, vehicle: str, **options: str) -> httpx.Response:
+    with (files / "rec.csv").open("rb") as recording, (files / vehicle).open("rb") as vehicle_file:
+        return client.post(
+            "/api/v1/diagnoses",
+            files={"recording": ("rec.csv", recording), "vehicle": (vehicle, vehicle_file)},
+            data=options,
+        )
+
+
+def test_a_diagnosis_job_names_the_hidden_effect_and_serves_its_report(
+    server: LiveServer, client: httpx.Client, files: Path
+) -> None:
+    response = submit(client, files, "vehicle.toml", tyre="maxwell", max_steps="2")
+    assert response.status_code == 201, response.text
+    job = response.json()
+    assert job["kind"] == "diagnose" and response.headers["location"] == f"/api/v1/jobs/{job['id']}"
+    assert job["options"]["max_steps"] == 2
+
+    def ended() -> dict[str, Any] | None:
+        now = client.get(f"/api/v1/jobs/{job['id']}").json()
+        return now if now["status"] in ("succeeded", "failed", "cancelled") else None
+
+    done = wait_until(ended, 600, f"diagnosis job {job['id']}")
+    assert done["status"] == "succeeded", done["error"]
+    result = done["result"]
+    assert set(result) >= {"gap_before_m", "steps", "gap_after_m", "unexplained"}
+    assert [step["effect"] for step in result["steps"]] == ["sensor_offset"], result["steps"]
+    step = result["steps"][0]
+    assert step["parameters"]["channel"] == "x_r" and step["evidence"]
+    assert abs(step["parameters"]["offset_m"] - PLATE_OFFSET_M) < 0.1 * PLATE_OFFSET_M
+    assert result["gap_after_m"] <= 0.5 * result["gap_before_m"] and result["unexplained"] is False
+
+    links = done["links"]["files"]
+    assert {"report.md", "gap_per_step.png", "measured_vs_simulated.png", "residual_spectra.png"} <= set(
+        links
+    )
+    with httpx.Client(base_url=server.url, headers={"Authorization": f"Bearer {VIEWER}"}) as viewer:
+        report = viewer.get(links["report.md"])
+        assert report.status_code == 200 and report.headers["content-type"].startswith("text/markdown")
+        assert "sensor_offset" in report.text and "gap_per_step.png" in report.text
+        plot = viewer.get(links["gap_per_step.png"])
+        assert plot.status_code == 200 and plot.content.startswith(PNG)
+        missing = viewer.get(f"/api/v1/jobs/{job['id']}/files/..%2Fjob.db")
+        assert missing.status_code == 404 and missing.json()["error"]["code"] == "not_found"
+    assert done["links"]["plot_png"] is None
+
+
+def test_a_diagnosis_that_cannot_run_is_refused_at_submit(client: httpx.Client, files: Path) -> None:
+    response = submit(client, files, "axle.toml")
+    assert response.status_code == 422 and response.json()["error"]["field"] == "recording", response.text
+    response = submit(client, files, "vehicle.toml", max_steps="0")
+    assert response.status_code == 422 and response.json()["error"]["field"] == "max_steps", response.text
+    response = submit(client, files, "vehicle.toml", generations="10")
+    assert response.status_code == 422 and response.json()["error"]["field"] == "generations", response.text
