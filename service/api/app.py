@@ -20,13 +20,15 @@ from fastapi import APIRouter, FastAPI
 from service.access import KeyRing
 from service.api.errors import install_error_handlers
 from service.api.limits import UploadSizeLimit
-from service.api.routes import bench, events, jobs, status, sweeps
+from service.api.routes import bench, events, jobs, schedules, status, sweeps
+from service.api.scheduler import InspectionScheduler
 from service.api.schemas import API_PREFIX
 from service.api.settings import ServiceSettings
 from service.bench_control import BenchController
 from service.jobs.manager import JobManager
 from service.store.database import Database
 from service.store.jobs import JobStore
+from service.store.schedules import ScheduleStore
 from service.store.sweeps import SweepStore
 
 log = logging.getLogger("shockbench.api")
@@ -55,6 +57,15 @@ class Services:
     sweeps: SweepStore | None = None
     bench: BenchController | None = None
     """None when the service was started without --simulated or --config: bench endpoints answer 503."""
+    tests: ScheduleStore | None = None
+    """Scheduled inspection-line tests."""
+    scheduler: InspectionScheduler | None = None
+    """Runs the scheduled tests on the bench (None without a bench)."""
+
+    def wake_scheduler(self) -> None:
+        """Something changed (a test submitted, a sweep ended): let the scheduler look now. Any thread."""
+        if self.scheduler is not None:
+            self.scheduler.wake()
 
 
 def open_bench(settings: ServiceSettings) -> BenchController | None:
@@ -93,6 +104,10 @@ def lifespan_factory(settings: ServiceSettings) -> Lifespan:
             log.warning("sweeps %s were cut off by a restart; marked failed", failed_sweeps)
         bench = await asyncio.to_thread(open_bench, settings)
         manager = JobManager(store, settings.worker)
+        tests = ScheduleStore(database)
+        scheduler = None
+        if bench is not None:
+            scheduler = InspectionScheduler(settings, bench, tests, sweep_store, store, manager)
         app.state.services = Services(
             settings,
             settings.keys,
@@ -103,12 +118,18 @@ def lifespan_factory(settings: ServiceSettings) -> Lifespan:
             time.monotonic(),
             sweeps=sweep_store,
             bench=bench,
+            tests=tests,
+            scheduler=scheduler,
         )
         try:
             await manager.start()
+            if scheduler is not None:
+                await scheduler.start()
             log.info("shockbench service up; database %s, data in %s", database.safe_url, settings.data_dir)
             yield
         finally:
+            if scheduler is not None:
+                await scheduler.stop()  # no new test starts while the bench closes
             if bench is not None:
                 await asyncio.to_thread(bench.close)  # a running sweep ends (and is stored) first
             await manager.stop()
@@ -124,6 +145,7 @@ def api_router() -> APIRouter:
     router.include_router(events.router)
     router.include_router(bench.router)
     router.include_router(sweeps.router)
+    router.include_router(schedules.router)
     return router
 
 

@@ -110,11 +110,12 @@ def accept_recording(
     options: BaseModel,
     recording_path: Path,
     vehicle_path: Path,
-    principal: Principal | None,
+    submitted_by: str | None,
     *,
     sweep_id: int | None = None,
 ) -> JobRecord:
-    """A job on a recording already on disk (a sweep's): checked alike, the files stay where they are."""
+    """A job on a recording already on disk (a sweep's): checked alike, the files stay where they are.
+    `submitted_by` is the key id of whoever asked (an operator, or the author of a scheduled test)."""
     parsed = _read_inputs(recording_path, recording_path.name, vehicle_path, vehicle_path.name)
     _check(spec, options, *parsed)
 
@@ -129,5 +130,5 @@ def accept_recording(
         place,
         input_source="sweep" if sweep_id is not None else "recording",
         sweep_id=sweep_id,
-        submitted_by=principal.key_id if principal else None,
+        submitted_by=submitted_by,
     )

@@ -1,0 +1,161 @@
+"""Starting a sweep on the bench, shared by `POST /sweeps` and the inspection-line scheduler: the request
+(`SweepIn`), its checks before anything moves (422 naming the field), and the launch (stored, then run in
+the bench's thread, its end stored by that thread).
+
+A sweep's recording is `sweeps/<id>.h5` in the data directory, its vehicle file `sweeps/<id>.vehicle.toml`
+beside it.
+"""
+
+from __future__ import annotations
+
+import logging
+import secrets
+from collections.abc import Callable
+from pathlib import Path
+
+from pydantic import BaseModel, ConfigDict, Field
+
+from daq.formats.vehicle_file import parse_vehicle
+from daq.sweep.model import DEFAULT_SETTLE_S, StopKind, SweepOutcome, SweepRequest
+from daq.sweep.run import SweepError
+from drivers.exciter.errors import EnvelopeViolationError
+from drivers.exciter.sweep import SweepLaw, SweepSettings
+from estimator.vehicle import VehicleParameters
+from service.api.errors import ApiError
+from service.bench_control import BenchBusyError, BenchController, SweepDone
+from service.store.models import SweepStatus
+from service.store.sweeps import SweepRecord, SweepStore
+
+log = logging.getLogger("shockbench.api")
+
+SETTINGS_FIELDS = ("start_Hz", "stop_Hz", "amplitude_m", "duration_s", "law")
+
+
+class SweepSettingsIn(BaseModel):
+    """The plate's settings and the settling time (as a sweep and a scheduled test take them)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    start_Hz: float = Field(0.0, ge=0, le=1000, description="sweep start (Hz)")
+    stop_Hz: float = Field(20.0, ge=0, le=1000, description="sweep end (Hz)")
+    amplitude_m: float = Field(
+        0.004, ge=0, le=1, description="plate amplitude, zero to peak (m); the bench envelope limits it"
+    )
+    duration_s: float = Field(20.0, gt=0, le=3600, description="the sweep itself, without settling (s)")
+    law: SweepLaw = Field(SweepLaw.LINEAR, description="linear or logarithmic")
+    settle_s: float = Field(DEFAULT_SETTLE_S, ge=0, le=600, description="recorded after the sweep (s)")
+
+    def sweep_settings(self) -> SweepSettings:
+        try:
+            return SweepSettings(**{name: getattr(self, name) for name in SETTINGS_FIELDS})
+        except ValueError as exc:
+            field = next((name for name in SETTINGS_FIELDS if name in str(exc)), None)
+            raise ApiError(422, str(exc), field=field) from None
+
+    def as_submitted(self) -> dict[str, object]:
+        """The settings as stored with the sweep (JSON)."""
+        return self.model_dump(mode="json", include={*SETTINGS_FIELDS, "settle_s"})
+
+
+class SweepIn(SweepSettingsIn):
+    """A sweep to run: the plate's settings, the settling time, and the vehicle on the bench."""
+
+    vehicle_toml: str = Field(
+        min_length=1, max_length=1_000_000, description="the vehicle file (TOML, one [vehicle] table)"
+    )
+
+
+def check_sweep(bench: BenchController, body: SweepIn) -> tuple[SweepSettings, VehicleParameters]:
+    """Everything checkable without the bench moving (ApiError 422 naming the field): the settings, the
+    vehicle file and its model against the bench's, the safety envelope."""
+    settings = body.sweep_settings()
+    try:
+        vehicle = parse_vehicle(body.vehicle_toml, source="vehicle_toml")
+    except ValueError as exc:
+        raise ApiError(422, str(exc), field="vehicle_toml") from None
+    if vehicle.model != bench.config.model:
+        raise ApiError(
+            422,
+            f"vehicle_toml: a {vehicle.model} vehicle cannot be tested on the {bench.config.model} bench",
+            field="vehicle_toml",
+        )
+    try:
+        bench.config.safety_envelope().check(settings)
+    except EnvelopeViolationError as exc:
+        raise ApiError(422, str(exc), field=exc.field) from None
+    return settings, vehicle
+
+
+def outcome_status(outcome: SweepOutcome) -> SweepStatus:
+    if outcome.complete:
+        return SweepStatus.COMPLETE
+    if outcome.stop is StopKind.CONTROLLED and outcome.reason.startswith("aborted"):
+        return SweepStatus.ABORTED
+    return SweepStatus.FAILED
+
+
+def sweep_done(store: SweepStore, on_end: Callable[[], None] | None = None) -> SweepDone:
+    """The bench's `done` callback: runs in the sweep's thread, stores how the sweep ended, then calls
+    `on_end` (the scheduler's wake-up)."""
+
+    def done(sweep_id: str, outcome: SweepOutcome | None, error: str) -> None:
+        try:
+            if outcome is None:
+                reason = error or "the sweep did not begin"
+                store.finish(int(sweep_id), SweepStatus.FAILED, complete=False, reason=reason)
+            else:
+                store.finish(
+                    int(sweep_id),
+                    outcome_status(outcome),
+                    complete=outcome.complete,
+                    reason=outcome.reason or None,
+                )
+            log.info("sweep %s ended: %s", sweep_id, outcome.summary() if outcome else error)
+        except Exception:  # the sweep thread must not die silently; the row stays for the next restart
+            log.exception("could not store the end of sweep %s", sweep_id)
+        if on_end is not None:
+            on_end()
+
+    return done
+
+
+def launch_sweep(
+    bench: BenchController,
+    store: SweepStore,
+    data_dir: Path,
+    body: SweepIn,
+    operator: str | None,
+    on_end: Callable[[], None] | None = None,
+) -> SweepRecord:
+    """Check the request (422 naming the field; 409 when busy), store it, start it. Blocking: call it in
+    a thread. `operator` is the key id recorded with the sweep."""
+    settings, _vehicle = check_sweep(bench, body)
+    if bench.busy:
+        raise ApiError(409, f"bench {bench.config.name!r} is running a sweep", code="bench_busy")
+
+    folder = data_dir / "sweeps"
+    folder.mkdir(parents=True, exist_ok=True)
+
+    def place(sweep_id: int) -> tuple[Path, Path]:
+        recording = folder / f"{sweep_id}.h5"
+        if recording.exists():  # a new database over an old data directory: never overwrite
+            recording = folder / f"{sweep_id}-{secrets.token_hex(4)}.h5"
+        vehicle_file = recording.with_suffix(".vehicle.toml")
+        vehicle_file.write_text(body.vehicle_toml, encoding="utf-8")
+        return recording, vehicle_file
+
+    record = store.create(bench.config.name, body.as_submitted(), place, operator=operator)
+    assert record.recording_path is not None and record.vehicle_file is not None
+    request = SweepRequest(
+        settings, vehicle_file=Path(record.vehicle_file), operator=operator, settle_s=body.settle_s
+    )
+    try:
+        bench.start_sweep(str(record.id), request, Path(record.recording_path), sweep_done(store, on_end))
+    except BenchBusyError as exc:
+        store.finish(record.id, SweepStatus.FAILED, complete=False, reason=str(exc))
+        raise ApiError(409, str(exc), code="bench_busy") from None
+    except SweepError as exc:
+        store.finish(record.id, SweepStatus.FAILED, complete=False, reason=str(exc))
+        raise ApiError(422, str(exc)) from None
+    store.mark_running(record.id)
+    return store.get(record.id) or record

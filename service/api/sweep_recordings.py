@@ -1,0 +1,76 @@
+"""A sweep's recording as the input of a job: the HDF5 recording exported once to a recording CSV beside
+it (a finished recording never changes), then taken in like any recording on disk. Shared by
+`POST /sweeps/{id}/jobs` and the inspection-line scheduler. Blocking (files): call it in a thread."""
+
+from __future__ import annotations
+
+import os
+import secrets
+from pathlib import Path as FilePath
+
+from daq.storage.hdf5_recording import RecordingFileError, RecordingGapError, export_csv
+from service.api.errors import ApiError
+from service.api.intake import accept_recording
+from service.api.settings import ServiceSettings
+from service.jobs.identify_job import IdentifyJobOptions
+from service.jobs.kinds import KINDS
+from service.store.jobs import JobRecord, JobStore
+from service.store.models import JobKind
+from service.store.sweeps import SweepRecord
+
+
+def recording_path(record: SweepRecord) -> FilePath:
+    if not record.finished:
+        raise ApiError(
+            409, f"sweep {record.id} is {record.status.value}; its recording is ready once it has ended"
+        )
+    path = FilePath(record.recording_path) if record.recording_path else None
+    if path is None or not path.is_file():
+        raise ApiError(404, f"sweep {record.id} has no recording ({record.reason or 'never recorded'})")
+    return path
+
+
+def export(h5: FilePath, csv: FilePath) -> None:
+    try:
+        export_csv(h5, csv)
+    except RecordingGapError as exc:
+        raise ApiError(422, str(exc).replace(str(h5), h5.name), code="recording_gaps") from None
+    except RecordingFileError as exc:
+        raise ApiError(422, str(exc).replace(str(h5), h5.name), code="bad_recording") from None
+
+
+def sweep_csv(record: SweepRecord) -> FilePath:
+    """The recording as CSV beside the HDF5 file (exported once; a finished recording never changes)."""
+    h5 = recording_path(record)
+    csv = h5.with_suffix(".csv")
+    if not csv.is_file():
+        partial = csv.with_name(f".{csv.name}.{secrets.token_hex(4)}.part")
+        try:
+            export(h5, partial)
+            os.replace(partial, csv)
+        finally:
+            partial.unlink(missing_ok=True)
+    return csv
+
+
+def accept_sweep_job(
+    settings: ServiceSettings,
+    jobs: JobStore,
+    record: SweepRecord,
+    options: IdentifyJobOptions,
+    submitted_by: str | None,
+) -> JobRecord:
+    """A queued identification job on the sweep's recording (ApiError 409 until the sweep has ended, 422
+    when its recording cannot be read as one). The caller enqueues it with the job manager."""
+    csv = sweep_csv(record)
+    assert record.vehicle_file is not None
+    return accept_recording(
+        settings,
+        jobs,
+        KINDS[JobKind.IDENTIFY.value],
+        options,
+        csv,
+        FilePath(record.vehicle_file),
+        submitted_by,
+        sweep_id=record.id,
+    )
