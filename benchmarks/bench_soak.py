@@ -14,8 +14,8 @@ sweep of `--seconds` at 4 mm.
 
 Reported: rows and gap rows in the recording, ring-buffer overruns, samples lost by the amplifiers' buffers,
 failed reads, each channel's achieved rate, and the CPU of this process (acquisition and recording
-together) as a fraction of one core, next to the simulator process's. Targets of the issue: gaps = 0,
-overruns = 0, acquisition below half a core.
+together) as a fraction of one core, overall and minute by minute, next to the simulator process's.
+Targets of the issue: gaps = 0, overruns = 0, acquisition below half a core.
 """
 
 from __future__ import annotations
@@ -28,6 +28,7 @@ import signal
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from pathlib import Path
 
@@ -39,6 +40,32 @@ from daq.sweep.run import run_sweep
 from drivers.exciter.sweep import SweepSettings
 
 START_TIMEOUT_S = 30.0
+MINUTE_S = 60.0
+
+
+class CpuPerMinute:
+    """This process's CPU as a fraction of one core, minute by minute (a background thread): a cost that
+    grows with the recording's length shows up as a rising series, which one average would hide."""
+
+    def __init__(self) -> None:
+        self.fractions: list[float] = []
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="cpu per minute", daemon=True)
+
+    def __enter__(self) -> CpuPerMinute:
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._stop.set()
+        self._thread.join()
+
+    def _run(self) -> None:
+        wall0, cpu0 = time.monotonic(), time.process_time()
+        while not self._stop.wait(MINUTE_S):
+            wall, cpu = time.monotonic(), time.process_time()
+            self.fractions.append((cpu - cpu0) / (wall - wall0))
+            wall0, cpu0 = wall, cpu
 
 
 def process_cpu_s(pid: int) -> float:
@@ -83,7 +110,8 @@ def main() -> int:
             request = SweepRequest(SweepSettings(duration_s=args.seconds), settle_s=0.0)
             sim_cpu0 = process_cpu_s(simulator.pid)
             out = Path(folder) / "soak.h5"
-            outcome = asyncio.run(run_sweep(config, request, out, pacing=RealtimePacing()))
+            with CpuPerMinute() as per_minute:
+                outcome = asyncio.run(run_sweep(config, request, out, pacing=RealtimePacing()))
             sim_cpu = process_cpu_s(simulator.pid) - sim_cpu0
             stored = load_recording(out)
         finally:
@@ -107,6 +135,8 @@ def main() -> int:
         f"acquisition process CPU: {outcome.cpu_s:.1f} s over {outcome.wall_s:.1f} s wall = "
         f"{outcome.cpu_s / outcome.wall_s:.3f} of a core (target < 0.5)"
     )
+    minutes = ", ".join(f"{f:.2f}" for f in per_minute.fractions)
+    print(f"acquisition process CPU minute by minute: {minutes or 'under a minute'}")
     print(f"simulator process CPU: {sim_cpu:.1f} s = {sim_cpu / outcome.wall_s:.3f} of a core")
     ok = (
         outcome.complete
