@@ -11,8 +11,9 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from functools import cache
 from pathlib import Path
-from typing import TypeVar
+from typing import Any, TypeVar
 
+import httpx
 import numpy as np
 from fastapi import FastAPI
 
@@ -32,6 +33,18 @@ def wait_until(condition: Callable[[], T | None], timeout_s: float, what: str, p
         if time.monotonic() > deadline:
             raise TimeoutError(f"{what}: not within {timeout_s:g} s")
         time.sleep(poll_s)
+
+
+def wait_for_status(
+    client: httpx.Client, path: str, *statuses: str, timeout_s: float = 120
+) -> dict[str, Any]:
+    """GET `path` (a job, sweep or scheduled test) until its "status" is one of `statuses`; returns it."""
+
+    def reached() -> dict[str, Any] | None:
+        item: dict[str, Any] = client.get(path).json()
+        return item if item["status"] in statuses else None
+
+    return wait_until(reached, timeout_s, f"{path} {' or '.join(statuses)}")
 
 
 class LiveServer:

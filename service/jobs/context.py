@@ -25,6 +25,17 @@ class InputError(ValueError):
         self.field = field
 
 
+def check_recording_fits(recording: Recording, vehicle: VehicleParameters) -> None:
+    """InputError (field recording) when the recording's channels are not those of the vehicle file's
+    model: an axle recording with a quarter-car file, or the other way round. Every job kind checks this."""
+    if vehicle.is_axle != recording.is_axle:
+        has = "axle" if recording.is_axle else "quarter-car"
+        raise InputError(
+            "recording",
+            f"the recording has {has} channels but the vehicle file is for a {vehicle.model.value}",
+        )
+
+
 class ProgressReporter:
     """Turns stages and DE generations into Progress messages. Generations are sent at most every
     `min_interval_s` (DE runs hundreds per second), but always the first and the last."""

@@ -8,7 +8,12 @@ from pydantic import BaseModel, Field
 
 from estimator.recording import Recording
 from estimator.vehicle import TyreModel, VehicleParameters
-from service.jobs.context import InputError, JobContext, JobOutcome, finite_json
+from service.jobs.context import (
+    JobContext,
+    JobOutcome,
+    check_recording_fits,
+    finite_json,
+)
 
 REPORT_FOLDER = "report"
 
@@ -27,12 +32,7 @@ class DiagnoseJobOptions(BaseModel):
 def check_diagnose_inputs(options: BaseModel, recording: Recording, vehicle: VehicleParameters) -> None:
     if not isinstance(options, DiagnoseJobOptions):
         raise TypeError("check_diagnose_inputs needs DiagnoseJobOptions")
-    if vehicle.is_axle != recording.is_axle:
-        has = "axle" if recording.is_axle else "quarter-car"
-        raise InputError(
-            "recording",
-            f"the recording has {has} channels but the vehicle file is for a {vehicle.model.value}",
-        )
+    check_recording_fits(recording, vehicle)
 
 
 def run(job: JobContext) -> JobOutcome:

@@ -9,7 +9,13 @@ from estimator.identify import IdentifyOptions, Solver
 from estimator.recording import Recording
 from estimator.solvers.differential_evolution import DESettings
 from estimator.vehicle import ModelKind, TyreModel, VehicleParameters
-from service.jobs.context import InputError, JobContext, JobOutcome, finite_json
+from service.jobs.context import (
+    InputError,
+    JobContext,
+    JobOutcome,
+    check_recording_fits,
+    finite_json,
+)
 
 PLOT_FORMATS = ("png", "svg")
 
@@ -51,12 +57,7 @@ def check_identify_inputs(options: BaseModel, recording: Recording, vehicle: Veh
         raise InputError(
             "model", f"model is {options.model.value} but the vehicle file says {vehicle.model.value}"
         )
-    if vehicle.is_axle != recording.is_axle:
-        has = "axle" if recording.is_axle else "quarter-car"
-        raise InputError(
-            "recording",
-            f"the recording has {has} channels but the vehicle file is for a {vehicle.model.value}",
-        )
+    check_recording_fits(recording, vehicle)
 
 
 def run(job: JobContext) -> JobOutcome:

@@ -1,46 +1,27 @@
 """Diagnosis jobs (the model doctor) through the API on the real server, exposed as identification jobs
-are: multipart submit at /diagnoses checked at submit, progress, the result of `shockbench diagnose --json`,
+are: multipart submit at /diagnoses checked at submit, the result of `shockbench diagnose --json`,
 and the Markdown report with its PNG plots as the job's files."""
 
 from __future__ import annotations
 
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
 
 import httpx
 import pytest
 
-from daq.formats.recording_csv import write_recording_csv
-from daq.formats.vehicle_file import write_vehicle
-from drivers.exciter.sweep import SweepSettings
 from service.access import KeyRing, Role
 from service.api import ServiceSettings, create_app
-from service.api.testing import LiveServer, wait_until
-from simulators.vehicle_sim import (
-    SimulationSettings,
-    default_axle,
-    default_quarter_car,
-    simulate,
-    with_effects,
-)
+from service.api.testing import LiveServer, wait_for_status
 
 OPERATOR = "operator-key-0123456789"
 VIEWER = "viewer-key-0123456789"
-PLATE_OFFSET_M = 0.0005
 PNG = b"\x89PNG\r\n\x1a\n"
 
 
 @pytest.fixture(scope="module")
-def files(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A 6 s sweep of the default quarter car whose plate laser reads 0.5 mm high (hidden from the job)."""
-    folder = tmp_path_factory.mktemp("diagnose-inputs")
-    vehicle = with_effects(default_quarter_car(), sensor_offset_m={"x_r": PLATE_OFFSET_M})
-    settings = SimulationSettings(sweep=SweepSettings(duration_s=6.0), seed=3, substeps=2)
-    write_recording_csv(folder / "rec.csv", simulate(vehicle, settings).recording)
-    write_vehicle(folder / "vehicle.toml", vehicle.known)
-    write_vehicle(folder / "axle.toml", default_axle().known)
-    return folder
+def files(plate_offset_files: Path) -> Path:
+    return plate_offset_files
 
 
 @pytest.fixture(scope="module")
@@ -67,7 +48,7 @@ def submit(client: httpx.Client, files: Path, vehicle: str, **options: str) -> h
 
 
 def test_a_diagnosis_job_names_the_hidden_effect_and_serves_its_report(
-    server: LiveServer, client: httpx.Client, files: Path
+    server: LiveServer, client: httpx.Client, files: Path, plate_offset_m: float
 ) -> None:
     response = submit(client, files, "vehicle.toml", tyre="maxwell", max_steps="2")
     assert response.status_code == 201, response.text
@@ -75,18 +56,14 @@ def test_a_diagnosis_job_names_the_hidden_effect_and_serves_its_report(
     assert job["kind"] == "diagnose" and response.headers["location"] == f"/api/v1/jobs/{job['id']}"
     assert job["options"]["max_steps"] == 2
 
-    def ended() -> dict[str, Any] | None:
-        now = client.get(f"/api/v1/jobs/{job['id']}").json()
-        return now if now["status"] in ("succeeded", "failed", "cancelled") else None
-
-    done = wait_until(ended, 600, f"diagnosis job {job['id']}")
+    done = wait_for_status(client, job["links"]["self"], "succeeded", "failed", "cancelled", timeout_s=600)
     assert done["status"] == "succeeded", done["error"]
     result = done["result"]
     assert set(result) >= {"gap_before_m", "steps", "gap_after_m", "unexplained"}
     assert [step["effect"] for step in result["steps"]] == ["sensor_offset"], result["steps"]
     step = result["steps"][0]
     assert step["parameters"]["channel"] == "x_r" and step["evidence"]
-    assert abs(step["parameters"]["offset_m"] - PLATE_OFFSET_M) < 0.1 * PLATE_OFFSET_M
+    assert abs(step["parameters"]["offset_m"] - plate_offset_m) < 0.1 * plate_offset_m
     assert result["gap_after_m"] <= 0.5 * result["gap_before_m"] and result["unexplained"] is False
 
     links = done["links"]["files"]

@@ -13,7 +13,13 @@ import pytest
 
 from service.access import KeyRing, Role
 from service.api import ServiceSettings, create_app
-from service.api.testing import LiveServer, SimulatedInputs, simulated_inputs, wait_until
+from service.api.testing import (
+    LiveServer,
+    SimulatedInputs,
+    simulated_inputs,
+    wait_for_status,
+    wait_until,
+)
 
 OPERATOR = "operator-key-0123456789"
 AUTH = {"Authorization": f"Bearer {OPERATOR}"}
@@ -48,11 +54,7 @@ def submit(client: httpx.Client, inputs: SimulatedInputs, **options: str) -> htt
 
 
 def wait_for(client: httpx.Client, job_id: int, *statuses: str, timeout_s: float = 120) -> dict[str, Any]:
-    def reached() -> dict[str, Any] | None:
-        job = client.get(f"/api/v1/jobs/{job_id}").json()
-        return job if job["status"] in statuses else None
-
-    return wait_until(reached, timeout_s, f"job {job_id} {' or '.join(statuses)}")
+    return wait_for_status(client, f"/api/v1/jobs/{job_id}", *statuses, timeout_s=timeout_s)
 
 
 def wait_running_de(client: httpx.Client, job_id: int) -> dict[str, Any]:

@@ -15,7 +15,7 @@ import pytest
 from service.access import KeyRing, Role
 from service.api import ServiceSettings, create_app
 from service.api.server import SHUTDOWN_GRACE_S
-from service.api.testing import LiveServer, SimulatedInputs, simulated_inputs, wait_until
+from service.api.testing import LiveServer, SimulatedInputs, simulated_inputs, wait_for_status, wait_until
 from service.store import Database, JobStatus, JobStore
 from service.store.jobs import RESTART_REASON, JobFiles
 
@@ -33,11 +33,9 @@ def settings_for(data_dir: Path) -> ServiceSettings:
 
 
 def finished(client: httpx.Client, job_id: int, timeout_s: float = 120) -> dict[str, Any]:
-    def done() -> dict[str, Any] | None:
-        job = client.get(f"/api/v1/jobs/{job_id}").json()
-        return job if job["status"] in ("succeeded", "failed", "cancelled") else None
-
-    return wait_until(done, timeout_s, f"job {job_id} finished")
+    return wait_for_status(
+        client, f"/api/v1/jobs/{job_id}", "succeeded", "failed", "cancelled", timeout_s=timeout_s
+    )
 
 
 def upload(inputs: SimulatedInputs) -> dict[str, bytes]:

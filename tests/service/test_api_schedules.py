@@ -18,6 +18,7 @@ from service.access import KeyRing, Role
 from service.api import ServiceSettings, create_app
 from service.api.scheduler import InspectionScheduler
 from service.api.testing import LiveServer, wait_until
+from service.api.testing import wait_for_status as wait_for
 from simulators.vehicle_sim import default_quarter_car
 
 ADMIN = "admin-key-0123456789"
@@ -72,14 +73,6 @@ def schedule(client: httpx.Client, body: dict[str, Any]) -> dict[str, Any]:
     test = response.json()
     assert response.headers["location"] == test["links"]["self"] == f"/api/v1/schedules/{test['id']}"
     return test
-
-
-def wait_for(client: httpx.Client, path: str, *statuses: str, timeout_s: float = 120) -> dict[str, Any]:
-    def reached() -> dict[str, Any] | None:
-        item = client.get(path).json()
-        return item if item["status"] in statuses else None
-
-    return wait_until(reached, timeout_s, f"{path} {' or '.join(statuses)}")
 
 
 def later(days: float) -> str:

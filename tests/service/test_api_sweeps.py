@@ -18,6 +18,7 @@ from estimator.damper import PiecewiseLinearCurve
 from service.access import KeyRing, Role
 from service.api import ServiceSettings, create_app
 from service.api.testing import LiveServer, wait_until
+from service.api.testing import wait_for_status as wait_for
 from service.store.database import Database
 from service.store.models import SweepStatus
 from service.store.sweeps import RESTART_REASON, SweepStore
@@ -44,14 +45,6 @@ def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[LiveServer]:
 def client(server: LiveServer) -> Iterator[httpx.Client]:
     with httpx.Client(base_url=server.url, headers=AUTH, timeout=60) as c:
         yield c
-
-
-def wait_for(client: httpx.Client, path: str, *statuses: str, timeout_s: float = 120) -> dict[str, Any]:
-    def reached() -> dict[str, Any] | None:
-        item = client.get(path).json()
-        return item if item["status"] in statuses else None
-
-    return wait_until(reached, timeout_s, f"{path} {' or '.join(statuses)}")
 
 
 def start_sweeping(client: httpx.Client, body: dict[str, Any]) -> dict[str, Any]:

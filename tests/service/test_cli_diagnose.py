@@ -8,33 +8,15 @@ from pathlib import Path
 
 import pytest
 
-from daq.formats.recording_csv import write_recording_csv
-from daq.formats.vehicle_file import write_vehicle
-from drivers.exciter.sweep import SweepSettings
 from service.cli import diagnose as diagnose_command
 from service.cli import main as main_module
-from simulators.vehicle_sim import (
-    SimulationSettings,
-    default_axle,
-    default_quarter_car,
-    simulate,
-    with_effects,
-)
 
-PLATE_OFFSET_M = 0.0005
 PNG = b"\x89PNG\r\n\x1a\n"
 
 
 @pytest.fixture(scope="module")
-def files(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A 6 s sweep of the default quarter car whose plate laser reads 0.5 mm high."""
-    folder = tmp_path_factory.mktemp("diagnose")
-    vehicle = with_effects(default_quarter_car(), sensor_offset_m={"x_r": PLATE_OFFSET_M})
-    settings = SimulationSettings(sweep=SweepSettings(duration_s=6.0), seed=3, substeps=2)
-    write_recording_csv(folder / "rec.csv", simulate(vehicle, settings).recording)
-    write_vehicle(folder / "vehicle.toml", vehicle.known)
-    write_vehicle(folder / "axle.toml", default_axle().known)
-    return folder
+def files(plate_offset_files: Path) -> Path:
+    return plate_offset_files
 
 
 @pytest.fixture
@@ -46,7 +28,7 @@ def cli(monkeypatch: pytest.MonkeyPatch):
 
 
 def test_json_names_the_plate_offset_and_the_report_has_plots_and_tables(
-    files: Path, cli, capsys: pytest.CaptureFixture[str]
+    files: Path, cli, capsys: pytest.CaptureFixture[str], plate_offset_m: float
 ) -> None:
     report = files / "report"
     code = cli(
@@ -68,7 +50,7 @@ def test_json_names_the_plate_offset_and_the_report_has_plots_and_tables(
     step = out["steps"][0]
     assert set(step) == {"effect", "gap_before_m", "gap_after_m", "parameters", "evidence"}
     assert step["parameters"]["channel"] == "x_r"
-    assert step["parameters"]["offset_m"] == pytest.approx(PLATE_OFFSET_M, rel=0.05)
+    assert step["parameters"]["offset_m"] == pytest.approx(plate_offset_m, rel=0.05)
     assert out["gap_after_m"] <= 0.5 * out["gap_before_m"] and out["unexplained"] is False
     text = (report / "report.md").read_text()
     assert "| step | effect | fitted parameters | gap before | gap after | evidence |" in text

@@ -1,0 +1,39 @@
+"""Inputs shared by the service's tests."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from daq.formats.recording_csv import write_recording_csv
+from daq.formats.vehicle_file import write_vehicle
+from drivers.exciter.sweep import SweepSettings
+from simulators.vehicle_sim import (
+    SimulationSettings,
+    default_axle,
+    default_quarter_car,
+    simulate,
+    with_effects,
+)
+
+PLATE_OFFSET_M = 0.0005
+"""The plate laser of `plate_offset_files` reads this high (m): a catalog effect for the model doctor."""
+
+
+@pytest.fixture(scope="session")
+def plate_offset_m() -> float:
+    return PLATE_OFFSET_M
+
+
+@pytest.fixture(scope="session")
+def plate_offset_files(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A folder with rec.csv, a 6 s sweep of the default quarter car whose plate laser reads 0.5 mm high
+    (the vehicle file does not say so), its vehicle.toml, and axle.toml (a vehicle file of the wrong kind)."""
+    folder = tmp_path_factory.mktemp("plate-offset")
+    vehicle = with_effects(default_quarter_car(), sensor_offset_m={"x_r": PLATE_OFFSET_M})
+    settings = SimulationSettings(sweep=SweepSettings(duration_s=6.0), seed=3, substeps=2)
+    write_recording_csv(folder / "rec.csv", simulate(vehicle, settings).recording)
+    write_vehicle(folder / "vehicle.toml", vehicle.known)
+    write_vehicle(folder / "axle.toml", default_axle().known)
+    return folder
