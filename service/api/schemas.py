@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 from datetime import datetime
-from typing import Any
+from typing import Annotated, Any
 
+from fastapi import Query
 from pydantic import BaseModel, Field
 
 from service.jobs.messages import Progress
@@ -12,6 +13,11 @@ from service.store.jobs import JobRecord
 from service.store.models import JobStatus
 
 API_PREFIX = "/api/v1"
+
+PageLimit = Annotated[int, Query(ge=1, le=500)]
+"""The `limit` query parameter of every list endpoint (jobs, sweeps, scheduled tests)."""
+PageOffset = Annotated[int, Query(ge=0, le=2**31)]
+"""The `offset` query parameter of every list endpoint."""
 
 
 class ProgressOut(BaseModel):

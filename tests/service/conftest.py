@@ -9,6 +9,7 @@ import pytest
 from daq.formats.recording_csv import write_recording_csv
 from daq.formats.vehicle_file import write_vehicle
 from drivers.exciter.sweep import SweepSettings
+from service.api.testing import SimulatedInputs, simulated_inputs
 from simulators.vehicle_sim import (
     SimulationSettings,
     default_axle,
@@ -37,3 +38,9 @@ def plate_offset_files(tmp_path_factory: pytest.TempPathFactory) -> Path:
     write_vehicle(folder / "vehicle.toml", vehicle.known)
     write_vehicle(folder / "axle.toml", default_axle().known)
     return folder
+
+
+@pytest.fixture(scope="session")
+def inputs(tmp_path_factory: pytest.TempPathFactory) -> SimulatedInputs:
+    """A 6 s quarter-car recording CSV and its vehicle file with the simulator's truth (read only)."""
+    return simulated_inputs(tmp_path_factory.mktemp("inputs"), seconds=6.0, seed=1)

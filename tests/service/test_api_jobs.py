@@ -16,7 +16,6 @@ from service.api import ServiceSettings, create_app
 from service.api.testing import (
     LiveServer,
     SimulatedInputs,
-    simulated_inputs,
     wait_for_status,
     wait_until,
 )
@@ -25,11 +24,6 @@ OPERATOR = "operator-key-0123456789"
 AUTH = {"Authorization": f"Bearer {OPERATOR}"}
 LONG_DE = {"solver": "de", "generations": "200000", "output_error": "false"}
 """A DE job that runs for minutes: something to cancel or kill."""
-
-
-@pytest.fixture(scope="module")
-def inputs(tmp_path_factory: pytest.TempPathFactory) -> SimulatedInputs:
-    return simulated_inputs(tmp_path_factory.mktemp("inputs"), seconds=6.0, seed=1)
 
 
 @pytest.fixture(scope="module")

@@ -15,17 +15,12 @@ import pytest
 from service.access import KeyRing, Role
 from service.api import ServiceSettings, create_app
 from service.api.server import SHUTDOWN_GRACE_S
-from service.api.testing import LiveServer, SimulatedInputs, simulated_inputs, wait_for_status, wait_until
+from service.api.testing import LiveServer, SimulatedInputs, wait_for_status, wait_until
 from service.store import Database, JobStatus, JobStore
 from service.store.jobs import RESTART_REASON, JobFiles
 
 OPERATOR = "operator-key-0123456789"
 AUTH = {"Authorization": f"Bearer {OPERATOR}"}
-
-
-@pytest.fixture(scope="module")
-def inputs(tmp_path_factory: pytest.TempPathFactory) -> SimulatedInputs:
-    return simulated_inputs(tmp_path_factory.mktemp("inputs"), seconds=6.0, seed=1)
 
 
 def settings_for(data_dir: Path) -> ServiceSettings:

@@ -10,7 +10,7 @@ import pytest
 
 from service.access import KeyRing, Role
 from service.api import ServiceSettings, create_app
-from service.api.testing import LiveServer, SimulatedInputs, simulated_inputs
+from service.api.testing import LiveServer, SimulatedInputs
 
 OPERATOR = "operator-key-0123456789"
 AUTH = {"Authorization": f"Bearer {OPERATOR}"}
@@ -23,11 +23,6 @@ tyre_stiffness_N_per_m = 210000
 tyre_viscoelastic_coefficient = 0.97
 track_m = 1.5
 """
-
-
-@pytest.fixture(scope="module")
-def inputs(tmp_path_factory: pytest.TempPathFactory) -> SimulatedInputs:
-    return simulated_inputs(tmp_path_factory.mktemp("inputs"), seconds=6.0, seed=1)
 
 
 @pytest.fixture(scope="module")

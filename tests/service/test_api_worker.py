@@ -14,18 +14,13 @@ import pytest
 from estimator.solvers.differential_evolution import DEProgress
 from service.access import KeyRing, Role
 from service.api import ServiceSettings, create_app
-from service.api.testing import LiveServer, SimulatedInputs, simulated_inputs, wait_until
+from service.api.testing import LiveServer, SimulatedInputs, wait_until
 from service.jobs.context import ProgressReporter
 from service.jobs.messages import Progress
 from service.jobs.process import describe_exit
 
 OPERATOR = "operator-key-0123456789"
 AUTH = {"Authorization": f"Bearer {OPERATOR}"}
-
-
-@pytest.fixture(scope="module")
-def inputs(tmp_path_factory: pytest.TempPathFactory) -> SimulatedInputs:
-    return simulated_inputs(tmp_path_factory.mktemp("inputs"), seconds=6.0, seed=1)
 
 
 @pytest.fixture(scope="module")

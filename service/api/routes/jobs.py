@@ -16,7 +16,7 @@ from fastapi.responses import FileResponse
 from service.api.auth import Operator, Viewer
 from service.api.errors import ApiError, responses
 from service.api.intake import accept_upload
-from service.api.schemas import API_PREFIX, JobList, JobOut
+from service.api.schemas import API_PREFIX, JobList, JobOut, PageLimit, PageOffset
 from service.jobs.kinds import KINDS, JobKindSpec
 from service.store.jobs import JobRecord
 from service.store.models import JobStatus
@@ -106,8 +106,8 @@ def router() -> APIRouter:
         _principal: Viewer,
         status: JobStatus | None = None,
         kind: Annotated[str | None, Query(max_length=32)] = None,
-        limit: Annotated[int, Query(ge=1, le=500)] = 50,
-        offset: Annotated[int, Query(ge=0, le=2**31)] = 0,
+        limit: PageLimit = 50,
+        offset: PageOffset = 0,
     ) -> JobList:
         """Jobs, newest first, without their results."""
         records, total = await asyncio.to_thread(

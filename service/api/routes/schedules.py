@@ -13,13 +13,13 @@ from datetime import datetime
 from pathlib import Path as FilePath
 from typing import Annotated, Any
 
-from fastapi import APIRouter, Path, Query, Request, Response
+from fastapi import APIRouter, Path, Request, Response
 from pydantic import AwareDatetime, BaseModel, ConfigDict, Field
 
 from service.api.auth import Admin, Viewer
 from service.api.errors import ApiError, responses
 from service.api.routes.bench import require_bench
-from service.api.schemas import API_PREFIX
+from service.api.schemas import API_PREFIX, PageLimit, PageOffset
 from service.api.settings import ServiceSettings
 from service.api.sweep_launch import SweepIn, check_sweep
 from service.bench_control import BenchController
@@ -177,8 +177,8 @@ async def list_tests(
     request: Request,
     _principal: Viewer,
     status: ScheduleStatus | None = None,
-    limit: Annotated[int, Query(ge=1, le=500)] = 50,
-    offset: Annotated[int, Query(ge=0, le=2**31)] = 0,
+    limit: PageLimit = 50,
+    offset: PageOffset = 0,
 ) -> ScheduleList:
     """Scheduled tests, newest first."""
     records, total = await asyncio.to_thread(

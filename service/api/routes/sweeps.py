@@ -15,7 +15,7 @@ from datetime import datetime
 from pathlib import Path as FilePath
 from typing import Annotated, Any
 
-from fastapi import APIRouter, Body, Path, Query, Request, Response
+from fastapi import APIRouter, Body, Path, Request, Response
 from fastapi.responses import FileResponse
 from pydantic import BaseModel, ConfigDict, Field
 from starlette.background import BackgroundTask
@@ -24,7 +24,7 @@ from service.api.auth import Operator, Viewer
 from service.api.errors import ApiError, responses
 from service.api.routes.bench import SweepProgressOut, require_bench
 from service.api.routes.jobs import job_out
-from service.api.schemas import API_PREFIX, JobOut
+from service.api.schemas import API_PREFIX, JobOut, PageLimit, PageOffset
 from service.api.sweep_launch import SweepIn, launch_sweep
 from service.api.sweep_recordings import accept_sweep_job, export, recording_path
 from service.bench_control import BenchController
@@ -159,8 +159,8 @@ async def list_sweeps(
     request: Request,
     _principal: Viewer,
     status: SweepStatus | None = None,
-    limit: Annotated[int, Query(ge=1, le=500)] = 50,
-    offset: Annotated[int, Query(ge=0, le=2**31)] = 0,
+    limit: PageLimit = 50,
+    offset: PageOffset = 0,
 ) -> SweepList:
     """Sweeps, newest first."""
     records, total = await asyncio.to_thread(
