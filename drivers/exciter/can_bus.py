@@ -11,13 +11,26 @@ been handled too: with a simulated clock the verdict is deterministic. After an 
 * heartbeat older than `heartbeat_timeout_s` -> ExciterHeartbeatLostError (also when the answer timed out);
 * an error frame was seen since the last exchange -> ExciterBusError (reported once);
 * Result REJECTED_FAULT -> ExciterDeviceFaultError, other rejections -> ExciterDeviceExceptionError.
+
+Frame ids: the DBC's (0x680..0x689, clear of CANopen's predefined connection set) or moved to `base_id`
+(can_frames.ExciterFrames).
+
+Sending never blocks the event loop: python-can's `send` may wait for room in the transmit queue (up to
+`reply_timeout_s`), so frames go out from one sender thread, in the order they were sent.
+
+Reader failure: when python-can's reader thread stops on an error (interface gone, socket closed), the
+request waiting for an answer fails with ExciterConnectionLostError, and the next operation (or open())
+shuts the dead bus down and opens a new one, as the Modbus back end reconnects. Heartbeat supervision
+restarts with the new bus (the drive has one heartbeat timeout to be heard again).
 """
 
 from __future__ import annotations
 
 import asyncio
+import logging
 import time
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
 
@@ -39,13 +52,16 @@ from drivers.exciter.errors import (
 from drivers.exciter.interface import DEFAULT_KEEPALIVE_INTERVAL_S, ExciterStatus, PlateExciter
 from drivers.exciter.sweep import SweepSettings
 
+log = logging.getLogger(__name__)
+
 NOTIFIER_POLL_S = 0.02
 """How often python-can's reader thread re-checks for shutdown (bounds the time close() takes)."""
 
 
 class CanExciter(PlateExciter):
     """Plate exciter on a CAN bus: `interface` and `channel` as python-can takes them
-    (('virtual', 'vcan0'), ('socketcan', 'can0'), ...); extra `bus_kwargs` go to can.Bus (bitrate...)."""
+    (('virtual', 'vcan0'), ('socketcan', 'can0'), ...); extra `bus_kwargs` go to can.Bus (bitrate...).
+    base_id: first id of the frame set (None: the DBC's, 0x680); the simulated drive must use the same."""
 
     def __init__(
         self,
@@ -56,6 +72,7 @@ class CanExciter(PlateExciter):
         reply_timeout_s: float = 0.5,
         heartbeat_timeout_s: float = 0.5,
         dbc_path: str | Path = frames.DEFAULT_DBC_PATH,
+        base_id: int | None = None,
         envelope: SafetyEnvelope | None = None,
         keepalive_interval_s: float | None = DEFAULT_KEEPALIVE_INTERVAL_S,
         clock: Callable[[], float] = time.monotonic,
@@ -66,7 +83,7 @@ class CanExciter(PlateExciter):
         self.bus_kwargs = dict(bus_kwargs or {})
         self.reply_timeout_s = reply_timeout_s
         self.heartbeat_timeout_s = heartbeat_timeout_s
-        self.frames = ExciterFrames(dbc_path)
+        self.frames = ExciterFrames(dbc_path, base_id=base_id)
         self.heartbeat_counter: int | None = None
         """Counter of the last drive heartbeat received (None before the first one)."""
         self._bus: can.BusABC | None = None
@@ -77,39 +94,69 @@ class CanExciter(PlateExciter):
         self._last_heartbeat_s = 0.0
         self._bus_error = False
         self._reader_error: Exception | None = None
+        self._sender: ThreadPoolExecutor | None = None
+        self._link_lock = asyncio.Lock()
 
     # ---- transport ----------------------------------------------------------------------------------
 
     async def open(self) -> None:
-        if self._bus is not None:
-            return
+        """Open the bus; after a reader error, shut the dead bus down first and open a new one."""
+        async with self._link_lock:
+            if self._bus is not None and self._reader_error is None:
+                return
+            await self._close_transport()
+            self._open_bus()
+
+    def _make_bus(self) -> can.BusABC:
+        """The python-can bus (a seam for tests that need a bus with special behaviour)."""
+        return can.Bus(interface=self.interface, channel=self.channel, **self.bus_kwargs)
+
+    def _open_bus(self) -> None:
         try:
-            self._bus = can.Bus(interface=self.interface, channel=self.channel, **self.bus_kwargs)
+            bus = self._make_bus()
         except (can.CanError, OSError, ValueError) as exc:
             where = f"{self.interface}/{self.channel}"
             raise ExciterConnectionLostError(f"cannot open CAN {where}: {exc}") from exc
+        self._bus = bus
         self._reader_error = None
+        self._bus_error = False
         self._last_heartbeat_s = self.clock()  # supervision starts now: the drive has one timeout to speak
+        self._sender = ThreadPoolExecutor(max_workers=1, thread_name_prefix=f"can-send {self.channel}")
         self._notifier = can.Notifier(
-            self._bus, [_Receiver(self)], timeout=NOTIFIER_POLL_S, loop=asyncio.get_running_loop()
+            bus, [_Receiver(self)], timeout=NOTIFIER_POLL_S, loop=asyncio.get_running_loop()
         )
 
     async def _close_transport(self) -> None:
         notifier, self._notifier = self._notifier, None
         bus, self._bus = self._bus, None
+        sender, self._sender = self._sender, None
         if notifier is not None:
             await asyncio.to_thread(notifier.stop)  # joins the reader thread: keep the loop free meanwhile
+        if sender is not None:
+            sender.shutdown(wait=False, cancel_futures=True)  # a send under way ends by its own timeout
         if bus is not None:
             bus.shutdown()
 
-    def _send(self, msg: can.Message) -> None:
-        if self._bus is None:
-            raise ExciterError(f"CAN exciter {self.interface}/{self.channel} is not open")
+    async def _live_bus(self) -> tuple[can.BusABC, ThreadPoolExecutor]:
+        """The open bus; a bus whose reader died is replaced first (the next operation reconnects)."""
         if self._reader_error is not None:
-            raise ExciterConnectionLostError(f"CAN reader stopped: {self._reader_error}")
+            log.warning(
+                "CAN reader on %s/%s stopped (%s): reopening",
+                self.interface,
+                self.channel,
+                self._reader_error,
+            )
+            await self.open()
+        if self._bus is None or self._sender is None:
+            raise ExciterError(f"CAN exciter {self.interface}/{self.channel} is not open")
+        return self._bus, self._sender
+
+    async def _send(self, msg: can.Message) -> None:
+        """Queue one frame on the sender thread and wait for python-can to take it, loop kept free."""
+        bus, sender = await self._live_bus()
         try:
-            self._bus.send(msg, timeout=self.reply_timeout_s)
-        except can.CanError as exc:
+            await asyncio.get_running_loop().run_in_executor(sender, bus.send, msg, self.reply_timeout_s)
+        except (can.CanError, OSError, RuntimeError) as exc:  # RuntimeError: sender shut down by close()
             where = f"{self.interface}/{self.channel}"
             raise ExciterConnectionLostError(f"CAN send on {where} failed: {exc}") from exc
 
@@ -146,7 +193,7 @@ class CanExciter(PlateExciter):
             future: asyncio.Future[Signals] = asyncio.get_running_loop().create_future()
             self._pending = (self._sequence, future)
             try:
-                self._send(msg)
+                await self._send(msg)
                 answer = await asyncio.wait_for(future, self.reply_timeout_s)
             except TimeoutError:
                 self._check_supervision(what)
@@ -191,7 +238,7 @@ class CanExciter(PlateExciter):
         await self._exchange(f"command {command.name}", frames.COMMAND, {"Command": command})
 
     async def _send_keepalive(self, counter: int) -> None:
-        self._send(self.frames.encode(frames.HOST_KEEPALIVE, {"Counter": counter}))
+        await self._send(self.frames.encode(frames.HOST_KEEPALIVE, {"Counter": counter}))
 
     async def _read_status(self) -> ExciterStatus:
         answer = await self._exchange("read status", frames.COMMAND, {"Command": CommandCode.NONE})

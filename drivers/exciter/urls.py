@@ -3,7 +3,8 @@
     modbus-tcp://127.0.0.1:5020?unit=1&timeout=1.0
     modbus-rtu:///dev/ttyUSB1?baudrate=19200&unit=1&parity=N&stopbits=1&bytesize=8&timeout=1.0
     can://virtual/vcan0            python-can interface 'virtual', channel 'vcan0'
-    can://socketcan/can0?bitrate=500000&timeout=0.5&heartbeat_timeout=0.5
+    can://socketcan/can0?bitrate=500000&timeout=0.5&heartbeat_timeout=0.5&base_id=0x680
+                                   base_id: first CAN id of the exciter frame set (default 0x680)
 
 Unknown schemes and query parameters are an ExciterConfigError naming them. `parse_exciter_url` gives the
 typed target without touching any transport; `open_exciter` builds the back end and connects it.
@@ -37,13 +38,15 @@ class ModbusTarget:
 
 @dataclass(frozen=True)
 class CanTarget:
-    """A CAN drive: python-can interface and channel, optional bitrate, reply and heartbeat timeouts."""
+    """A CAN drive: python-can interface and channel, optional bitrate, reply and heartbeat timeouts, and
+    the first id of the frame set (None: the DBC's, 0x680)."""
 
     interface: str
     channel: str
     bitrate: int | None = None
     reply_timeout_s: float = 0.5
     heartbeat_timeout_s: float = 0.5
+    base_id: int | None = None
 
 
 ExciterTarget = ModbusTarget | CanTarget
@@ -80,7 +83,12 @@ def parse_exciter_url(url: str) -> ExciterTarget:
             raise ExciterConfigError(f"{url}: expected can://<python-can interface>/<channel>")
         bitrate = query.integer("bitrate", 0) or None
         target = CanTarget(
-            interface, channel, bitrate, query.number("timeout", 0.5), query.number("heartbeat_timeout", 0.5)
+            interface,
+            channel,
+            bitrate,
+            query.number("timeout", 0.5),
+            query.number("heartbeat_timeout", 0.5),
+            query.can_id("base_id"),
         )
     else:
         raise ExciterConfigError(f"{url}: unknown scheme {parts.scheme!r} (modbus-tcp, modbus-rtu or can)")
@@ -116,6 +124,7 @@ async def open_exciter(
             bus_kwargs={"bitrate": target.bitrate} if target.bitrate else None,
             reply_timeout_s=target.reply_timeout_s,
             heartbeat_timeout_s=target.heartbeat_timeout_s,
+            base_id=target.base_id,
             envelope=envelope,
             keepalive_interval_s=keepalive_interval_s,
             clock=clock,
@@ -147,6 +156,23 @@ class _Query:
             return default if raw is None else float(raw)
         except ValueError:
             raise ExciterConfigError(f"{self.url}: {name} must be a number, got {raw!r}") from None
+
+    def can_id(self, name: str) -> int | None:
+        """An 11-bit CAN id, decimal or 0x-hex; None when absent."""
+        raw = self._take(name)
+        if raw is None:
+            return None
+        try:
+            value = int(raw, 0)
+        except ValueError:
+            raise ExciterConfigError(
+                f"{self.url}: {name} must be a CAN id such as 0x680, got {raw!r}"
+            ) from None
+        if not 0 < value <= 0x7FF:
+            raise ExciterConfigError(
+                f"{self.url}: {name} must be an 11-bit CAN id 0x001..0x7FF, got {raw!r}"
+            )
+        return value
 
     def choice(self, name: str, default: str, allowed: tuple[str, ...]) -> str:
         raw = self._take(name)

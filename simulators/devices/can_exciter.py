@@ -42,7 +42,8 @@ _RESULT_FOR = {
 
 
 class SimulatedCanExciter:
-    """A plate drive on CAN `channel` of python-can `interface`. Use `with` (or start()/close())."""
+    """A plate drive on CAN `channel` of python-can `interface`. Use `with` (or start()/close()).
+    base_id moves the frame set as the driver's does (None: the DBC's ids)."""
 
     def __init__(
         self,
@@ -53,13 +54,14 @@ class SimulatedCanExciter:
         heartbeat_period_s: float = DEFAULT_HEARTBEAT_PERIOD_S,
         watchdog_timeout_s: float = DEFAULT_WATCHDOG_TIMEOUT_S,
         dbc_path: str | Path = frames.DEFAULT_DBC_PATH,
+        base_id: int | None = None,
     ) -> None:
         self.drive = SimulatedDrive(bench, watchdog_timeout_s)
         self.clock = bench.clock
         self.channel = channel
         self.interface = interface
         self.heartbeat_period_s = heartbeat_period_s
-        self.frames = ExciterFrames(dbc_path)
+        self.frames = ExciterFrames(dbc_path, base_id=base_id)
         self.received: list[tuple[str, Signals]] = []
         """Every host frame seen on the bus (also while silent), decoded, in arrival order."""
         self.heartbeats_sent = 0

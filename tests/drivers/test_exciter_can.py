@@ -3,19 +3,23 @@
 from __future__ import annotations
 
 import asyncio
+import threading
 import uuid
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 
+import can
 import pytest
+from can.interfaces.virtual import VirtualBus
 
 from drivers.exciter import can_frames as frames
 from drivers.exciter.can_bus import CanExciter
-from drivers.exciter.can_frames import CanResult, ExciterFrames
+from drivers.exciter.can_frames import CanResult, ExciterFrames, canopen_conflicts
 from drivers.exciter.codes import FAULT_WATCHDOG, CommandCode, ExciterState, LawCode, StateCode
 from drivers.exciter.errors import (
     ExciterBusError,
     ExciterConfigError,
+    ExciterConnectionLostError,
     ExciterDeviceExceptionError,
     ExciterDeviceFaultError,
     ExciterEncodingError,
@@ -77,7 +81,7 @@ def test_frames_round_trip_with_scaling() -> None:
         "ActualPosition": -0.003217,
     }
     msg = codec.encode(frames.STATUS, signals)
-    assert msg.arbitration_id == 0x181 and len(msg.data) == 8
+    assert msg.arbitration_id == 0x688 and len(msg.data) == 8
     name, decoded = codec.decode(msg)  # type: ignore[misc]
     assert name == frames.STATUS
     assert decoded == pytest.approx(signals)
@@ -91,11 +95,44 @@ def test_frames_round_trip_with_scaling() -> None:
         )
 
 
+def test_default_frame_ids_avoid_canopen_and_a_base_id_moves_the_whole_set() -> None:
+    default = ExciterFrames().frame_ids
+    assert default == {
+        frames.COMMAND: 0x680,
+        frames.SWEEP_FREQUENCIES: 0x681,
+        frames.SWEEP_SHAPE: 0x682,
+        frames.HOST_KEEPALIVE: 0x683,
+        frames.STATUS: 0x688,
+        frames.HEARTBEAT: 0x689,
+    }
+    assert canopen_conflicts(default) == {}
+    # the first frame set's ids were node 1's TPDO1, RPDO1 and heartbeat: the check names them
+    assert canopen_conflicts({"old status": 0x181, "old sweep": 0x201, "old heartbeat": 0x701}) == {
+        "old status": "PDOs",
+        "old sweep": "PDOs",
+        "old heartbeat": "NMT error control (heartbeat)",
+    }
+    moved = ExciterFrames(base_id=0x6A0)
+    assert moved.frame_ids == {name: frame_id - 0x680 + 0x6A0 for name, frame_id in default.items()}
+    msg = moved.encode(frames.COMMAND, {"Command": CommandCode.START, "Sequence": 3})
+    assert msg.arbitration_id == 0x6A0
+    assert moved.decode(msg) == (frames.COMMAND, {"Command": 1.0, "Sequence": 3.0})
+    assert ExciterFrames().decode(msg) is None  # the default set does not know 0x6A0
+    with pytest.raises(ExciterConfigError, match=r"0x7FC\.\.0x805"):
+        ExciterFrames(base_id=0x7FC)
+
+
 def test_can_urls() -> None:
     assert parse_exciter_url("can://virtual/vcan0") == CanTarget("virtual", "vcan0")
     assert parse_exciter_url("can://socketcan/can0?bitrate=500000&timeout=0.1&heartbeat_timeout=0.3") == (
         CanTarget("socketcan", "can0", 500000, 0.1, 0.3)
     )
+    assert parse_exciter_url("can://virtual/vcan0?base_id=0x6a0").base_id == 0x6A0  # type: ignore[union-attr]
+    assert parse_exciter_url("can://virtual/vcan0?base_id=1700").base_id == 1700  # type: ignore[union-attr]
+    with pytest.raises(ExciterConfigError, match="base_id must be a CAN id such as 0x680, got 'x'"):
+        parse_exciter_url("can://virtual/vcan0?base_id=x")
+    with pytest.raises(ExciterConfigError, match="base_id must be an 11-bit CAN id"):
+        parse_exciter_url("can://virtual/vcan0?base_id=0x800")
     with pytest.raises(ExciterConfigError, match="can://<python-can interface>/<channel>"):
         parse_exciter_url("can://virtual")
     with pytest.raises(ExciterConfigError, match=r"unknown parameter\(s\) \['baud'\]"):
@@ -276,5 +313,131 @@ def test_watchdog_over_can() -> None:
             assert (status.state, status.fault_code) == (ExciterState.STOPPING, FAULT_WATCHDOG)
             sim.advance(0.5)
             assert (await exciter.status()).state is ExciterState.FAULT
+
+    asyncio.run(scenario())
+
+
+def test_moved_frame_set_from_a_url_talks_to_a_drive_on_the_same_base() -> None:
+    async def scenario() -> None:
+        bench = PlateOnlyBench()
+        channel = fresh_channel()
+        with SimulatedCanExciter(bench, channel=channel, base_id=0x6C0) as sim:
+            sim.tick()
+            url = f"can://virtual/{channel}?timeout={REPLY_TIMEOUT_S}&base_id=0x6C0"
+            exciter = await open_exciter(url, clock=bench.clock.now_s)
+            try:
+                assert (await exciter.status()).state is ExciterState.IDLE
+                assert sim.received == [(frames.COMMAND, {"Command": 0.0, "Sequence": 1.0})]
+            finally:
+                await exciter.close()
+
+    asyncio.run(scenario())
+
+
+# ---- reader failure and reopening ---------------------------------------------------------------------
+
+
+class _FailingReadBus(VirtualBus):
+    """A virtual bus whose reader can be made to fail once, as a socket that goes away would."""
+
+    def __init__(self, channel: str) -> None:
+        super().__init__(channel=channel)
+        self.fail_next_read = threading.Event()
+
+    def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
+        if self.fail_next_read.is_set():
+            self.fail_next_read.clear()
+            raise can.CanOperationError("interface went down")
+        return super()._recv_internal(timeout)
+
+
+class _RigExciter(CanExciter):
+    """A CanExciter on buses the test keeps hold of."""
+
+    def __init__(self, make: type[VirtualBus], *args: object, **kwargs: object) -> None:
+        super().__init__(*args, **kwargs)  # type: ignore[arg-type]
+        self._make = make
+        self.buses: list[VirtualBus] = []
+
+    def _make_bus(self) -> can.BusABC:
+        self.buses.append(self._make(self.channel))
+        return self.buses[-1]
+
+
+@pytest.mark.filterwarnings("ignore::pytest.PytestUnhandledThreadExceptionWarning")
+def test_reader_error_fails_the_call_then_a_new_bus_is_opened() -> None:
+    async def scenario() -> None:
+        bench = PlateOnlyBench()
+        channel = fresh_channel()
+        with SimulatedCanExciter(bench, channel=channel) as sim:
+            sim.tick()
+            exciter = _RigExciter(
+                _FailingReadBus, "virtual", channel, reply_timeout_s=REPLY_TIMEOUT_S, clock=bench.clock.now_s
+            )
+            async with exciter:
+                assert (await exciter.status()).state is ExciterState.IDLE
+                sim.go_silent()  # the request below stays unanswered until the reader has failed
+                exciter.buses[0].fail_next_read.set()
+                with pytest.raises(ExciterConnectionLostError, match="reader stopped: interface went down"):
+                    await exciter.status()
+                sim.resume()
+                # the next call reopens: old bus shut down, a new one made, the error cleared
+                assert (await exciter.status()).state is ExciterState.IDLE
+                assert len(exciter.buses) == 2 and exciter.buses[0]._open is False
+                assert exciter._reader_error is None
+
+                exciter.buses[1].fail_next_read.set()
+                sim.go_silent()
+                with pytest.raises(ExciterConnectionLostError):
+                    await exciter.status()
+                sim.resume()
+                await exciter.open()  # an explicit open() after the error makes a new bus too
+                assert len(exciter.buses) == 3 and exciter.buses[1]._open is False
+                await exciter.configure_sweep(SWEEP)
+                assert sim.drive._params["duration_s"] == SWEEP.duration_s
+                await exciter.open()  # a healthy bus is kept
+                assert len(exciter.buses) == 3
+
+    asyncio.run(scenario())
+
+
+# ---- sending does not block the event loop -----------------------------------------------------------------
+
+
+class _BlockingSendBus(VirtualBus):
+    """A virtual bus whose send blocks until the test releases it (a full transmit queue)."""
+
+    def __init__(self, channel: str) -> None:
+        super().__init__(channel=channel)
+        self.send_entered = threading.Event()
+        self.release = threading.Event()
+        self.released_by_test: bool | None = None
+
+    def send(self, msg: can.Message, timeout: float | None = None) -> None:
+        self.send_entered.set()
+        self.released_by_test = self.release.wait(5.0)  # bounded: a blocked loop fails the test, not hangs
+        super().send(msg, timeout)
+
+
+def test_a_blocked_send_leaves_the_event_loop_running() -> None:
+    async def scenario() -> None:
+        channel = fresh_channel()
+        with can.Bus(interface="virtual", channel=channel) as listener:
+            exciter = _RigExciter(_BlockingSendBus, "virtual", channel, keepalive_interval_s=None)
+            async with exciter:
+                bus = exciter.buses[0]
+                keepalive = asyncio.get_running_loop().create_task(exciter._send_keepalive(1))
+                await asyncio.to_thread(bus.send_entered.wait, 5.0)
+                ticks = 0
+                for _ in range(20):  # the loop keeps running other work while the send is blocked
+                    await asyncio.sleep(0)
+                    ticks += 1
+                assert ticks == 20 and not keepalive.done()
+                bus.release.set()
+                await keepalive
+                assert bus.released_by_test is True
+            frame = listener.recv(timeout=2.0)
+            assert frame is not None
+            assert ExciterFrames().decode(frame) == (frames.HOST_KEEPALIVE, {"Counter": 1.0})
 
     asyncio.run(scenario())
