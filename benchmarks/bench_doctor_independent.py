@@ -1,0 +1,197 @@
+"""Benchmark: the model doctor on recordings of the independent world (simulators/independent), which shares
+no code with the estimator or the project's own simulator.
+
+    .venv/bin/python benchmarks/bench_doctor_independent.py --per-class 3 --jobs 2
+    .venv/bin/python benchmarks/bench_doctor_independent.py --classes clean,pair --per-class 1
+
+For every class (clean; each single effect; two at once; outside the catalog) it draws `--per-class` cases
+with fixed seeds (simulators.independent.cases.draw_case), writes each as a recording CSV and vehicle TOML to
+a temporary folder, reads them back with the project's readers (daq.formats) and runs the doctor in-process
+(estimator.doctor.diagnose, the call `shockbench diagnose` makes, starting tyre Maxwell). It prints one line
+per case, a confusion matrix (hidden class × what the doctor said), the hit rates, the gaps before and after
+against the doctor's own expected gap, and the wall time per doctor run.
+
+What counts as a hit: clean → nothing named and not unexplained; one effect → exactly that effect named and
+not unexplained; pair → exactly both named and not unexplained; outside → unexplained.
+"""
+
+from __future__ import annotations
+
+import argparse
+import platform
+import statistics
+import tempfile
+import time
+from collections import Counter, defaultdict
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from simulators.independent.cases import CLASSES, draw_case, simulate_case
+from simulators.independent.files import write_recording
+
+
+@dataclass(frozen=True)
+class Outcome:
+    label: str
+    seed: int
+    description: str
+    hidden: tuple[str, ...]
+    named: tuple[str, ...]
+    unexplained: bool
+    gap_before_m: float | None
+    gap_after_m: float | None
+    expected_gap_m: float | None
+    airborne_fraction: float
+    simulate_s: float
+    doctor_s: float
+    conclusion: str
+
+    @property
+    def said(self) -> str:
+        """The doctor's answer in one word: unexplained, nothing, or the effects named (joined by +)."""
+        if self.unexplained:
+            return "unexplained"
+        return "+".join(sorted(self.named)) if self.named else "nothing"
+
+    @property
+    def hit(self) -> bool:
+        if self.hidden == ("outside",):
+            return self.unexplained
+        return not self.unexplained and sorted(self.named) == sorted(self.hidden)
+
+
+def run_case(label: str, seed: int, folder: str, sweep_s: float) -> Outcome:
+    """Simulate, write, read back, diagnose one case (runs in a worker process)."""
+    from daq.formats.recording_csv import read_recording_csv
+    from daq.formats.vehicle_file import read_vehicle
+    from estimator import vehicle as vehicle_module
+    from estimator.doctor import DiagnoseOptions, diagnose
+    from estimator.vehicle import TyreModel
+
+    case = draw_case(label, seed, sweep_s=sweep_s)
+    # the vehicle file's ϑ is referred to the recording's sample time (README today) unless the project
+    # names a fixed reference sample time
+    reference = getattr(vehicle_module, "REFERENCE_SAMPLE_TIME_S", None)
+    case = replace(case, settings=replace(case.settings, theta_reference_s=reference))
+    start = time.perf_counter()
+    world = simulate_case(case)
+    simulate_s = time.perf_counter() - start
+    csv_path, toml_path = Path(folder) / f"{label}_{seed}.csv", Path(folder) / f"{label}_{seed}.toml"
+    write_recording(world, csv_path, toml_path)
+    recording, vehicle = read_recording_csv(csv_path), read_vehicle(toml_path)
+    start = time.perf_counter()
+    result = diagnose(recording, vehicle, DiagnoseOptions(tyre=TyreModel.MAXWELL))
+    doctor_s = time.perf_counter() - start
+    data = result.to_json()
+    return Outcome(
+        label,
+        seed,
+        case.description,
+        case.hidden,
+        tuple(result.effects_named),
+        bool(result.unexplained),
+        data["gap_before_m"],  # type: ignore[arg-type]
+        data["gap_after_m"],  # type: ignore[arg-type]
+        data["expected_gap_m"],  # type: ignore[arg-type]
+        world.airborne_fraction,
+        simulate_s,
+        doctor_s,
+        result.conclusion,
+    )
+
+
+def _micro(value: float | None) -> str:
+    return "—" if value is None else f"{value * 1e6:.1f}"
+
+
+def print_report(outcomes: list[Outcome]) -> None:
+    print("\n## Cases\n")
+    print(
+        "| class | seed | hidden (size) | said | gap before / after / expected (µm) | airborne | doctor (s) |"
+    )
+    print("|---|---:|---|---|---|---:|---:|")
+    for o in outcomes:
+        gaps = f"{_micro(o.gap_before_m)} / {_micro(o.gap_after_m)} / {_micro(o.expected_gap_m)}"
+        mark = "" if o.hit else " ✗"
+        print(
+            f"| {o.label} | {o.seed} | {o.description} | {o.said}{mark} | {gaps} | "
+            f"{100 * o.airborne_fraction:.1f}% | {o.doctor_s:.0f} |"
+        )
+    said_columns = ["nothing", "unexplained"]
+    for o in outcomes:
+        for name in o.named:
+            if name not in said_columns:
+                said_columns.append(name)
+    print("\n## Confusion matrix (rows: hidden class; columns: what the doctor said)\n")
+    print("A run counts once in `unexplained` if the doctor said so, else once per effect it named, else in")
+    print("`nothing`.\n")
+    print("| hidden \\ said | " + " | ".join(said_columns) + " | hits |")
+    print("|---|" + "---:|" * (len(said_columns) + 1))
+    for label in dict.fromkeys(o.label for o in outcomes):
+        rows = [o for o in outcomes if o.label == label]
+        counts: Counter[str] = Counter()
+        for o in rows:
+            if o.unexplained:
+                counts["unexplained"] += 1
+            elif not o.named:
+                counts["nothing"] += 1
+            else:
+                counts.update(o.named)
+        cells = [str(counts[c]) if counts[c] else "·" for c in said_columns]
+        print(f"| {label} | " + " | ".join(cells) + f" | {sum(o.hit for o in rows)}/{len(rows)} |")
+    hits = sum(o.hit for o in outcomes)
+    print(f"\nhit rate: {hits}/{len(outcomes)} = {100 * hits / len(outcomes):.0f}%")
+    groups: dict[str, list[Outcome]] = defaultdict(list)
+    for o in outcomes:
+        kind = o.label if o.label in ("clean", "pair", "outside") else "single effect"
+        groups[kind].append(o)
+    for kind, rows in groups.items():
+        print(f"  {kind}: {sum(o.hit for o in rows)}/{len(rows)}")
+    ratios = [
+        o.gap_after_m / o.expected_gap_m
+        for o in outcomes
+        if o.label == "clean" and o.gap_after_m is not None and o.expected_gap_m
+    ]
+    if ratios:
+        print(f"clean: gap after / expected gap, median {statistics.median(ratios):.1f} (doctor's limit 4)")
+    doctor = [o.doctor_s for o in outcomes]
+    simulate = [o.simulate_s for o in outcomes]
+    print(
+        f"wall time per doctor run: median {statistics.median(doctor):.0f} s (min {min(doctor):.0f}, "
+        f"max {max(doctor):.0f}); per simulation median {statistics.median(simulate):.1f} s"
+    )
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--per-class", type=int, default=3, help="cases per class (seeds 0..N-1)")
+    parser.add_argument("--jobs", type=int, default=1, help="worker processes")
+    parser.add_argument("--classes", default=",".join(CLASSES), help="comma-separated subset of classes")
+    parser.add_argument("--sweep-s", type=float, default=12.0, help="sweep length (s), 10-30")
+    args = parser.parse_args()
+    labels = [c.strip() for c in args.classes.split(",") if c.strip()]
+    unknown = [c for c in labels if c not in CLASSES]
+    if unknown:
+        parser.error(f"unknown class {unknown[0]!r}; expected some of {', '.join(CLASSES)}")
+    print(
+        f"machine: {platform.machine()}, Python {platform.python_version()}, numpy {np.__version__}; "
+        f"{args.per_class} per class, {args.jobs} jobs, {args.sweep_s:.0f} s sweeps 0-20 Hz ±4 mm"
+    )
+    work = [(label, seed) for label in labels for seed in range(args.per_class)]
+    start = time.perf_counter()
+    with tempfile.TemporaryDirectory(prefix="doctor-independent-") as folder:
+        if args.jobs > 1:
+            with ProcessPoolExecutor(args.jobs) as pool:
+                futures = [pool.submit(run_case, label, seed, folder, args.sweep_s) for label, seed in work]
+                outcomes = [f.result() for f in futures]
+        else:
+            outcomes = [run_case(label, seed, folder, args.sweep_s) for label, seed in work]
+    print_report(outcomes)
+    print(f"total wall time {time.perf_counter() - start:.0f} s")
+
+
+if __name__ == "__main__":
+    main()
