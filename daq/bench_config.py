@@ -14,6 +14,7 @@ One TOML file per bench, read with `load_bench_config` and written with `write_b
     [exciter]                            # the plate drive
     name = "plate"
     url = "modbus-tcp://192.168.0.20:502?unit=1"
+    register_map = "drive-registers.toml"  # optional (Modbus): relative to this file
 
     [[lasers]]                           # one table per laser sensor (amplifier + head)
     name = "body"
@@ -30,19 +31,29 @@ One TOML file per bench, read with `load_bench_config` and written with `write_b
     url = "serial:///dev/ttyUSB0?baudrate=38400&node=2"   # same RS-485 line, next node
     channel = "x_t"
     head = "ZX-LD40"
+    value_area = "parameter"             # optional: where the measured value lives (see below)
+    value_type = 0xC020
+    value_address = 0x3000
+    value_unit = "nm"
 
 Keys:
 
 [bench] name: free text. model: "quarter-car" (channels x_s, x_t, x_r: sprung mass, wheel, plate) or "axle"
     (the same per side: x_s_l, x_s_r, x_t_l, x_t_r, x_r_l, x_r_r).
-[bench.envelope] max_amplitude_m, max_frequency_Hz: the bench's safety envelope (drivers.exciter.envelope);
-    each may be left out (default 4 mm, 25 Hz); neither may exceed the installation's hard limits.
+[bench.envelope] max_amplitude_m, max_frequency_Hz, max_duration_s: the bench's safety envelope
+    (drivers.exciter.envelope); each may be left out (default 4 mm, 25 Hz, 300 s); none may exceed the
+    installation's hard limits (by default the same values: a bench may lower them).
 [exciter] name, url: the plate drive, by a drivers.exciter.urls URL: modbus-tcp://HOST:PORT?unit=N,
     modbus-rtu:///dev/ttyUSB1?baudrate=19200&unit=1, can://INTERFACE/CHANNEL (python-can, e.g.
-    can://socketcan/can0, can://virtual/vcan0).
+    can://socketcan/can0, can://virtual/vcan0). register_map (Modbus only, optional): the drive's
+    register map file (format: drivers/exciter/default_register_map.toml), relative to this file;
+    checked when the configuration is loaded.
 [[lasers]] name: unique among all devices. url: a drivers.compowayf.urls device URL that names the node:
     serial:///dev/ttyUSB0?baudrate=38400&node=1, socket://127.0.0.1:9000?node=2 (a serial-to-Ethernet
-    converter), or a plain device path /dev/ttyUSB0?node=1; timeout_s= and retries= may be added.
+    converter), or a plain device path /dev/ttyUSB0?node=1; timeout_s= (reply timeout, default 0.5 s;
+    OMRON documents replies up to 3 s), late_reply_s= (after a request went unanswered, drain the line
+    until this long after it before the next, default 3 s), retries= and echo=1 (the RS-485 adapter echoes
+    the host's frames: each is read back and discarded) may be added.
     channel: which bench channel the laser measures (each channel at most once; not every channel needs a
     laser). head: "ZX-LD40" (40 +- 10 mm) or "ZX-LD100" (100 +- 40 mm). sign: +1 when the head looks down
     on its target (an upward move reads positive), -1 when it looks up. zero_m: what the amplifier reads
@@ -52,6 +63,13 @@ Keys:
     then carry device timestamps and none is missed between reads. Leave it out for an amplifier that only
     holds its present value: it is polled as fast as the line allows and stamped with host time, and the
     recording states the rate achieved. buffer_length: the samples such an amplifier keeps (default 256).
+    value_area ("parameter": read with 0201, or "variable": 0101), value_type (parameter type, e.g. 0xC020
+    = C000h + data number; or variable type, e.g. 0xC0), value_address (read start address; for the
+    parameter area unit number << 8 | channel) and value_unit ("nm", "0.1um", "um"): where the amplifier
+    keeps its measured value (drivers.compowayf.layout). Polled defaults: the ZS-series measurement
+    result, parameter area C020 address 3000, nm (OMRON ZS/ZFV CompoWay/F references; that the ZX-L
+    follows it is an assumption, its own table was not available). Streaming defaults: the sample
+    counter at variable area C0 address 0000 with the sample ring after it (the simulator's layout).
 
 Errors are `BenchConfigError` (a ValueError) with one line naming the file, the line where it is known
 (TOML syntax errors and keys are located; a missing key points at its table) and the table and key, e.g.
@@ -64,6 +82,7 @@ from __future__ import annotations
 import math
 import os
 import re
+import time
 import tomllib
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, fields
@@ -74,10 +93,13 @@ from urllib.parse import urlsplit
 from daq.formats.atomic import atomic_write
 from drivers.compowayf.amplifier import STREAM_BUFFER_LENGTH, AmplifierConfig, streaming_measured_config
 from drivers.compowayf.errors import DeviceUrlError
+from drivers.compowayf.layout import COUNT_UNIT_NAMES, MeasuredArea, MeasuredValueConfig
 from drivers.compowayf.urls import parse_device_url
 from drivers.exciter.envelope import DEFAULT_HARD_LIMITS, EnvelopeLimits, SafetyEnvelope
 from drivers.exciter.errors import ExciterConfigError
-from drivers.exciter.urls import CanTarget, parse_exciter_url
+from drivers.exciter.interface import DEFAULT_KEEPALIVE_INTERVAL_S, PlateExciter
+from drivers.exciter.register_map import RegisterMap
+from drivers.exciter.urls import CanTarget, open_exciter, parse_exciter_url
 from estimator.recording import AXLE_CHANNELS, QUARTER_CAR_CHANNELS
 from estimator.vehicle import ModelKind
 
@@ -86,7 +108,8 @@ LASER_HEADS = ("ZX-LD40", "ZX-LD100")
 
 LASER_URL_SCHEMES = ("serial", "socket", "rfc2217", "loop")
 MAX_BUFFER_LENGTH = 1000
-"""Longest sample buffer a streaming amplifier may declare (its reply must fit one CompoWay/F frame)."""
+"""Longest sample buffer a streaming amplifier may declare (read in requests of at most 25 double words)."""
+VALUE_AREAS = ("parameter", "variable")
 """Schemes a laser URL may use (besides a plain device path); all but serial are pyserial URL handlers."""
 
 CHANNELS: dict[ModelKind, tuple[str, ...]] = {
@@ -117,9 +140,14 @@ class LaserConfig:
     zero_m: float = 0.0
     sample_period_s: float | None = None
     buffer_length: int = STREAM_BUFFER_LENGTH
+    value_area: str | None = None
+    value_type: int | None = None
+    value_address: int | None = None
+    value_unit: str = "nm"
 
     def __post_init__(self) -> None:
         _check_name(self.name)
+        self._check_value_location()
         if self.sample_period_s is not None:
             if not (math.isfinite(self.sample_period_s) and 0 < self.sample_period_s <= 1.0):
                 raise BenchConfigError(
@@ -159,11 +187,51 @@ class LaserConfig:
             raise BenchConfigError(f"laser URL {self.url!r} names no node: add ?node=N", ("url",))
         return parsed.pyserial_url, parsed.node
 
+    def _check_value_location(self) -> None:
+        if self.value_area is not None and self.value_area not in VALUE_AREAS:
+            raise BenchConfigError(
+                f"value_area must be one of {list(VALUE_AREAS)}, got {self.value_area!r}", ("value_area",)
+            )
+        if self.value_unit not in COUNT_UNIT_NAMES:
+            raise BenchConfigError(
+                f"value_unit must be one of {list(COUNT_UNIT_NAMES)}, got {self.value_unit!r}",
+                ("value_unit",),
+            )
+        for key in ("value_type", "value_address"):
+            value = getattr(self, key)
+            if value is not None and (type(value) is not int or not 0 <= value <= 0xFFFF):
+                raise BenchConfigError(f"{key} must be an integer 0..0xFFFF, got {value!r}", (key,))
+        try:
+            self.amplifier_config()
+        except ValueError as exc:
+            raise BenchConfigError(f"measured value location: {exc}", ("value_type",)) from None
+
     def amplifier_config(self) -> AmplifierConfig:
-        """How the driver reads this amplifier: the streaming layout when it samples on its own clock."""
+        """How the driver reads this amplifier: where its value lives (value_* keys over the defaults), and
+        the streaming layout when it samples on its own clock."""
+        unit = COUNT_UNIT_NAMES[self.value_unit]
         if self.sample_period_s is None:
-            return AmplifierConfig()
-        return AmplifierConfig(measured=streaming_measured_config(self.sample_period_s, self.buffer_length))
+            defaults = MeasuredValueConfig()
+            area = MeasuredArea(self.value_area) if self.value_area else defaults.area
+            type_default = defaults.area_type if area is defaults.area else 0xC0
+            measured = MeasuredValueConfig(
+                area=area,
+                area_type=type_default if self.value_type is None else self.value_type,
+                address=defaults.address if self.value_address is None else self.value_address,
+                count_unit=unit,
+            )
+            return AmplifierConfig(measured=measured)
+        area = MeasuredArea(self.value_area or MeasuredArea.VARIABLE)
+        type_default = 0xC0 if area is MeasuredArea.VARIABLE else 0xC000
+        measured = streaming_measured_config(
+            self.sample_period_s,
+            self.buffer_length,
+            area=area,
+            area_type=type_default if self.value_type is None else self.value_type,
+            counter_address=0 if self.value_address is None else self.value_address,
+            count_unit=unit,
+        )
+        return AmplifierConfig(measured=measured)
 
     def to_channel_m(self, reading_m: float) -> float:
         """Channel displacement (upward positive, from the static position) for an amplifier reading."""
@@ -172,10 +240,12 @@ class LaserConfig:
 
 @dataclass(frozen=True)
 class ExciterConfig:
-    """The plate drive: a drivers.exciter.urls URL."""
+    """The plate drive: a drivers.exciter.urls URL and, for Modbus, the register map file (None: the
+    default map)."""
 
     name: str
     url: str
+    register_map: str | None = None
 
     def __post_init__(self) -> None:
         _check_name(self.name)
@@ -183,6 +253,39 @@ class ExciterConfig:
             parse_exciter_url(self.url)
         except ExciterConfigError as exc:
             raise BenchConfigError(f"bad exciter URL: {exc}", ("url",)) from None
+        if self.register_map is not None:
+            if self.kind != "modbus":
+                raise BenchConfigError("a register map applies to a Modbus exciter only", ("register_map",))
+            self.load_register_map()
+
+    def load_register_map(self) -> RegisterMap | None:
+        """The register map the file names (None: none named, the driver's default)."""
+        if self.register_map is None:
+            return None
+        try:
+            return RegisterMap.load(self.register_map)
+        except OSError as exc:
+            raise BenchConfigError(
+                f"register map {self.register_map}: {exc.strerror or exc}", ("register_map",)
+            ) from None
+        except ExciterConfigError as exc:
+            raise BenchConfigError(str(exc).splitlines()[0], ("register_map",)) from None
+
+    async def open(
+        self,
+        *,
+        envelope: SafetyEnvelope | None = None,
+        keepalive_interval_s: float | None = DEFAULT_KEEPALIVE_INTERVAL_S,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> PlateExciter:
+        """Open this drive (drivers.exciter.urls.open_exciter) with its register map."""
+        return await open_exciter(
+            self.url,
+            envelope=envelope,
+            register_map=self.load_register_map(),
+            keepalive_interval_s=keepalive_interval_s,
+            clock=clock,
+        )
 
     @property
     def kind(self) -> str:
@@ -269,7 +372,7 @@ def _check_name(name: str) -> None:
 _TABLE_KEYS: dict[str, dict[str, tuple[type, ...]]] = {
     "bench": {"name": (str,), "model": (str,), "envelope": (dict,)},
     "envelope": {f.name: (int, float) for f in fields(EnvelopeLimits)},
-    "exciter": {"name": (str,), "url": (str,)},
+    "exciter": {"name": (str,), "url": (str,), "register_map": (str,)},
     "lasers": {
         "name": (str,),
         "url": (str,),
@@ -279,6 +382,10 @@ _TABLE_KEYS: dict[str, dict[str, tuple[type, ...]]] = {
         "zero_m": (int, float),
         "sample_period_s": (int, float),
         "buffer_length": (int,),
+        "value_area": (str,),
+        "value_type": (int,),
+        "value_address": (int,),
+        "value_unit": (str,),
     },
 }
 _REQUIRED = {
@@ -300,11 +407,15 @@ T = TypeVar("T")
 def load_bench_config(path: str | os.PathLike[str]) -> BenchConfig:
     """Read and check a bench configuration file (BenchConfigError, or OSError if it cannot be read)."""
     path = Path(path)
-    return parse_bench_config(path.read_text(encoding="utf-8"), source=str(path))
+    return parse_bench_config(path.read_text(encoding="utf-8"), source=str(path), base_dir=path.parent)
 
 
-def parse_bench_config(text: str, source: str = "<bench config>") -> BenchConfig:
-    """Parse and check the TOML text of a bench configuration; `source` names it in error messages."""
+def parse_bench_config(
+    text: str, source: str = "<bench config>", base_dir: str | os.PathLike[str] | None = None
+) -> BenchConfig:
+    """Parse and check the TOML text of a bench configuration; `source` names it in error messages;
+    relative file names in it (the exciter's register_map) are taken from `base_dir` (default: the
+    current directory)."""
     try:
         document = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
@@ -312,14 +423,14 @@ def parse_bench_config(text: str, source: str = "<bench config>") -> BenchConfig
         raise BenchConfigError(f"{source}:{at_line.group(1) + ':' if at_line else ''} {exc}") from None
     lines = _KeyLines(text)
     try:
-        return _build(document)
+        return _build(document, Path(base_dir) if base_dir is not None else Path.cwd())
     except BenchConfigError as exc:
         line = lines.find(exc.key)
         where = f"{source}:{line}" if line else source
         raise BenchConfigError(f"{where}: {_describe(exc.key)}{exc.message}", exc.key) from None
 
 
-def _build(document: dict[str, Any]) -> BenchConfig:
+def _build(document: dict[str, Any], base_dir: Path) -> BenchConfig:
     for name in document:
         if name not in _TOP_LEVEL:
             expected = ", ".join(_TOP_LEVEL.values())
@@ -337,6 +448,8 @@ def _build(document: dict[str, Any]) -> BenchConfig:
             _located(lambda n=name, v=value: SafetyEnvelope(EnvelopeLimits(**{n: v})), limit_key)
         envelope = EnvelopeLimits(**values)
     exciter_table = _table(document["exciter"], "exciter", ("exciter",))
+    if "register_map" in exciter_table:
+        exciter_table["register_map"] = str(base_dir / exciter_table["register_map"])
     exciter = _located(lambda: ExciterConfig(**exciter_table), ("exciter",))
     lasers_doc = document["lasers"]
     lasers = []
@@ -446,6 +559,8 @@ def dump_bench_config(config: BenchConfig, comment: str = "") -> str:
         limits = config.envelope
         out += ["", "[bench.envelope]"] + [_pair(f.name, getattr(limits, f.name)) for f in fields(limits)]
     out += ["", "[exciter]", _pair("name", config.exciter.name), _pair("url", config.exciter.url)]
+    if config.exciter.register_map is not None:
+        out.append(_pair("register_map", config.exciter.register_map))
     for laser in config.lasers:
         out += ["", "[[lasers]]"] + [
             _pair(f.name, getattr(laser, f.name))

@@ -3,12 +3,12 @@ displacements in metres, into a ring buffer of its own.
 
 Two kinds of amplifier, told apart by the bench configuration (`LaserConfig.sample_period_s`):
 
-* Streaming: the amplifier samples on its own clock into a buffer behind a sample counter
-  (drivers.compowayf.amplifier.streaming_measured_config). Each `poll` reads the counter and as many of the
-  newest samples as can have come in since the last poll (a few more for safety; if that was still short,
-  a second read of the whole buffer), so every sample arrives once, stamped with its device time (sample
-  number x period, `Clock.DEVICE`). Samples that left the amplifier's buffer before a poll got them are
-  counted in `lost_samples` and are absent from the ring buffer: the recorder sees the hole, marks a gap.
+* Streaming: the amplifier samples on its own clock into a ring behind a sample counter
+  (drivers.compowayf.layout.streaming_measured_config). Each `poll` reads the counter, then exactly the
+  samples taken since the last poll (ZxlAmplifier.read_stream with `since`, in requests of at most 25
+  double words), so every sample arrives once, stamped with its device time (sample number x period,
+  `Clock.DEVICE`). Samples that left the amplifier's ring before a poll got them are counted in
+  `lost_samples` and are absent from the ring buffer: the recorder sees the hole, marks a gap.
 * Polled: the amplifier holds only its present value. Each `poll` reads it once and stamps it with the
   host's clock at the middle of the request (`Clock.HOST_MONOTONIC`). The rate is whatever the line allows;
   `statistics().achieved_rate_Hz` says what it was, and the recording carries it.
@@ -35,8 +35,6 @@ from daq.ring_buffer import Clock, RingBuffer
 from daq.sources.clock_mapping import DeviceClockMapping
 from drivers.compowayf.amplifier import COUNTER_MODULUS, ZxlAmplifier
 
-STREAM_MARGIN_SAMPLES = 8
-"""Samples read beyond those expected since the last poll, for the jitter of the poll timing."""
 DEFAULT_CAPACITY = 1 << 16
 """Ring-buffer samples per source: 65 s at 1 kHz, far more than a recorder ever falls behind."""
 
@@ -137,23 +135,18 @@ class LaserSource:
         period_s = self.period_s
         assert period_s is not None
         capacity = self.amplifier.config.measured.buffer_length
-        now_s = self.host_clock()
-        if self._total_counter is None or self._last_poll_host_s is None:
-            count = 1
+        if self._total_counter is None:
+            read = self.amplifier.read_stream(1)  # the first poll only finds where the counter stands
+            new = len(read.counts)
         else:
-            expected = math.ceil(max(0.0, now_s - self._last_poll_host_s) / period_s)
-            count = min(capacity, max(1, expected + STREAM_MARGIN_SAMPLES))
-        while True:  # at most twice: a read found short is followed by one of the whole buffer
-            read = self.amplifier.read_stream(count)
-            received_s = self.host_clock()
-            new = 1 if self._total_counter is None else (read.counter - self._total_counter) % COUNTER_MODULUS
-            if new <= count or count == capacity:
-                break
-            count = capacity
+            since = self._total_counter % COUNTER_MODULUS
+            read = self.amplifier.read_stream(capacity, since=since)
+            new = (read.counter - since) % COUNTER_MODULUS
+        received_s = self.host_clock()
         self._last_poll_host_s = received_s
         total = read.counter if self._total_counter is None else self._total_counter + new
         self._total_counter = total
-        taken = min(new, len(read.counts))  # the last read's length (count may have grown after it)
+        taken = min(new, len(read.counts))  # fewer when the ring overwrote the oldest before the read
         lost = new - taken
         if taken == 0:
             self._book(0, lost, 0, math.nan, math.nan, received_s)

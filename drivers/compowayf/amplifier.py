@@ -2,10 +2,15 @@
 RS-485 or through the ZX-SF11 interface unit (RS-232C).
 
 Where the measured value lives (variable or parameter area, type, address, buffer length), how its counts
-scale to metres and which count value means "out of range" are configuration (`MeasuredValueConfig`),
-because OMRON's address maps differ between amplifier generations. The simulated amplifier uses the same
-dataclasses, so driver and simulator agree by construction; check the defaults against the communication
-manual of the actual amplifier before trusting a real reading.
+scale to metres and which count values mean "out of range" are configuration (`MeasuredValueConfig`, in
+drivers.compowayf.layout, with its sources and the assumption made for the ZX-L), because OMRON's address
+maps differ between amplifier generations. The simulated amplifier uses the same dataclasses, so driver and
+simulator agree by construction; check the defaults against the communication manual of the actual
+amplifier before trusting a real reading.
+
+One request carries at most 25 double words (OMRON's documented maximum), fewer when the communications
+buffer size the amplifier reports in 0503 (`read_attributes`, `read_model`) is smaller; longer reads are
+split into several requests.
 
 Sign: the driver reports what the amplifier reports, scaled to metres. The simulator's convention (see
 simulators/devices/sensor_heads.py) is positive toward the head.
@@ -14,11 +19,12 @@ simulators/devices/sensor_heads.py) is positive toward the head.
 from __future__ import annotations
 
 import contextlib
-import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from enum import Enum, StrEnum
 
 from drivers.compowayf.codec import (
+    ControllerAttributes,
+    ResponseFrame,
     Service,
     StatusReport,
     decode_values,
@@ -26,6 +32,7 @@ from drivers.compowayf.codec import (
     encode_parameter_area_read,
     encode_parameter_area_write,
     encode_variable_area_read,
+    max_elements_per_read,
     parameter_element_width,
     variable_element_width,
 )
@@ -35,124 +42,23 @@ from drivers.compowayf.errors import (
     MeasurementOutOfRangeError,
     UnexpectedResponseError,
 )
+from drivers.compowayf.layout import (
+    COUNTER_MODULUS,
+    STREAM_BUFFER_LENGTH,
+    CountUnit,
+    MeasuredArea,
+    MeasuredValueConfig,
+    streaming_measured_config,
+)
 from drivers.compowayf.rate import RateMeter, ReadRate
 from drivers.compowayf.transport import CompowayFPort, LinkSettings, Opener
 from drivers.compowayf.urls import SerialSettings, parse_device_url
 
-
-class MeasuredArea(StrEnum):
-    """Which CompoWay/F area holds the measured value: variable area (read with 0101) or parameter area
-    (read with 0201)."""
-
-    VARIABLE = "variable"
-    PARAMETER = "parameter"
-
-
-class CountUnit(Enum):
-    """Length of one count of the measured value, in metres."""
-
-    NANOMETRE = 1e-9
-    TENTH_MICROMETRE = 1e-7
-
-    @property
-    def metres(self) -> float:
-        return float(self.value)
-
-
-@dataclass(frozen=True)
-class MeasuredValueConfig:
-    """Where and how an amplifier exposes its measured value.
-
-    area / area_type / address: the area, its type code (variable type, 2 hex digits, e.g. 0xC0 for a
-        double-word area; or parameter type, 4 hex digits, e.g. 0xC000) and the first element's address.
-        Defaults (variable area C0, address 0000) are an assumption, not taken from a ZX-L manual.
-    buffer_length: how many consecutive elements from `address` hold samples, newest first (1 = only the
-        current value; N = the current value and the N-1 before it).
-    count_unit: metres per count (signed 32-bit counts for double-word areas); OMRON's ZS/ZX-L send nm.
-    out_of_range_counts: count values that mean "no valid measurement" (OMRON uses 7FFFFFFx-style
-        markers); the first one is what the simulator sends.
-    sample_period_s: the amplifier's own sampling period when it samples on its own clock and buffers
-        (None: it holds only the value at the moment of the read, which the host then timestamps).
-    counter_address: with sample_period_s, the address of a sample counter (samples taken since the
-        amplifier started, modulo 2**31) directly before the newest sample (address - 1), so that one
-        read returns the counter and the newest samples together: the counter is the device clock
-        (time = counter * sample_period_s) and tells how many samples are new since the last read.
-    """
-
-    area: MeasuredArea = MeasuredArea.VARIABLE
-    area_type: int = 0xC0
-    address: int = 0x0000
-    buffer_length: int = 1
-    count_unit: CountUnit = CountUnit.NANOMETRE
-    out_of_range_counts: tuple[int, ...] = (0x7FFFFFFF,)
-    sample_period_s: float | None = None
-    counter_address: int | None = None
-
-    def __post_init__(self) -> None:
-        if self.buffer_length < 1:
-            raise ValueError(f"buffer_length must be >= 1, got {self.buffer_length}")
-        if self.sample_period_s is not None and not (
-            math.isfinite(self.sample_period_s) and self.sample_period_s > 0
-        ):
-            raise ValueError(f"sample_period_s must be positive, got {self.sample_period_s}")
-        if self.counter_address is not None:
-            if self.sample_period_s is None:
-                raise ValueError("a sample counter needs the sample_period_s it counts")
-            if self.counter_address != self.address - 1:
-                raise ValueError(
-                    f"the sample counter must sit directly before the newest sample (address "
-                    f"0x{self.address - 1:04X}), got 0x{self.counter_address:04X}"
-                )
-        if not self.out_of_range_counts:
-            raise ValueError("at least one out-of-range marker is needed")
-        type_max = 0xFF if self.area is MeasuredArea.VARIABLE else 0xFFFF
-        if not 0 <= self.area_type <= type_max:
-            raise ValueError(f"area_type 0x{self.area_type:X} does not fit a {self.area} area")
-
-    @property
-    def element_width(self) -> int:
-        """Hex characters per element in the reply."""
-        if self.area is MeasuredArea.VARIABLE:
-            return variable_element_width(self.area_type)
-        return parameter_element_width(self.area_type)
-
-    @property
-    def out_of_range_marker(self) -> int:
-        return self.out_of_range_counts[0]
-
-    def is_out_of_range(self, counts: int) -> bool:
-        return counts in self.out_of_range_counts
-
-    def counts_to_m(self, counts: int) -> float:
-        """Metres for a count value; NaN for an out-of-range marker."""
-        return math.nan if self.is_out_of_range(counts) else counts * self.count_unit.metres
-
-    def m_to_counts(self, value_m: float) -> int:
-        return round(value_m / self.count_unit.metres)
-
-    @property
-    def is_streaming(self) -> bool:
-        """True when the amplifier samples on its own clock and exposes a sample counter."""
-        return self.counter_address is not None
-
-
-COUNTER_MODULUS = 2**31
-"""The sample counter wraps here (a non-negative signed double word)."""
-
-STREAM_BUFFER_LENGTH = 256
-"""Samples a streaming amplifier keeps by default: 256 ms at 1 kHz, so a host may pause that long between
-reads without losing a sample."""
-
-
-def streaming_measured_config(
-    sample_period_s: float = 0.001, buffer_length: int = STREAM_BUFFER_LENGTH
-) -> MeasuredValueConfig:
-    """The layout of an amplifier that samples on its own clock: the sample counter at variable area C0
-    address 0000, the newest sample at 0001, older ones after it. An assumed layout (no ZX-L manual was at
-    hand); the simulated amplifier serves exactly this."""
-    return MeasuredValueConfig(
-        address=0x0001, buffer_length=buffer_length, sample_period_s=sample_period_s, counter_address=0x0000
-    )
+PARAMETER_READ_ECHO_CHARS = 12
+"""A parameter area read's reply repeats type, start address and element count before the data."""
+STREAM_GUARD_FRACTION = 0.5
+"""A streaming read re-reads the counter at the end unless it took less than this fraction of the time the
+amplifier needs to overwrite the oldest slot read (see ZxlAmplifier.read_stream)."""
 
 
 @dataclass(frozen=True)
@@ -160,7 +66,8 @@ class StreamRead:
     """One read of a streaming amplifier: the sample counter and the newest samples.
 
     counter: samples taken since the amplifier started, modulo COUNTER_MODULUS; the newest sample is
-        number counter - 1. counts: raw counts, newest first (markers included).
+        number counter - 1. counts: raw counts, newest first (markers included); fewer than asked when
+        the oldest of them were overwritten while the read went on.
     """
 
     counter: int
@@ -200,6 +107,8 @@ class ZxlAmplifier:
         self.port = port
         self.node = node
         self.config = config or AmplifierConfig()
+        self.buffer_size_bytes: int | None = None
+        """Communications buffer size from 0503 (None until read_attributes/read_model)."""
         self._rate = RateMeter()
         self._owns_port = False
 
@@ -236,46 +145,69 @@ class ZxlAmplifier:
 
     # --- services --------------------------------------------------------------------------------------
 
-    def _request(self, service: Service, data: str = "") -> str:
-        return self.port.request(self.node, service, data).data
+    def _request(self, service: Service, data: str = "", matches: Matcher | None = None) -> str:
+        return self.port.request(self.node, service, data, matches=matches).data
+
+    def _max_elements(self, width: int, echoed_chars: int = 0) -> int:
+        limit = max_elements_per_read(width, self.buffer_size_bytes, echoed_chars)
+        if limit < 1:
+            raise ValueError(
+                f"node {self.node:02d}: a {self.buffer_size_bytes}-byte communications buffer holds no "
+                f"element of {width} hex characters"
+            )
+        return limit
 
     def read_variable_area(self, variable_type: int, start_address: int, count: int) -> list[int]:
-        """0101: `count` signed elements from a variable area."""
-        request = encode_variable_area_read(variable_type, start_address, count)
-        data = self._request(Service.VARIABLE_AREA_READ, request)
-        return decode_values(data, variable_element_width(variable_type), count)
+        """0101: `count` signed elements from a variable area, in requests of at most 25 double words (or
+        what the amplifier's buffer holds)."""
+        width = variable_element_width(variable_type)
+        values: list[int] = []
+        for start, n in _chunks(start_address, count, self._max_elements(width)):
+            request = encode_variable_area_read(variable_type, start, n)
+            data = self._request(Service.VARIABLE_AREA_READ, request, _data_chars(width * n))
+            values += decode_values(data, width, n)
+        return values
 
     def read_parameter_area(self, parameter_type: int, start_address: int, count: int) -> list[int]:
-        """0201: `count` signed elements from a parameter area (the reply echoes type, address, count)."""
-        request = encode_parameter_area_read(parameter_type, start_address, count)
-        data = self._request(Service.PARAMETER_AREA_READ, request)
-        if data[:12].upper() != request:
-            raise UnexpectedResponseError(f"parameter read echoed {data[:12]!r}, asked {request!r}")
-        return decode_values(data[12:], parameter_element_width(parameter_type), count)
+        """0201: `count` signed elements from a parameter area (each reply echoes type, address, count and
+        is accepted only with the echo of its own request), split like read_variable_area."""
+        width = parameter_element_width(parameter_type)
+        values: list[int] = []
+        limit = self._max_elements(width, PARAMETER_READ_ECHO_CHARS)
+        for start, n in _chunks(start_address, count, limit):
+            request = encode_parameter_area_read(parameter_type, start, n)
+            data = self._request(Service.PARAMETER_AREA_READ, request, _echoes(request, width * n))
+            values += decode_values(data[PARAMETER_READ_ECHO_CHARS:], width, n)
+        return values
 
     def write_parameter_area(self, parameter_type: int, start_address: int, values: list[int]) -> None:
         """0202: write consecutive elements of a parameter area."""
         request = encode_parameter_area_write(parameter_type, start_address, values)
-        self._request(Service.PARAMETER_AREA_WRITE, request)
+        self._request(Service.PARAMETER_AREA_WRITE, request, _data_chars(0))
+
+    def read_attributes(self) -> ControllerAttributes:
+        """0503: model and communications buffer size. The buffer size then bounds every read."""
+        attributes = ControllerAttributes.decode(self._request(Service.MODEL_READ))
+        self.buffer_size_bytes = attributes.buffer_size_bytes
+        return attributes
 
     def read_model(self) -> str:
-        """0503: the amplifier's model name."""
-        return self._request(Service.MODEL_READ).strip()
+        """0503: the amplifier's model name (and, kept for later reads, its buffer size)."""
+        return self.read_attributes().model
 
     def read_status(self) -> StatusReport:
         """0601: operating status and related information (raw bytes; meaning is model specific)."""
-        return StatusReport.decode(self._request(Service.STATUS_READ))
+        return StatusReport.decode(self._request(Service.STATUS_READ, matches=_data_chars(4)))
 
     def echo(self, text: str) -> str:
         """0801: send `text` (printable ASCII) and check that it comes back unchanged."""
-        echoed = self._request(Service.ECHO_BACK, text)
-        if echoed != text:
-            raise UnexpectedResponseError(f"echo-back returned {echoed!r} for {text!r}")
+        echoed = self._request(Service.ECHO_BACK, text, lambda response: response.data == text)
         return echoed
 
     def operation_command(self, command_code: int, related_info: int = 0) -> None:
         """3005: an operation command (command code + related information)."""
-        self._request(Service.OPERATION_COMMAND, encode_operation_command(command_code, related_info))
+        request = encode_operation_command(command_code, related_info)
+        self._request(Service.OPERATION_COMMAND, request, _data_chars(0))
 
     def zero_reset(self) -> None:
         """Make the present reading the amplifier's zero (operation command from the configuration)."""
@@ -286,16 +218,18 @@ class ZxlAmplifier:
 
     # --- measured value --------------------------------------------------------------------------------
 
+    def _read_area(self, address: int, count: int) -> list[int]:
+        measured = self.config.measured
+        if measured.area is MeasuredArea.VARIABLE:
+            return self.read_variable_area(measured.area_type, address, count)
+        return self.read_parameter_area(measured.area_type, address, count)
+
     def _read_measured(self, address: int, count: int, samples: int) -> list[int]:
         """`count` elements of the measured area from `address`, timed for read_rate() as `samples`."""
-        measured = self.config.measured
         started_s = self._rate.clock()
         ok = False
         try:
-            if measured.area is MeasuredArea.VARIABLE:
-                values = self.read_variable_area(measured.area_type, address, count)
-            else:
-                values = self.read_parameter_area(measured.area_type, address, count)
+            values = self._read_area(address, count)
             ok = True
             return values
         finally:
@@ -309,23 +243,60 @@ class ZxlAmplifier:
     def read_counts(self, count: int = 1) -> list[int]:
         """The newest `count` samples as raw counts, newest first, as the amplifier holds them (markers
         included). Timed for read_rate(); count may not exceed the configured buffer_length."""
+        if self.config.measured.is_streaming:
+            return self.read_stream(count).counts
         self._check_count(count)
         return self._read_measured(self.config.measured.address, count, count)
 
-    def read_stream(self, count: int) -> StreamRead:
-        """Counter and newest `count` samples in one request (streaming layout only, count <= buffer_length).
-        Timed for read_rate() like read_counts."""
-        counter_address = self.config.measured.counter_address
-        if counter_address is None:
+    def _read_counter(self) -> int:
+        measured = self.config.measured
+        assert measured.counter_address is not None
+        counter = self._read_area(measured.counter_address, 1)[0]
+        if not 0 <= counter < COUNTER_MODULUS:
+            raise UnexpectedResponseError(f"node {self.node:02d}: sample counter {counter} out of range")
+        return counter
+
+    def read_stream(self, count: int, since: int | None = None) -> StreamRead:
+        """Streaming layout: the sample counter, then the newest samples (at most `count`; with `since`, a
+        counter from an earlier read, only those taken after it), newest first. Timed for read_rate().
+
+        The samples are read slot by slot from the ring (split into requests of at most 25 double words),
+        after the counter. A slot is overwritten buffer_length samples after it was written, so when the
+        read took long enough for that to matter (more than STREAM_GUARD_FRACTION of the time, in host
+        seconds, the amplifier needs to overwrite the oldest slot read) the counter is read again and the
+        samples overwritten meanwhile are dropped from the oldest end.
+        """
+        measured = self.config.measured
+        if not measured.is_streaming or measured.sample_period_s is None:
             raise ValueError("this amplifier's configuration has no sample counter (not a streaming layout)")
         self._check_count(count)
-        values = self._read_measured(counter_address, count + 1, count)
-        if not 0 <= values[0] < COUNTER_MODULUS:
-            raise UnexpectedResponseError(f"node {self.node:02d}: sample counter {values[0]} out of range")
-        return StreamRead(values[0], values[1:])
+        length = measured.buffer_length
+        started_s = self._rate.clock()
+        ok = False
+        samples = 0
+        try:
+            counter = self._read_counter()
+            new = count if since is None else min(count, (counter - since) % COUNTER_MODULUS)
+            new = min(new, counter)  # none before sample 0 (so a wrap, each 24.8 days at 1 kHz, loses some)
+            by_slot: dict[int, int] = {}
+            oldest = counter - new  # sample numbers oldest .. counter - 1 (unwrapped arithmetic)
+            for start_slot, n in _ring_runs(measured.slot_of(oldest), new, length):
+                for offset, value in enumerate(self._read_area(measured.address + start_slot, n)):
+                    by_slot[start_slot + offset] = value
+            usable = new
+            budget_s = STREAM_GUARD_FRACTION * (length - new) * measured.sample_period_s
+            if new and self._rate.clock() - started_s >= budget_s:
+                taken_since = (self._read_counter() - counter) % COUNTER_MODULUS
+                usable = max(0, min(new, length - taken_since))
+            counts = [by_slot[measured.slot_of(counter - 1 - k)] for k in range(usable)]
+            samples = len(counts)
+            ok = True
+            return StreamRead(counter, counts)
+        finally:
+            self._rate.record(started_s, self._rate.clock(), samples, ok)
 
     def read_position_m(self) -> float:
-        """The current measured value in metres. Raises MeasurementOutOfRangeError on the marker."""
+        """The current measured value in metres. Raises MeasurementOutOfRangeError on a marker."""
         counts = self.read_counts(1)[0]
         if self.config.measured.is_out_of_range(counts):
             raise MeasurementOutOfRangeError(
@@ -357,3 +328,50 @@ class ZxlAmplifier:
             with contextlib.suppress(CompowayFError):
                 self.read_counts(count)
         return self.read_rate()
+
+
+Matcher = Callable[[ResponseFrame], bool]
+
+
+def _data_chars(chars: int) -> Matcher:
+    """Accept a reply whose data is exactly `chars` characters (the element count asked for)."""
+    return lambda response: len(response.data) == chars
+
+
+def _echoes(request: str, chars: int) -> Matcher:
+    """Accept a parameter area reply that repeats `request` and then carries `chars` data characters."""
+    return lambda response: (
+        response.data[:PARAMETER_READ_ECHO_CHARS].upper() == request
+        and len(response.data) == PARAMETER_READ_ECHO_CHARS + chars
+    )
+
+
+def _chunks(start: int, count: int, limit: int) -> list[tuple[int, int]]:
+    """(start address, element count) of consecutive requests of at most `limit` elements."""
+    return [(start + done, min(limit, count - done)) for done in range(0, count, limit)]
+
+
+def _ring_runs(first_slot: int, count: int, length: int) -> list[tuple[int, int]]:
+    """(first slot, slots) of the contiguous runs covering `count` slots of a ring of `length` from
+    `first_slot` on (two runs when they wrap past the last slot)."""
+    if count <= 0:
+        return []
+    head = min(count, length - first_slot)
+    runs = [(first_slot, head)]
+    if count > head:
+        runs.append((0, count - head))
+    return runs
+
+
+__all__ = [
+    "COUNTER_MODULUS",
+    "STREAM_BUFFER_LENGTH",
+    "AmplifierConfig",
+    "CountUnit",
+    "MeasuredArea",
+    "MeasuredValueConfig",
+    "OperationCodes",
+    "StreamRead",
+    "ZxlAmplifier",
+    "streaming_measured_config",
+]

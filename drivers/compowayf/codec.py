@@ -179,6 +179,28 @@ def split_frame(buffer: bytes, *, skip_to_stx: bool = False) -> tuple[bytes | No
     return buffer[: end + 2], buffer[end + 2 :]
 
 
+def split_reply(buffer: bytes) -> tuple[bytes | None, bytes, int]:
+    """The host's cut of a reply off a byte stream, resynchronising on STX as OMRON's receivers do.
+
+    Returns (frame, rest, skipped): frame is None while no ETX+BCC has arrived. Bytes before the last STX
+    that precedes the first ETX are dropped and counted in `skipped` (a 0x00 from an RS-485 line turning
+    around, noise, the tail of an older frame): "when STX is received again during reception, reception is
+    carried out again from the point where STX was received" (OMRON E5CN/ZEN CompoWay/F manuals). A
+    segment ending in ETX+BCC with no STX at all is returned as it is, for the parser to report as
+    malformed (something did answer, garbled).
+    """
+    end = buffer.find(bytes([ETX]))
+    if end < 0 or end + 1 >= len(buffer):
+        start = buffer.rfind(bytes([STX]))
+        if start > 0:  # noise before a reply still arriving: drop it now
+            return None, buffer[start:], start
+        return None, buffer, 0
+    start = buffer.rfind(bytes([STX]), 0, end)
+    if start < 0:
+        return buffer[: end + 2], buffer[end + 2 :], 0
+    return buffer[start : end + 2], buffer[end + 2 :], start
+
+
 def _unframe(frame: bytes) -> str:
     """Check STX/ETX/BCC of a complete frame and return its text between STX and ETX."""
     if not frame:
@@ -380,6 +402,54 @@ def decode_parameter_area_request(data: str) -> AreaRequest:
     return AreaRequest(ptype, _hex_field(data[4:8], "start address"), count, values=values)
 
 
+MODEL_NAME_CHARS = 10
+"""0503 reply: the model name is 10 ASCII characters, padded with spaces."""
+MAX_DOUBLE_WORDS_PER_READ = 25
+"""Most double-word elements one area read may carry: OMRON's CompoWay/F manuals (E5CN/E5AN "Read Variable
+Area": 0001 to 0019 hex; KM-N3: "a maximum of 25 (H'19) are read"); more is refused with 110B."""
+MAX_WORDS_PER_READ = 50
+"""The same limit for word (4 hex character) elements: 0001 to 0032 hex."""
+RESPONSE_FRAME_OVERHEAD_BYTES = 17
+"""Bytes of a response frame around its data: STX, node 2, sub-address 2, end code 2, MRC SRC 4, response
+code 4, ETX, BCC. With the 25 double words (200 characters) of a full read it gives 217 = 00D9 hex, the
+buffer size OMRON's controllers report in 0503."""
+
+
+@dataclass(frozen=True)
+class ControllerAttributes:
+    """0503 (read controller attributes) reply: the model (10 ASCII characters, space padded) and the
+    communications buffer size, 4 hex characters (OMRON: "the communications buffer size is expressed in
+    2-byte hexadecimal, and read after being converted to 4-byte ASCII", e.g. 00D9 = 217 bytes)."""
+
+    model: str
+    buffer_size_bytes: int
+
+    def encode(self) -> str:
+        if not 0 <= self.buffer_size_bytes <= 0xFFFF:
+            raise ValueError(f"buffer size must fit 4 hex digits, got {self.buffer_size_bytes}")
+        return f"{self.model[:MODEL_NAME_CHARS]:<{MODEL_NAME_CHARS}}{self.buffer_size_bytes:04X}"
+
+    @classmethod
+    def decode(cls, data: str) -> ControllerAttributes:
+        if len(data) != MODEL_NAME_CHARS + 4:
+            raise MalformedFrameError(
+                f"controller attributes must be a 10-character model and a 4-hex-digit buffer size, "
+                f"got {data!r}"
+            )
+        return cls(data[:MODEL_NAME_CHARS].rstrip(), _hex_field(data[MODEL_NAME_CHARS:], "buffer size"))
+
+
+def max_elements_per_read(width: int, buffer_size_bytes: int | None, echoed_chars: int = 0) -> int:
+    """Most elements of `width` hex characters one read may ask for: OMRON's documented maximum (25 double
+    words, 50 words), lowered to what fits the device's communications buffer (0503) when it is known.
+    `echoed_chars`: request fields the reply repeats before the data (12 for a parameter area read)."""
+    documented = MAX_DOUBLE_WORDS_PER_READ if width >= 8 else MAX_WORDS_PER_READ
+    if buffer_size_bytes is None:
+        return documented
+    fits = (buffer_size_bytes - RESPONSE_FRAME_OVERHEAD_BYTES - echoed_chars) // width
+    return max(0, min(documented, fits))
+
+
 @dataclass(frozen=True)
 class StatusReport:
     """0601 response: operating status and related information bytes (meaning is model specific)."""
@@ -402,6 +472,7 @@ __all__ = [
     "STX",
     "AreaRequest",
     "CommandFrame",
+    "ControllerAttributes",
     "ResponseFrame",
     "Service",
     "StatusReport",
@@ -420,9 +491,11 @@ __all__ = [
     "encode_parameter_area_write",
     "encode_values",
     "encode_variable_area_read",
+    "max_elements_per_read",
     "parameter_element_width",
     "parse_command",
     "parse_response",
     "split_frame",
+    "split_reply",
     "variable_element_width",
 ]

@@ -56,6 +56,11 @@ class UnexpectedResponseError(MalformedFrameError):
     """A well-formed reply that does not answer our request (other node, other service, wrong echo)."""
 
 
+class MissingEchoError(ResponseTimeoutError):
+    """Echo suppression is on (the adapter is said to echo the host's frames) but the frame just sent did
+    not come back within the timeout: the adapter does not echo, or the line garbled the echo."""
+
+
 class PortError(CompowayFError):
     """The serial port / socket itself failed."""
 
@@ -127,8 +132,10 @@ class SubAddressEndCodeError(EndCodeError):
 
 
 class FrameLengthEndCodeError(EndCodeError):
+    """Not retryable: the same command is as long the second time (OMRON: "the received frame exceeds the
+    specified (supported) number of bytes")."""
+
     code, meaning = "18", "frame length error: the command exceeds the supported length"
-    retryable = True
 
 
 END_CODE_ERRORS: dict[str, type[EndCodeError]] = {

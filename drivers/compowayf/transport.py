@@ -2,15 +2,30 @@
 request/response exchanges on it with timeouts, bounded retries and re-opening of a lost port.
 
 Several amplifiers on one RS-485 line share one `CompowayFPort` (each addresses its own node); a lock keeps
-their exchanges from interleaving. An exchange is: flush stale input, write the command, read until the
-reply's ETX and BCC byte have arrived or the timeout expires. A reply cut short (no ETX or no BCC) counts as
-a timeout (IncompleteResponseError). Errors whose class is `retryable` (timeouts, corrupted or malformed
-replies, transmission end codes, a lost port) are retried up to `LinkSettings.retries` times, re-opening the
-port first when it was lost; the last error is raised when all attempts failed. Refusals (response codes,
-format/sub-address end codes) are raised at once.
+their exchanges from interleaving. An exchange is: wait out a late reply still owed by an earlier request
+(below), flush stale input, write the command, discard its echo when the adapter echoes (`LinkSettings.echo`),
+then read until a reply that answers the command has arrived or the timeout expires.
 
-Caveat (protocol, not implementation): CompoWay/F has no sequence number, so a reply that arrives after its
-request timed out and after the next request's input flush would be taken as the next reply.
+Reading a reply:
+* Resync on STX: bytes before the STX of a reply (a 0x00 from an RS-485 line turning around, noise, the tail
+  of an older frame) are dropped, as OMRON's own receivers do ("when STX is received again during reception,
+  reception is carried out again from the point where STX was received").
+* Matching: CompoWay/F has no sequence number, so a reply is accepted only when it comes from the node asked,
+  for the service asked, and (where the request says how, e.g. the element count or the echoed parameter
+  read header) with the content asked for. Any other well-formed reply is discarded (counted in
+  `LinkCounters.discarded_frames`), never returned, and reading goes on until the timeout.
+* Late replies: OMRON allows a reply up to 3 s after the command (ZS/ZFV CompoWay/F command references,
+  "Response Formats": "It may take three seconds at longest from sending a command to receiving a response.
+  If no response is returned, be sure to send another command after waiting for at least three seconds").
+  After a request got no reply, the next exchange on the port first waits until `late_reply_s` after that
+  request was sent, discarding whatever arrives, unless the late reply itself arrives first. The reply to
+  the next request can then not be confused with it.
+* A reply cut short (no ETX or no BCC) counts as a timeout (IncompleteResponseError).
+
+Errors whose class is `retryable` (timeouts, corrupted or malformed replies, transmission end codes, a lost
+port) are retried up to `LinkSettings.retries` times, re-opening the port first when it was lost; the last
+error is raised when all attempts failed. Refusals (response codes, format/sub-address/frame-length end
+codes) are raised at once.
 """
 
 from __future__ import annotations
@@ -25,10 +40,19 @@ from typing import Protocol
 
 import serial
 
-from drivers.compowayf.codec import ResponseFrame, build_command, check_response, parse_response, split_frame
+from drivers.compowayf.codec import (
+    NORMAL_COMPLETION,
+    NORMAL_END,
+    ResponseFrame,
+    build_command,
+    check_response,
+    parse_response,
+    split_reply,
+)
 from drivers.compowayf.errors import (
     CompowayFError,
     IncompleteResponseError,
+    MissingEchoError,
     PortError,
     PortLostError,
     PortOpenError,
@@ -57,34 +81,66 @@ class SerialLike(Protocol):
     def close(self) -> None: ...
 
 
+OMRON_WORST_CASE_RESPONSE_S = 3.0
+"""OMRON: "It may take three seconds at longest from sending a command to receiving a response" (ZS series
+and ZFV-C CompoWay/F command references, Response Formats)."""
+
+
 @dataclass(frozen=True)
 class LinkSettings:
-    """Timing of the link. timeout_s bounds one attempt (write + complete reply); retries is the number of
-    extra attempts for retryable errors (0 = fail at the first error); poll_s is the read slice used to
-    watch the deadline (it adds no latency: reads return as soon as bytes arrive)."""
+    """Timing of the link.
+
+    timeout_s: how long one attempt waits for its reply (write + complete reply). The default 0.5 s suits
+        an amplifier that answers in milliseconds and lets the acquisition notice a silent sensor quickly;
+        OMRON's documented worst case is 3 s (OMRON_WORST_CASE_RESPONSE_S): set timeout_s=3 to honour it
+        on every request.
+    late_reply_s: after a request went unanswered, the next exchange waits until this long after that
+        request was sent (draining the line) before sending, unless the late reply arrives first. Default
+        OMRON's 3 s; 0 sends at once (only matching then protects against a late reply).
+    retries: extra attempts for retryable errors (0 = fail at the first error).
+    echo: the adapter echoes every byte the host sends (some RS-485 converters do): each frame sent is
+        read back and discarded before the reply is looked for.
+    poll_s: the read slice used to watch the deadline (it adds no latency: reads return as soon as bytes
+        arrive).
+    """
 
     timeout_s: float = 0.5
     retries: int = 2
     reopen: bool = True
     poll_s: float = 0.02
+    late_reply_s: float = OMRON_WORST_CASE_RESPONSE_S
+    echo: bool = False
 
     def __post_init__(self) -> None:
         if self.timeout_s <= 0 or self.poll_s <= 0:
             raise ValueError("timeout_s and poll_s must be positive")
         if self.retries < 0:
             raise ValueError("retries must be >= 0")
+        if self.late_reply_s < 0:
+            raise ValueError("late_reply_s must be >= 0")
 
 
 @dataclass
 class LinkCounters:
-    """What the link went through since it was opened (all requests, all nodes)."""
+    """What the link went through since it was opened (all requests, all nodes).
+
+    discarded_frames: well-formed replies that did not answer the request in hand (late, other node or
+    service, other content); skipped_bytes: bytes dropped before an STX; late_reply_waits: exchanges that
+    first waited out a reply owed by an unanswered request."""
 
     requests: int = 0
     attempts: int = 0
     retries: int = 0
     reopens: int = 0
     failures: int = 0
+    discarded_frames: int = 0
+    skipped_bytes: int = 0
+    late_reply_waits: int = 0
 
+
+ReplyMatcher = Callable[[ResponseFrame], bool]
+"""Says whether a normal reply (end code 00, response code 0000) for the right node and service carries
+what the request asked for (e.g. the number of elements)."""
 
 Opener = Callable[[], SerialLike]
 
@@ -99,11 +155,14 @@ class CompowayFPort:
         serial_settings: SerialSettings | None = None,
         link: LinkSettings | None = None,
         opener: Opener | None = None,
+        clock: Callable[[], float] = time.monotonic,
     ) -> None:
         """Open `url` (a device URL, see urls.py; a node= option in it is ignored here) at once.
 
         serial_settings and link default to the URL's options, else to the dataclass defaults. `opener`
-        replaces serial_for_url (tests pass a replay double). Raises PortOpenError if the port won't open.
+        replaces serial_for_url (tests pass a replay double); `clock` (monotonic seconds) times the
+        deadlines, tests pass the simulated clock of their double. Raises PortOpenError if the port won't
+        open.
         """
         parsed = parse_device_url(url, serial_settings)
         self.url = url
@@ -114,9 +173,13 @@ class CompowayFPort:
             link = LinkSettings(
                 timeout_s=parsed.timeout_s or defaults.timeout_s,
                 retries=defaults.retries if parsed.retries is None else parsed.retries,
+                late_reply_s=defaults.late_reply_s if parsed.late_reply_s is None else parsed.late_reply_s,
+                echo=parsed.echo,
             )
         self.link = link
         self.counters = LinkCounters()
+        self._clock = clock
+        self._unanswered_sent_s: float | None = None  # send time of a request whose reply may come late
         self._opener = opener or self._open_with_pyserial
         self._lock = threading.RLock()
         self._port: SerialLike | None = None
@@ -156,7 +219,7 @@ class CompowayFPort:
         fetch a reply byte by byte)."""
         if self._descriptor is None:
             return port.read(max(1, port.in_waiting))
-        wait_s = max(0.0, min(self.link.poll_s, deadline - time.monotonic()))
+        wait_s = max(0.0, min(self.link.poll_s, deadline - self._clock()))
         ready, _, _ = select.select([self._descriptor], [], [], wait_s)
         return port.read(READ_CHUNK_BYTES) if ready else b""
 
@@ -190,18 +253,34 @@ class CompowayFPort:
     def __exit__(self, *exc: object) -> None:
         self.close()
 
-    def request(self, node: int, service: str, data: str = "") -> ResponseFrame:
+    def request(
+        self, node: int, service: str, data: str = "", *, matches: ReplyMatcher | None = None
+    ) -> ResponseFrame:
         """Send one command and return its checked response (end code 00, response code 0000).
 
-        Retries retryable errors up to link.retries times; raises the last error (a CompowayFError).
+        Only a reply from `node` for `service` (and, for a normal reply, one `matches` accepts) answers the
+        command; others are discarded. Retries retryable errors up to link.retries times; raises the last
+        error (a CompowayFError).
         """
         frame = build_command(node, service, data)
+        service = service.upper()
+
+        def answers(response: ResponseFrame) -> bool:
+            if response.node != node:
+                return False
+            if not response.service:  # short error form: nothing to match it by
+                return True
+            if response.service != service:
+                return False
+            normal = response.end_code == NORMAL_END and response.response_code == NORMAL_COMPLETION
+            return not normal or matches is None or matches(response)
+
         with self._lock:
             self.counters.requests += 1
             for attempt in range(self.link.retries + 1):
                 try:
-                    reply = self._attempt(frame, f"node {node:02d} on {self.pyserial_url}")
-                    response = parse_response(reply)
+                    response = self._attempt(frame, f"node {node:02d} on {self.pyserial_url}", answers)
+                    assert isinstance(response, ResponseFrame)
                     check_response(response, node, service)
                     return response
                 except CompowayFError as exc:
@@ -214,9 +293,11 @@ class CompowayFPort:
     def exchange(self, frame: bytes) -> bytes:
         """One raw attempt: write `frame`, return the first complete frame that comes back (unparsed)."""
         with self._lock:
-            return self._attempt(frame, self.pyserial_url)
+            reply = self._attempt(frame, self.pyserial_url, None)
+            assert isinstance(reply, bytes)
+            return reply
 
-    def _attempt(self, frame: bytes, label: str) -> bytes:
+    def _usable_port(self, label: str) -> SerialLike:
         if self._closed:
             raise PortError(f"{label}: port is closed")
         if self._port is None:
@@ -227,23 +308,69 @@ class CompowayFPort:
             except PortOpenError as exc:
                 raise PortLostError(f"{self.pyserial_url}: port lost, re-open failed: {exc}") from exc
             self.counters.reopens += 1
-        port = self._port
+        return self._port
+
+    def _wait_out_late_reply(self, port: SerialLike) -> None:
+        """Drain the line until late_reply_s after the unanswered request, or until its reply came."""
+        sent_s, self._unanswered_sent_s = self._unanswered_sent_s, None
+        if sent_s is None:
+            return
+        until_s = sent_s + self.link.late_reply_s
+        if self._clock() >= until_s:
+            return
+        self.counters.late_reply_waits += 1
+        received = b""
+        while self._clock() < until_s:
+            received += self._read_available(port, until_s)
+            late, received, skipped = split_reply(received)
+            self.counters.skipped_bytes += skipped
+            if late is not None:
+                self.counters.discarded_frames += 1
+                return
+
+    def _attempt(
+        self, frame: bytes, label: str, answers: Callable[[ResponseFrame], bool] | None
+    ) -> ResponseFrame | bytes:
+        """Write `frame` and return the reply that answers it (parsed), or with answers=None the first
+        complete frame (raw bytes)."""
+        port = self._usable_port(label)
         self.counters.attempts += 1
         received = b""
+        echo_pending = self.link.echo
         try:
+            self._wait_out_late_reply(port)
             port.reset_input_buffer()
             port.write(frame)
-            deadline = time.monotonic() + self.link.timeout_s
+            sent_s = self._clock()
+            deadline = sent_s + self.link.timeout_s
             while True:
-                reply, _rest = split_frame(received)
-                if reply is not None:
-                    return reply
-                if time.monotonic() >= deadline:
+                if echo_pending:
+                    at = received.find(frame)
+                    if at >= 0:
+                        received, echo_pending = received[at + len(frame) :], False
+                if not echo_pending:
+                    reply, received, skipped = split_reply(received)
+                    self.counters.skipped_bytes += skipped
+                    if reply is not None:
+                        if answers is None:
+                            return reply
+                        response = parse_response(reply)
+                        if answers(response):
+                            return response
+                        self.counters.discarded_frames += 1
+                        continue
+                if self._clock() >= deadline:
                     break
                 received += self._read_available(port, deadline)
         except (serial.SerialException, OSError) as exc:
             self._drop_port()
             raise PortLostError(f"{label}: port lost ({exc})") from exc
+        self._unanswered_sent_s = sent_s
+        if echo_pending:
+            raise MissingEchoError(
+                f"{label}: the adapter did not echo the command within {self.link.timeout_s:g} s "
+                "(echo suppression is on: does this adapter echo?)"
+            )
         if received:
             raise IncompleteResponseError(
                 f"{label}: reply incomplete after {self.link.timeout_s:g} s "

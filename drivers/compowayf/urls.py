@@ -5,9 +5,14 @@
     socket://127.0.0.1:9000?node=2                           a serial-to-Ethernet converter or simulator
 
 Everything goes through pyserial's serial_for_url in the end; the query keys this module understands
-(node, baudrate, bytesize, parity, stopbits, timeout_s, retries) are taken out of the URL first because
+(node, baudrate, bytesize, parity, stopbits, timeout_s, retries, late_reply_s, echo) are taken out of the URL
+first because
 pyserial's URL handlers reject options they do not know. Other query options (e.g. socket's logging=debug)
 are passed on to pyserial untouched. "serial://" + path is not a pyserial scheme: it means the plain path.
+
+Link options (drivers.compowayf.transport.LinkSettings): timeout_s= the reply timeout (default 0.5 s; OMRON
+documents replies up to 3 s), late_reply_s= how long after an unanswered request to drain the line before the
+next one (default 3 s, OMRON's worst case), retries=, echo=1 for an adapter that echoes the host's frames.
 """
 
 from __future__ import annotations
@@ -70,6 +75,13 @@ class DeviceUrl:
     serial: SerialSettings = field(default_factory=SerialSettings)
     timeout_s: float | None = None
     retries: int | None = None
+    late_reply_s: float | None = None
+    echo: bool = False
+
+
+_BOOLEANS = {word: True for word in ("1", "true", "yes", "on")} | {
+    word: False for word in ("0", "false", "no", "off")
+}
 
 
 def _number(key: str, text: str, kind: type[int] | type[float]) -> float:
@@ -91,6 +103,8 @@ def parse_device_url(url: str, serial_defaults: SerialSettings | None = None) ->
     node: int | None = None
     timeout_s: float | None = None
     retries: int | None = None
+    late_reply_s: float | None = None
+    echo = False
     passed_on: list[tuple[str, str]] = []
     for key, value in parse_qsl(query, keep_blank_values=True):
         if key == "node":
@@ -109,6 +123,14 @@ def parse_device_url(url: str, serial_defaults: SerialSettings | None = None) ->
             timeout_s = _number(key, value, float)
             if timeout_s <= 0:
                 raise DeviceUrlError(f"timeout_s must be positive, got {value}")
+        elif key == "late_reply_s":
+            late_reply_s = _number(key, value, float)
+            if late_reply_s < 0:
+                raise DeviceUrlError(f"late_reply_s must be >= 0, got {value}")
+        elif key == "echo":
+            if value.lower() not in _BOOLEANS:
+                raise DeviceUrlError(f"echo must be 1 or 0 (true/false), got {value!r}")
+            echo = _BOOLEANS[value.lower()]
         elif key == "retries":
             retries = int(_number(key, value, int))
             if retries < 0:
@@ -125,4 +147,4 @@ def parse_device_url(url: str, serial_defaults: SerialSettings | None = None) ->
     else:
         base = url.split("?", 1)[0]
         pyserial_url = base + ("?" + urlencode(passed_on) if passed_on else "")
-    return DeviceUrl(pyserial_url, node, serial, timeout_s, retries)
+    return DeviceUrl(pyserial_url, node, serial, timeout_s, retries, late_reply_s, echo)

@@ -7,22 +7,31 @@ one or more nodes on one transport, like an RS-485 multi-drop line: every node a
 number, commands for absent nodes get no reply. One thread per server; frames are parsed and built with
 drivers.compowayf.codec, the driver's own codec.
 
-Measured values: each read of the measured area takes a sample at bench.clock.now_s() (unless one was
-already taken at that simulated time) and pushes it into a ring buffer of `buffer_length` samples, newest at
-the configured address, older ones at the following addresses. Tests fill the buffer at a chosen rate by
-advancing the clock and calling `sample()`; a buffer not yet full repeats its oldest sample.
+Measured values live where the configuration says (area, type, address; by default the ZS-series
+measurement result, parameter area C020 address 3000, see drivers.compowayf.layout). Each read of the
+measured area takes a sample at bench.clock.now_s() (unless one was already taken at that simulated time)
+and pushes it into a buffer of `buffer_length` samples, newest at the configured address, older ones at the
+following addresses. Tests fill the buffer at a chosen rate by advancing the clock and calling `sample()`; a
+buffer not yet full repeats its oldest sample.
 
 Streaming amplifiers (a configuration with `sample_period_s` and a sample counter, see
-drivers.compowayf.amplifier.streaming_measured_config) sample on their own clock instead: sample k is taken
-at origin + k * sample_period_s, where origin is the bench time at which the amplifier was created. On
-every read (and every `sample()`), the samples due since the last one are taken, at their own instants
-(the bench keeps a short history of its motion for this), and the counter in front of the buffer says how
-many have been taken in all. Samples older than the buffer are counted but never measured.
+drivers.compowayf.layout.streaming_measured_config) sample on their own clock instead: sample k is taken at
+origin + k * sample_period_s, where origin is the bench time at which the amplifier was created, and is
+stored in ring slot k % buffer_length after the counter. On every read (and every `sample()`), the samples
+due since the last one are taken, at their own instants (the bench keeps a short history of its motion for
+this), and the counter says how many have been taken in all. Samples older than the ring are counted but
+never measured.
+
+Protocol limits as OMRON documents them: 0503 answers the model and the communications buffer size
+(BUFFER_SIZE_BYTES, 217 = 00D9 hex as OMRON's controllers report); a command frame longer than the buffer
+gets end code 18; a read of more elements than one reply may carry (25 double words, fewer when the buffer
+is smaller) gets response code 110B (response too long).
 
 Faults (`inject_fault`, `clear_faults`), switchable at run time, for one node or all, for the next `count`
 replies or until cleared: no reply, garbage bytes, bad BCC, a given end code, a given response code,
-out-of-range readings, an incomplete reply (no ETX/BCC) and, on TCP, a dropped connection (on a pty that
-one behaves as no reply).
+out-of-range readings, an incomplete reply (no ETX/BCC), a 0x00 byte before the reply's STX (an RS-485 line
+turning around) and, on TCP, a dropped connection (on a pty that one behaves as no reply). A line built with
+echo=True echoes every byte it receives before answering, as some RS-485 adapters do.
 """
 
 from __future__ import annotations
@@ -43,10 +52,11 @@ from typing import Self
 
 import numpy as np
 
-from drivers.compowayf.amplifier import COUNTER_MODULUS, AmplifierConfig, MeasuredArea
+from drivers.compowayf.amplifier import AmplifierConfig
 from drivers.compowayf.codec import (
     STX,
     CommandFrame,
+    ControllerAttributes,
     Service,
     StatusReport,
     build_end_code_response,
@@ -55,17 +65,22 @@ from drivers.compowayf.codec import (
     decode_variable_area_read,
     encode_values,
     is_hex,
+    max_elements_per_read,
     parameter_element_width,
     parse_command,
     split_frame,
     variable_element_width,
 )
 from drivers.compowayf.errors import CompowayFError, EndCodeError
+from drivers.compowayf.layout import COUNTER_MODULUS, MeasuredArea
 from simulators.coupling import BenchPhysics
 from simulators.devices.sensor_heads import ZX_LD40, HeadModel, SimulatedHead
 
-MAX_FRAME_BYTES = 256
-"""Longest command frame the simulated amplifier accepts (end code 18 beyond); an assumed buffer size."""
+BUFFER_SIZE_BYTES = 217
+"""The simulated amplifier's communications buffer (reported by 0503): longer command frames get end code 18,
+and a reply may not exceed it (response code 110B). 217 (00D9 hex) is what OMRON's controllers report: it
+holds a reply of 25 double words."""
+PARAMETER_READ_ECHO_CHARS = 12
 
 GARBAGE_REPLY = b"\xff\x00\x7e#GARBAGE#\x03\x5a"
 """What the GARBAGE fault sends: no STX, but an ETX and a byte after it, so it reads as a complete frame."""
@@ -87,6 +102,7 @@ class FaultKind(StrEnum):
     OUT_OF_RANGE = "out_of_range"
     INCOMPLETE = "incomplete"
     DROP_CONNECTION = "drop_connection"
+    NULL_BEFORE_STX = "null_before_stx"
 
 
 @dataclass
@@ -127,6 +143,7 @@ class SimulatedAmplifier:
         self.parameters = dict(DEFAULT_PARAMETERS if parameters is None else parameters)
         self._lock = threading.RLock()
         self._buffer: deque[int] = deque(maxlen=self.config.measured.buffer_length)
+        self._ring = [self.config.measured.out_of_range_marker] * self.config.measured.buffer_length
         self._last_sample_s: float | None = None
         self._last_reading_m: float | None = None
         self._zero_m = 0.0
@@ -171,10 +188,10 @@ class SimulatedAmplifier:
         there is no reading or the value does not fit the element width."""
         measured = self.config.measured
         bits = 4 * measured.element_width
+        marker = measured.out_of_range_marker
         with np.errstate(invalid="ignore"):
             counts = np.round((readings_m - self._zero_m) / measured.count_unit.metres)
-            fits = (counts >= -(2 ** (bits - 1))) & (counts < 2**bits)
-        marker = measured.out_of_range_marker
+            fits = (counts >= -(2 ** (bits - 1))) & (counts < marker - 15)
         return [int(c) if ok else marker for c, ok in zip(counts.tolist(), fits.tolist(), strict=True)]
 
     def _take(self, at_s: float | None = None) -> None:
@@ -189,10 +206,12 @@ class SimulatedAmplifier:
         period_s = self.config.measured.sample_period_s
         assert period_s is not None
         due = int((now_s - self._origin_s) / period_s + 1e-9) + 1
-        first = max(self._samples_taken, due - self.config.measured.buffer_length)
+        measured = self.config.measured
+        first = max(self._samples_taken, due - measured.buffer_length)
         if due > first:
             readings = self.head.measure_many_m(self._origin_s + np.arange(first, due) * period_s)
-            self._buffer.extendleft(self._counts_many(readings))
+            for number, counts in zip(range(first, due), self._counts_many(readings), strict=True):
+                self._ring[measured.slot_of(number)] = counts
             self._last_reading_m = None if np.isnan(readings[-1]) else float(readings[-1])
             self._last_out_of_range = self._last_reading_m is None
         self._samples_taken = max(self._samples_taken, due)
@@ -208,9 +227,10 @@ class SimulatedAmplifier:
         A streaming amplifier takes every sample due on its own clock instead."""
         now_s = self.head.bench.clock.now_s()
         with self._lock:
-            if self.config.measured.is_streaming:
+            measured = self.config.measured
+            if measured.is_streaming:
                 self._catch_up(now_s)
-                return self._buffer[0]
+                return self._ring[measured.slot_of(self._samples_taken - 1)]
             if self._last_sample_s != now_s or not self._buffer:
                 self._take()
                 self._last_sample_s = now_s
@@ -219,7 +239,10 @@ class SimulatedAmplifier:
     def _rezero_newest(self) -> None:
         """Express the newest sample against the new zero, so a zero reset shows at once even when the
         simulated clock has not moved since that sample."""
-        if self._buffer:
+        measured = self.config.measured
+        if measured.is_streaming and self._samples_taken:
+            self._ring[measured.slot_of(self._samples_taken - 1)] = self._counts_for(self._last_reading_m)
+        elif self._buffer:
             self._buffer[0] = self._counts_for(self._last_reading_m)
 
     def buffered_counts(self, count: int) -> list[int]:
@@ -272,6 +295,9 @@ class SimulatedAmplifier:
             request = decode_variable_area_read(data)
             if request.bit_position != 0 or request.count == 0:
                 raise _RefusalError("1100")
+            width = variable_element_width(request.area_type)
+            if request.count > max_elements_per_read(width, BUFFER_SIZE_BYTES):
+                raise _RefusalError("110B")
             values = self._read(
                 MeasuredArea.VARIABLE, request.area_type, request.start_address, request.count, out_of_range
             )
@@ -281,6 +307,9 @@ class SimulatedAmplifier:
             request = decode_parameter_area_request(data)
             if request.count == 0:
                 raise _RefusalError("1100")
+            width = parameter_element_width(request.area_type)
+            if request.count > max_elements_per_read(width, BUFFER_SIZE_BYTES, PARAMETER_READ_ECHO_CHARS):
+                raise _RefusalError("110B")
             values = self._read(
                 MeasuredArea.PARAMETER, request.area_type, request.start_address, request.count, out_of_range
             )
@@ -290,7 +319,7 @@ class SimulatedAmplifier:
             return ""
         if service == Service.MODEL_READ:
             self._expect_length(data, 0)
-            return self.model_name
+            return ControllerAttributes(self.model_name, BUFFER_SIZE_BYTES).encode()
         if service == Service.STATUS_READ:
             self._expect_length(data, 0)
             return self.status().encode()
@@ -321,24 +350,12 @@ class SimulatedAmplifier:
         self, area: MeasuredArea, area_type: int, start: int, count: int, out_of_range: bool
     ) -> list[int]:
         measured = self.config.measured
-        if (
-            measured.counter_address is not None
-            and start == measured.counter_address
-            and self._measured_slice(area, area_type, measured.address) is not None
-        ):
-            if count - 1 > measured.buffer_length:
-                raise _RefusalError("1104")
-            with self._lock:  # counter and samples from one instant
-                samples = (
-                    self._read(area, area_type, measured.address, count - 1, out_of_range)
-                    if count > 1
-                    else []
-                )
-                if count == 1:
-                    self.sample()
-                return [self._samples_taken % COUNTER_MODULUS, *samples]
+        if measured.is_streaming and area is measured.area and area_type == measured.area_type:
+            ring = self._read_ring(start, count, out_of_range)
+            if ring is not None:
+                return ring
         offset = self._measured_slice(area, area_type, start)
-        if offset is not None:
+        if offset is not None and not measured.is_streaming:
             if offset + count > measured.buffer_length:
                 raise _RefusalError("1104")
             if out_of_range:
@@ -347,6 +364,22 @@ class SimulatedAmplifier:
         self._check_parameter_range(area, area_type, start, count)
         with self._lock:
             return [self.parameters[(area_type, address)] for address in range(start, start + count)]
+
+    def _read_ring(self, start: int, count: int, out_of_range: bool) -> list[int] | None:
+        """Streaming: counter (at counter_address) and ring slots after it; None for other addresses."""
+        measured = self.config.measured
+        assert measured.counter_address is not None
+        first = start - measured.counter_address  # 0 = the counter, 1.. = ring slots 0..
+        if not 0 <= first <= measured.buffer_length:
+            return None
+        if first + count - 1 > measured.buffer_length:
+            raise _RefusalError("1104")
+        with self._lock:  # counter and slots from one instant
+            self.sample()
+            words = [self._samples_taken % COUNTER_MODULUS, *self._ring]
+            if out_of_range:
+                words[1:] = [measured.out_of_range_marker] * measured.buffer_length
+            return words[first : first + count]
 
     def _check_parameter_range(self, area: MeasuredArea, area_type: int, start: int, count: int) -> None:
         measured = self.config.measured
@@ -384,7 +417,7 @@ def _next_command(buffer: bytes) -> tuple[bytes | None, bytes]:
     if frame is not None:
         last_stx = frame[:-1].rfind(bytes([STX]))
         frame = frame[last_stx:]
-    elif len(rest) > 4 * MAX_FRAME_BYTES:
+    elif len(rest) > 4 * BUFFER_SIZE_BYTES:
         rest = b""
     return frame, rest
 
@@ -392,11 +425,13 @@ def _next_command(buffer: bytes) -> tuple[bytes | None, bytes]:
 class AmplifierLine:
     """Nodes sharing one transport, fault injection, and the bytes-in/bytes-out logic of both servers."""
 
-    def __init__(self, amplifiers: Mapping[int, SimulatedAmplifier]) -> None:
+    def __init__(self, amplifiers: Mapping[int, SimulatedAmplifier], *, echo: bool = False) -> None:
+        """echo: the line echoes every byte the host sends (an RS-485 adapter that hears itself)."""
         for node in amplifiers:
             if not 0 <= node <= 99:
                 raise ValueError(f"node numbers are 0..99, got {node}")
         self.amplifiers: dict[int, SimulatedAmplifier] = dict(amplifiers)
+        self.echo = echo
         self.commands_received = 0
         self._faults: list[Fault] = []
         self._faults_lock = threading.Lock()
@@ -439,7 +474,7 @@ class AmplifierLine:
         """(reply bytes or None for silence, drop the connection?) for one received command frame."""
         self.commands_received += 1
         try:
-            command = parse_command(frame, max_frame_bytes=MAX_FRAME_BYTES)
+            command = parse_command(frame, max_frame_bytes=BUFFER_SIZE_BYTES)
         except EndCodeError as exc:
             if exc.node not in self.amplifiers:
                 return None, False
@@ -473,6 +508,8 @@ class AmplifierLine:
                 )
                 reply = build_response(node, command.service, response_code, data)
         assert reply is not None
+        if kind is FaultKind.NULL_BEFORE_STX:
+            return b"\x00" + reply, False
         if kind is FaultKind.BAD_BCC:
             return reply[:-1] + bytes([reply[-1] ^ 0x5A]), False
         if kind is FaultKind.INCOMPLETE:
@@ -514,8 +551,8 @@ class _ServedLine(AmplifierLine):
 class PtyAmplifierServer(_ServedLine):
     """Amplifiers on a pseudo-terminal; the driver opens `port_path` (or `device_url(node)`) as a port."""
 
-    def __init__(self, amplifiers: Mapping[int, SimulatedAmplifier]) -> None:
-        super().__init__(amplifiers)
+    def __init__(self, amplifiers: Mapping[int, SimulatedAmplifier], *, echo: bool = False) -> None:
+        super().__init__(amplifiers, echo=echo)
         self._master, self._slave = os.openpty()
         tty.setraw(self._slave)  # no echo, no line editing: the line carries binary BCC bytes
         self.port_path = os.ttyname(self._slave)
@@ -542,9 +579,12 @@ class PtyAmplifierServer(_ServedLine):
             if self._wake_r in ready:
                 return
             try:
-                buffer += os.read(self._master, 4096)
+                chunk = os.read(self._master, 4096)
             except OSError:
                 return
+            if self.echo:
+                os.write(self._master, chunk)
+            buffer += chunk
             while True:
                 frame, buffer = _next_command(buffer)
                 if frame is None:
@@ -559,9 +599,14 @@ class TcpAmplifierServer(_ServedLine):
     to `url` = socket://127.0.0.1:PORT. Several clients may connect; each is served in turn by one thread."""
 
     def __init__(
-        self, amplifiers: Mapping[int, SimulatedAmplifier], host: str = "127.0.0.1", port: int = 0
+        self,
+        amplifiers: Mapping[int, SimulatedAmplifier],
+        host: str = "127.0.0.1",
+        port: int = 0,
+        *,
+        echo: bool = False,
     ) -> None:
-        super().__init__(amplifiers)
+        super().__init__(amplifiers, echo=echo)
         self._listener = socket.create_server((host, port))
         self._listener.setblocking(False)
         self.host, self.port = self._listener.getsockname()[:2]
@@ -620,6 +665,12 @@ class TcpAmplifierServer(_ServedLine):
         if not chunk:
             self._close_client(conn, buffers)
             return
+        if self.echo:
+            try:
+                conn.sendall(chunk)
+            except OSError:
+                self._close_client(conn, buffers)
+                return
         buffer = buffers[conn] + chunk
         while True:
             frame, buffer = _next_command(buffer)

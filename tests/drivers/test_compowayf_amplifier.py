@@ -8,6 +8,7 @@ from __future__ import annotations
 import math
 import socket
 from collections.abc import Iterator
+from dataclasses import replace
 
 import pytest
 
@@ -62,11 +63,13 @@ PARAM_REPLY = (
 # Model read, node 01: "01" "00" "0" "0503" ETX: '0' x6 -> 0, '1' 0x31, '5' 0x35, '3' 0x33:
 # 0x31^0x35 = 0x04, ^0x33 = 0x37, ^0x03 = 0x34
 MODEL = b"\x02" + b"01" + b"00" + b"0" + b"0503" + b"\x03" + b"\x34"
-# Reply "ZX-LDA11-N": "01" "00" "00" "0503" "0000" "ZX-LDA11-N" ETX: '0' x11 -> 0x30, '1' x3 -> 0x31,
-# '5' 0x35, '3' 0x33, '-' x2 -> 0, 'Z' 0x5A, 'X' 0x58, 'L' 0x4C, 'D' 0x44, 'A' 0x41, 'N' 0x4E, ETX:
-# 0x30^0x31 = 0x01, ^0x35 = 0x34, ^0x33 = 0x07, ^0x5A = 0x5D, ^0x58 = 0x05, ^0x4C = 0x49, ^0x44 = 0x0D,
-# ^0x41 = 0x4C, ^0x4E = 0x02, ^0x03 = 0x01
-MODEL_REPLY = b"\x02" + b"01" + b"00" + b"00" + b"0503" + b"0000" + b"ZX-LDA11-N" + b"\x03" + b"\x01"
+# Reply model "ZX-LDA11-N" and buffer size 00D9 (217 bytes): "01" "00" "00" "0503" "0000" "ZX-LDA11-N"
+# "00D9" ETX: '0' x13 -> 0x30, '1' x3 -> 0x31, '5' 0x35, '3' 0x33, '-' x2 -> 0, 'Z' 0x5A, 'X' 0x58,
+# 'L' 0x4C, 'D' x2 -> 0, 'A' 0x41, 'N' 0x4E, '9' 0x39, ETX: 0x30^0x31 = 0x01, ^0x35 = 0x34, ^0x33 = 0x07,
+# ^0x5A = 0x5D, ^0x58 = 0x05, ^0x4C = 0x49, ^0x41 = 0x08, ^0x4E = 0x46, ^0x39 = 0x7F, ^0x03 = 0x7C
+MODEL_REPLY = (
+    b"\x02" + b"01" + b"00" + b"00" + b"0503" + b"0000" + b"ZX-LDA11-N" + b"00D9" + b"\x03" + b"\x7c"
+)
 # Zero reset (placeholder code 01/00), node 01: "01" "00" "0" "3005" "0100": '0' x9 -> 0x30, '1' x2 -> 0,
 # '3' 0x33, '5' 0x35: 0x30^0x33 = 0x03, ^0x35 = 0x36, ^0x03 = 0x35
 ZERO_RESET = b"\x02" + b"01" + b"00" + b"0" + b"3005" + b"0100" + b"\x03" + b"\x35"
@@ -123,6 +126,10 @@ def replay() -> Iterator[list[ReplayPort]]:
         port.assert_consumed()
 
 
+VARIABLE_C0 = MeasuredValueConfig(area=MeasuredArea.VARIABLE, area_type=0xC0, address=0x0000)
+"""The frames above read variable area C0 from address 0000 (an E5CC-like layout, not the ZX default)."""
+
+
 def _amplifier(
     ports: list[ReplayPort],
     exchanges: list[tuple[bytes, bytes]],
@@ -131,8 +138,8 @@ def _amplifier(
 ) -> ZxlAmplifier:
     port = ReplayPort(exchanges)
     ports.append(port)
-    config = AmplifierConfig(measured=measured or MeasuredValueConfig())
-    link = LinkSettings(timeout_s=0.05, retries=retries)
+    config = AmplifierConfig(measured=measured or VARIABLE_C0)
+    link = LinkSettings(timeout_s=0.05, retries=retries, late_reply_s=0.05)
     return ZxlAmplifier.open("loop://?node=1", config=config, link=link, opener=lambda: port)
 
 
@@ -142,14 +149,14 @@ def test_read_position_m(replay: list[ReplayPort]) -> None:
 
 
 def test_count_unit_tenth_micrometre(replay: list[ReplayPort]) -> None:
-    measured = MeasuredValueConfig(count_unit=CountUnit.TENTH_MICROMETRE)
+    measured = replace(VARIABLE_C0, count_unit=CountUnit.TENTH_MICROMETRE)
     amplifier = _amplifier(replay, [(READ_ONE, REPLY_MINUS_1000)], measured)
     assert amplifier.read_position_m() == pytest.approx(-1000e-7)
 
 
 def test_buffer_read_is_returned_oldest_first(replay: list[ReplayPort]) -> None:
     amplifier = _amplifier(
-        replay, [(READ_TWO, REPLY_TWO), (READ_TWO, REPLY_TWO)], MeasuredValueConfig(buffer_length=2)
+        replay, [(READ_TWO, REPLY_TWO), (READ_TWO, REPLY_TWO)], replace(VARIABLE_C0, buffer_length=2)
     )
     assert amplifier.read_counts(2) == [1000, -1000]  # amplifier order: newest first
     assert amplifier.read_samples_m(2) == pytest.approx([-1e-6, 1e-6])
@@ -165,7 +172,7 @@ def test_out_of_range_marker(replay: list[ReplayPort]) -> None:
 
 
 def test_measured_value_in_parameter_area(replay: list[ReplayPort]) -> None:
-    measured = MeasuredValueConfig(area=MeasuredArea.PARAMETER, area_type=0xC000)
+    measured = MeasuredValueConfig(area=MeasuredArea.PARAMETER, area_type=0xC000, address=0x0000)
     amplifier = _amplifier(replay, [(PARAM_READ, PARAM_REPLY)], measured)
     assert amplifier.read_position_m() == pytest.approx(100e-9)
 
@@ -173,6 +180,7 @@ def test_measured_value_in_parameter_area(replay: list[ReplayPort]) -> None:
 def test_model_and_zero_reset(replay: list[ReplayPort]) -> None:
     amplifier = _amplifier(replay, [(MODEL, MODEL_REPLY), (ZERO_RESET, ZERO_RESET_REPLY)])
     assert amplifier.read_model() == "ZX-LDA11-N"
+    assert amplifier.buffer_size_bytes == 217
     amplifier.zero_reset()
 
 
@@ -210,12 +218,13 @@ def test_no_reply_is_a_timeout(replay: list[ReplayPort]) -> None:
         amplifier.read_position_m()
 
 
-def test_reply_from_another_node(replay: list[ReplayPort]) -> None:
+def test_reply_from_another_node_is_discarded_not_returned(replay: list[ReplayPort]) -> None:
     # REPLY_MINUS_1000 with node "02": one '1' becomes '2', so BCC = 0x0E ^ 0x31 ^ 0x32 = 0x0D
     other_node = b"\x02" + b"02" + b"00" + b"00" + b"0101" + b"0000" + b"FFFFFC18" + b"\x03" + b"\x0d"
     amplifier = _amplifier(replay, [(READ_ONE, other_node)])
-    with pytest.raises(errors.UnexpectedResponseError, match="node 02"):
+    with pytest.raises(errors.ResponseTimeoutError, match="no reply"):
         amplifier.read_position_m()
+    assert amplifier.port.counters.discarded_frames == 1
 
 
 def test_rate_meter_with_a_fake_clock() -> None:
@@ -283,4 +292,6 @@ def test_measured_value_config_checks() -> None:
     with pytest.raises(ValueError):
         MeasuredValueConfig(buffer_length=0)
     with pytest.raises(ValueError):
-        MeasuredValueConfig(area_type=0x1C0)
+        MeasuredValueConfig(area=MeasuredArea.VARIABLE, area_type=0x1C0)
+    with pytest.raises(ValueError):
+        MeasuredValueConfig(address=0xFFFF, buffer_length=2)

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import pytest
@@ -29,7 +29,8 @@ from simulators.devices.laser_amplifier import (
 from simulators.devices.sensor_heads import ZX_LD40, ZX_LD100, SimulatedHead
 from simulators.plate import PlateOnlyBench
 
-FAST = LinkSettings(timeout_s=0.2, retries=0)
+FAST = LinkSettings(timeout_s=0.2, late_reply_s=0.2, retries=0)
+"""The simulated amplifier answers at once or never: no late reply to wait out after a timeout."""
 SWEEP = SweepSettings(start_Hz=1.0, stop_Hz=5.0, amplitude_m=0.004, duration_s=600.0)
 
 
@@ -163,7 +164,8 @@ def test_plain_device_path_on_the_pty(bench: PlateOnlyBench) -> None:
 
 
 def test_sample_buffer_read_oldest_first(bench: PlateOnlyBench, transport: str) -> None:
-    config = AmplifierConfig(measured=MeasuredValueConfig(buffer_length=4))
+    measured = MeasuredValueConfig(area=MeasuredArea.VARIABLE, area_type=0xC0, address=0, buffer_length=4)
+    config = AmplifierConfig(measured=measured)
     amplifier = SimulatedAmplifier.for_channel(bench, "x_r", config=config, noise_sigma_m=0.0)
     bench.start_sweep(SWEEP)
     expected_m = []
@@ -275,7 +277,7 @@ def test_dropped_tcp_connection_is_port_lost_then_reopened(bench: PlateOnlyBench
 
 def test_server_gone_is_port_lost(bench: PlateOnlyBench) -> None:
     server = TcpAmplifierServer({1: SimulatedAmplifier.for_channel(bench, "x_r")}).start()
-    driver = ZxlAmplifier.open(server.device_url(1), link=LinkSettings(timeout_s=0.2, retries=1))
+    driver = ZxlAmplifier.open(server.device_url(1), link=replace(FAST, retries=1))
     driver.read_counts()
     server.stop()
     with pytest.raises(errors.PortLostError, match="re-open failed"):
@@ -296,7 +298,7 @@ def test_server_gone_is_port_lost(bench: PlateOnlyBench) -> None:
 )
 def test_retries_hide_a_one_off_fault(rig: Rig, kind: FaultKind, code: str) -> None:
     bench, server, driver = rig.bench, rig.server, rig.driver
-    driver.port.link = LinkSettings(timeout_s=0.2, retries=2)
+    driver.port.link = replace(FAST, retries=2)
     retries_before = driver.port.counters.retries
     bench.clock.advance(0.01)
     server.inject_fault(kind, code, count=1)
@@ -307,7 +309,7 @@ def test_retries_hide_a_one_off_fault(rig: Rig, kind: FaultKind, code: str) -> N
 def test_dropped_connection_hidden_by_retry(bench: PlateOnlyBench) -> None:
     with (
         TcpAmplifierServer({1: SimulatedAmplifier.for_channel(bench, "x_r", noise_sigma_m=0.0)}) as server,
-        ZxlAmplifier.open(server.device_url(1), link=LinkSettings(timeout_s=0.2, retries=1)) as driver,
+        ZxlAmplifier.open(server.device_url(1), link=replace(FAST, retries=1)) as driver,
     ):
         server.inject_fault(FaultKind.DROP_CONNECTION, count=1)
         assert driver.read_position_m() == 0.0
@@ -316,7 +318,7 @@ def test_dropped_connection_hidden_by_retry(bench: PlateOnlyBench) -> None:
 
 def test_refusal_is_not_retried_by_the_link(rig: Rig) -> None:
     server, driver = rig.server, rig.driver
-    driver.port.link = LinkSettings(timeout_s=0.2, retries=2)
+    driver.port.link = replace(FAST, retries=2)
     server.inject_fault(FaultKind.RESPONSE_CODE, "2204", count=2)
     before = server.commands_received
     with pytest.raises(errors.NotInRunModeError, match="2204"):
