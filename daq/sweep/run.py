@@ -16,8 +16,15 @@ recording is kept, closed as complete or as incomplete with the reason:
 * a source silent for `silence_timeout_s` (no new samples: the line is down, the amplifier stopped
   answering or sampling): controlled stop, "sensor silence: ...";
 * the exciter's link lost (status cannot be read): controlled stop attempted, "lost link to exciter ...";
+  the drive refuses the status read (an exception code): controlled stop, "exciter refused ...";
 * the exciter reports a fault: emergency stop, "exciter fault 0x....";
+* the drive reports a frequency or plate position outside the safety envelope, or runs past the sweep's
+  end: the driver's own emergency stop, "envelope breach: ...";
 * any other error on the host: controlled stop, "host error: ...".
+
+Supervision: every cycle reads the drive's status, checks it (fault, envelope, then the sources' silence)
+and only then feeds the drive's watchdog (PlateExciter.supervise). There is no other keep-alive: when a
+status read fails or a check finds something wrong, the keep-alive ends with that cycle.
 
 A controlled stop that cannot be sent is followed by an emergency stop; if neither reaches the drive, its
 watchdog stops the plate once the keep-alive has ended (both stops end it first), and the outcome says so.
@@ -49,8 +56,8 @@ from daq.sweep.pacing import Pacing, RealtimePacing
 from drivers.compowayf.amplifier import ZxlAmplifier
 from drivers.compowayf.transport import CompowayFPort
 from drivers.exciter.codes import ExciterState
+from drivers.exciter.errors import EnvelopeBreachError, ExciterDeviceExceptionError
 from drivers.exciter.interface import ExciterStatus, PlateExciter
-from drivers.exciter.urls import open_exciter
 
 log = logging.getLogger(__name__)
 
@@ -233,8 +240,8 @@ class _SweepRun:
             self.sources.append(source)
             lines[url].append(source)
         try:
-            self.exciter = await open_exciter(
-                self.config.exciter.url, envelope=self.config.safety_envelope(), clock=self.clock
+            self.exciter = await self.config.exciter.open(
+                envelope=self.config.safety_envelope(), clock=self.clock
             )
             status = await self.exciter.status()
         except Exception as exc:
@@ -338,16 +345,28 @@ class _SweepRun:
             await self._cycle()
 
     async def _cycle(self) -> ExciterStatus:
-        """One orchestration cycle: write the final rows, check the drive and the sources, report."""
+        """One orchestration cycle: write the final rows, supervise the drive (status read and checked, the
+        sources checked, then the keep-alive), report."""
         assert self.recorder is not None and self.exciter is not None
         await asyncio.to_thread(self.recorder.step)
         try:
-            status = await self.exciter.status()
+            status = await self.exciter.supervise(self._check_cycle)
+        except SweepFaultError:
+            raise
+        except EnvelopeBreachError as breach:
+            raise SweepFaultError(f"envelope breach: {breach}", emergency=True) from None
+        except ExciterDeviceExceptionError as exc:
+            raise SweepFaultError(f"exciter refused the status read: {exc}") from None
         except Exception as exc:
             raise SweepFaultError(f"lost link to exciter: {type(exc).__name__}: {exc}") from None
+        self.frequency_Hz = status.frequency_Hz
+        self._report()
+        return status
+
+    def _check_cycle(self, status: ExciterStatus) -> None:
+        """The cycle's checks, run after the status read and before the keep-alive (SweepFaultError)."""
         if status.is_fault:
             raise SweepFaultError(f"exciter fault 0x{status.fault_code:04X}", emergency=True)
-        self.frequency_Hz = status.frequency_Hz
         for source in self.sources:
             silent_s = source.seconds_since_data()
             if silent_s > self.silence_timeout_s:
@@ -356,8 +375,6 @@ class _SweepRun:
                     f"sensor silence: laser {source.name!r} ({source.channel}) delivered nothing for "
                     f"{silent_s:.2f} s (last error: {error})"
                 )
-        self._report()
-        return status
 
     # ---- stopping and finishing -------------------------------------------------------------------------
 

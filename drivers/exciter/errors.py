@@ -71,6 +71,25 @@ class EnvelopeViolationError(ExciterError, ValueError):
         self.limit = limit
 
 
+class EnvelopeBreachError(ExciterError):
+    """While a sweep ran, the drive reported a frequency or plate position outside the safety envelope, or
+    kept running past the sweep's end. The driver sent an emergency stop before raising this
+    (`stopped` says whether the drive acknowledged it; if not, the keep-alive has ended and the drive's
+    watchdog stops the plate)."""
+
+    def __init__(self, quantity: str, value: float, limit_name: str, limit: float, stopped: bool) -> None:
+        action = "emergency stop sent" if stopped else "emergency stop failed: the drive's watchdog must act"
+        super().__init__(
+            f"drive reported {quantity}={value:.6g} outside the safety envelope ({limit_name}={limit:.6g}); "
+            f"{action}"
+        )
+        self.quantity = quantity
+        self.value = value
+        self.limit_name = limit_name
+        self.limit = limit
+        self.stopped = stopped
+
+
 class ExciterEncodingError(ExciterError, ValueError):
     """A value cannot be represented on the wire (out of the register or signal range after scaling);
     raised before anything is sent."""

@@ -4,12 +4,17 @@ Registers follow a `RegisterMap` (TOML, see default_register_map.toml). The swee
 per run of consecutive holding registers, commands and keep-alives as single-register writes, and the
 status is one read of the input-register block.
 
+Every request, keep-alives included, goes through one asyncio.Lock of the driver: one request on the
+link at a time, and no request can wait inside pymodbus while another one closes the link under it.
+
 Error translation (pymodbus 3.16): an exception response -> ExciterDeviceExceptionError with the Modbus
-exception code; no response within `timeout_s` -> ExciterTimeoutError (the link is then closed, so no
-late answer can be mistaken for the next one); a connection that drops during a request ->
-ExciterConnectionLostError at once (not after the timeout). The next operation reconnects. pymodbus's
-own automatic reconnection is disabled (reconnect_delay=0) and it does not retry (retries=0): the caller
-decides.
+exception code; no response within `timeout_s` -> ExciterTimeoutError; a connection that drops during a
+request -> ExciterConnectionLostError at once (not after the timeout). After a timeout or a drop the link
+is marked down first, then its pymodbus client is closed and dropped: no late answer can be mistaken for
+the next request's, and the next operation connects a new client. (Reconnecting the same client is not
+safe: asyncio delivers the old socket's connection_lost later, to the same pymodbus protocol object, which
+then closes the new socket.) pymodbus's own automatic reconnection is disabled (reconnect_delay=0) and it
+does not retry (retries=0): the caller decides.
 """
 
 from __future__ import annotations
@@ -17,7 +22,7 @@ from __future__ import annotations
 import asyncio
 import time
 from collections.abc import Awaitable, Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from pymodbus import FramerType
 from pymodbus.client import AsyncModbusSerialClient, AsyncModbusTcpClient
@@ -63,6 +68,15 @@ class ModbusRtuLink:
 
 
 ModbusLink = ModbusTcpLink | ModbusRtuLink
+ModbusClient = AsyncModbusTcpClient | AsyncModbusSerialClient
+
+
+@dataclass
+class _Connection:
+    """One connected pymodbus client and the event its trace_connect hook sets when it drops."""
+
+    client: ModbusClient
+    dropped: asyncio.Event = field(default_factory=asyncio.Event)
 
 
 class ModbusExciter(PlateExciter):
@@ -84,19 +98,28 @@ class ModbusExciter(PlateExciter):
         self.unit = unit
         self.register_map = register_map or RegisterMap.default()
         self.timeout_s = timeout_s
-        self._client: AsyncModbusTcpClient | AsyncModbusSerialClient | None = None
-        self._link_down: asyncio.Event | None = None
+        self._lock = asyncio.Lock()
+        self._connection: _Connection | None = None
+        self._open = False
+
+    @property
+    def link_up(self) -> bool:
+        """A connection is established and has not been marked down."""
+        connection = self._connection
+        return connection is not None and connection.client.connected and not connection.dropped.is_set()
 
     async def open(self) -> None:
-        if self._client is None:
-            self._link_down = asyncio.Event()
-            self._client = self._make_client()
-        await self._ensure_connected()
+        async with self._lock:
+            self._open = True
+            await self._connected()
 
-    def _make_client(self) -> AsyncModbusTcpClient | AsyncModbusSerialClient:
-        common = dict(
-            timeout=self.timeout_s, retries=0, reconnect_delay=0, trace_connect=self._on_link_change
-        )
+    def _make_client(self, dropped: asyncio.Event) -> ModbusClient:
+        def on_link_change(connected: bool) -> None:
+            """pymodbus trace_connect hook of this client only: a drop fails its pending request at once."""
+            if not connected:
+                dropped.set()
+
+        common = dict(timeout=self.timeout_s, retries=0, reconnect_delay=0, trace_connect=on_link_change)
         if isinstance(self.link, ModbusTcpLink):
             return AsyncModbusTcpClient(self.link.host, port=self.link.port, **common)  # type: ignore[arg-type]
         return AsyncModbusSerialClient(
@@ -109,66 +132,71 @@ class ModbusExciter(PlateExciter):
             **common,  # type: ignore[arg-type]
         )
 
-    def _on_link_change(self, connected: bool) -> None:
-        """pymodbus trace_connect hook: remember a drop so a pending request fails at once."""
-        if self._link_down is not None and not connected:
-            self._link_down.set()
-
-    async def _ensure_connected(self) -> None:
-        client = self._require_client()
-        if client.connected:
-            return
-        if not await client.connect():
-            raise ExciterConnectionLostError(f"cannot connect to the plate drive at {self.link}")
-        assert self._link_down is not None
-        self._link_down.clear()
-
-    def _require_client(self) -> AsyncModbusTcpClient | AsyncModbusSerialClient:
-        if self._client is None:
+    async def _connected(self) -> _Connection:
+        """The live connection, or a new client connected now (call with the lock held)."""
+        if not self._open:
             raise ExciterError("Modbus exciter is not open")
-        return self._client
+        if self.link_up:
+            assert self._connection is not None
+            return self._connection
+        self._mark_down()
+        dropped = asyncio.Event()
+        connection = _Connection(self._make_client(dropped), dropped)
+        if not await connection.client.connect():
+            connection.client.close()
+            raise ExciterConnectionLostError(f"cannot connect to the plate drive at {self.link}")
+        self._connection = connection
+        return connection
 
-    async def _request(self, what: str, call: Callable[[], Awaitable[ModbusPDU]]) -> ModbusPDU:
-        """Run one pymodbus request; translate every failure into a typed ExciterError."""
-        await self._ensure_connected()
-        assert self._link_down is not None
-        request = asyncio.ensure_future(call())
-        dropped = asyncio.ensure_future(self._link_down.wait())
-        try:
-            await asyncio.wait({request, dropped}, return_when=asyncio.FIRST_COMPLETED)
-        finally:
-            for task in (request, dropped):
-                task.cancel()
-            await asyncio.gather(request, dropped, return_exceptions=True)
-        if not (request.done() and not request.cancelled()):
-            raise ExciterConnectionLostError(f"{what}: connection to {self.link} lost")
-        try:
-            response = request.result()
-        except ConnectionException as exc:
-            raise ExciterConnectionLostError(f"{what}: {self.link}: {exc}") from exc
-        except ModbusIOException as exc:
-            self._require_client().close()  # a late answer must not be taken for the next request's
-            raise ExciterTimeoutError(
-                f"{what}: no answer from {self.link} within {self.timeout_s} s"
-            ) from exc
-        except ModbusException as exc:
-            raise ExciterError(f"{what}: {exc}") from exc
+    def _mark_down(self) -> None:
+        """Forget the current connection first (so nothing uses it again), then close it."""
+        connection, self._connection = self._connection, None
+        if connection is not None:
+            connection.client.close()
+
+    async def _request(self, what: str, call: Callable[[ModbusClient], Awaitable[ModbusPDU]]) -> ModbusPDU:
+        """Run one pymodbus request under the driver's lock; translate every failure into a typed
+        ExciterError, marking the link down on a timeout or a drop."""
+        async with self._lock:
+            connection = await self._connected()
+            request = asyncio.ensure_future(call(connection.client))
+            dropped = asyncio.ensure_future(connection.dropped.wait())
+            try:
+                await asyncio.wait({request, dropped}, return_when=asyncio.FIRST_COMPLETED)
+            finally:
+                for task in (request, dropped):
+                    task.cancel()
+                await asyncio.gather(request, dropped, return_exceptions=True)
+            if not (request.done() and not request.cancelled()):
+                self._mark_down()
+                raise ExciterConnectionLostError(f"{what}: connection to {self.link} lost")
+            try:
+                response = request.result()
+            except ConnectionException as exc:
+                self._mark_down()
+                raise ExciterConnectionLostError(f"{what}: {self.link}: {exc}") from exc
+            except ModbusIOException as exc:
+                self._mark_down()  # a late answer must not be taken for the next request's
+                raise ExciterTimeoutError(
+                    f"{what}: no answer from {self.link} within {self.timeout_s} s"
+                ) from exc
+            except ModbusException as exc:
+                raise ExciterError(f"{what}: {exc}") from exc
         if response.isError():
             code = int(getattr(response, "exception_code", 0))
             raise ExciterDeviceExceptionError(code, f"{what} refused by the drive at {self.link}")
         return response
 
     async def _write_holding(self, what: str, values: dict[str, float]) -> None:
-        client = self._require_client()
         runs = contiguous_runs(self.register_map.encode_holding(values))  # all encoded before any write
         for address, words in runs:
             if len(words) == 1:
                 await self._request(
-                    what, lambda a=address, w=words[0]: client.write_register(a, w, device_id=self.unit)
+                    what, lambda c, a=address, w=words[0]: c.write_register(a, w, device_id=self.unit)
                 )
             else:
                 await self._request(
-                    what, lambda a=address, ws=words: client.write_registers(a, ws, device_id=self.unit)
+                    what, lambda c, a=address, ws=words: c.write_registers(a, ws, device_id=self.unit)
                 )
 
     async def _write_sweep(self, settings: SweepSettings) -> None:
@@ -190,10 +218,9 @@ class ModbusExciter(PlateExciter):
         await self._write_holding("keep-alive", {"keepalive": counter})
 
     async def _read_status(self) -> ExciterStatus:
-        client = self._require_client()
         start, count = self.register_map.input_block()
         response = await self._request(
-            "read status", lambda: client.read_input_registers(start, count=count, device_id=self.unit)
+            "read status", lambda c: c.read_input_registers(start, count=count, device_id=self.unit)
         )
         if len(response.registers) != count:
             raise ExciterError(f"read status: expected {count} registers, got {len(response.registers)}")
@@ -203,5 +230,8 @@ class ModbusExciter(PlateExciter):
         )
 
     async def _close_transport(self) -> None:
-        if self._client is not None:
-            self._client.close()
+        async with self._lock:
+            self._open = False
+            connection, self._connection = self._connection, None
+            if connection is not None:
+                connection.client.close()

@@ -25,6 +25,9 @@ VIOLATIONS = [
     pytest.param(SweepSettings(stop_Hz=25.01), "stop_Hz", "max_frequency_Hz", id="stop"),
     pytest.param(SweepSettings(amplitude_m=math.nan), "amplitude_m", "max_amplitude_m", id="nan-amplitude"),
     pytest.param(SweepSettings(stop_Hz=math.inf), "stop_Hz", "max_frequency_Hz", id="inf-frequency"),
+    pytest.param(SweepSettings(duration_s=11 * 86400.0), "duration_s", "max_duration_s", id="11-days"),
+    pytest.param(SweepSettings(duration_s=300.001), "duration_s", "max_duration_s", id="just-too-long"),
+    pytest.param(SweepSettings(duration_s=math.inf), "duration_s", "max_duration_s", id="inf-duration"),
     pytest.param(
         SweepSettings(start_Hz=1.0, stop_Hz=30.0, law=SweepLaw.LOGARITHMIC),
         "stop_Hz",
@@ -129,7 +132,10 @@ def test_modbus_value_that_does_not_fit_a_register_is_refused_before_any_write()
     async def scenario() -> None:
         bench = PlateOnlyBench()
         async with SimulatedModbusExciter(bench) as sim:
-            async with ModbusExciter(ModbusTcpLink(sim.host, sim.port), timeout_s=0.5) as exciter:
+            long_sweeps = EnvelopeLimits(max_duration_s=1e7)  # an installation that allows them
+            envelope = SafetyEnvelope(long_sweeps, long_sweeps)
+            link = ModbusTcpLink(sim.host, sim.port)
+            async with ModbusExciter(link, timeout_s=0.5, envelope=envelope) as exciter:
                 with pytest.raises(ExciterEncodingError, match="sweep_duration_s"):
                     await exciter.configure_sweep(SweepSettings(duration_s=5e6))  # > u32 milliseconds
             assert sim.writes == []
@@ -156,3 +162,35 @@ def test_can_sends_nothing_for_a_violation(settings: SweepSettings, field: str, 
             assert sim.drive.commands == []
 
     asyncio.run(scenario())
+
+
+# ---- what the drive reports while the plate moves ----------------------------------------------------------
+
+
+def test_default_duration_limit_and_bench_may_shorten_it() -> None:
+    SafetyEnvelope().check(SweepSettings(duration_s=300.0))
+    envelope = SafetyEnvelope(EnvelopeLimits(max_duration_s=60.0))
+    with pytest.raises(EnvelopeViolationError, match=r"duration_s=61\.0.*max_duration_s=60\.0"):
+        envelope.check(SweepSettings(duration_s=61.0))
+    with pytest.raises(ExciterConfigError, match="max_duration_s"):
+        SafetyEnvelope(EnvelopeLimits(max_duration_s=301.0))  # above the hard limit
+
+
+@pytest.mark.parametrize(
+    ("frequency_Hz", "position_m", "running_for_s", "expected"),
+    [
+        (20.0, 0.004, 10.0, None),  # the standard sweep at its peak
+        (25.0 * 1.05, -0.004 * 1.05, 20.9, None),  # within the reporting margin, before the overrun margin
+        (26.3, 0.0, 1.0, ("frequency_Hz", "max_frequency_Hz")),
+        (5.0, -0.0043, 1.0, ("position_m", "max_amplitude_m")),
+        (math.nan, 0.0, 1.0, ("frequency_Hz", "max_frequency_Hz")),
+        (5.0, math.inf, 1.0, ("position_m", "max_amplitude_m")),
+        (5.0, 0.001, 21.1, ("running_s", "sweep duration_s")),  # still RUNNING 1.1 s after a 20 s sweep
+        (5.0, 0.001, None, None),  # not reported as RUNNING (stopping): no overrun check
+    ],
+)
+def test_breach_of_reported_values(
+    frequency_Hz: float, position_m: float, running_for_s: float | None, expected: tuple[str, str] | None
+) -> None:
+    breach = SafetyEnvelope().breach(frequency_Hz, position_m, running_for_s, 20.0)
+    assert (None if breach is None else (breach[0], breach[2])) == expected

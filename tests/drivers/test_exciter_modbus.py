@@ -367,8 +367,10 @@ def test_watchdog_stops_the_plate_when_the_host_stops_talking() -> None:
     run(scenario)
 
 
-def test_background_keepalive_keeps_a_wall_clock_drive_running() -> None:
-    """Real time: the driver's keep-alive task alone (no status polls) feeds the drive's watchdog."""
+def test_keepalive_comes_only_from_supervision_on_a_wall_clock_drive() -> None:
+    """Real time: supervision steps (status reads) feed the drive's watchdog; when the host stops
+    supervising, nothing else does (there is no background keep-alive) and the watchdog stops the plate.
+    (This replaced a test of the former background keep-alive task, removed on purpose: issue 14, S2.)"""
     from simulators.coupling import SimulatedClock
 
     async def scenario() -> None:
@@ -379,11 +381,23 @@ def test_background_keepalive_keeps_a_wall_clock_drive_running() -> None:
                 await exciter.configure_sweep(SWEEP)
                 await exciter.start()
                 began_s = bench.clock.now_s()
-                await sim.wait_until(lambda: sim.drive.keepalives_received >= 20, timeout_s=5.0)
-                sim.tick()
+                while sim.drive.keepalives_received < 20:  # supervise back to back, as a host cycle would
+                    status = await exciter.supervise()
+                    assert status.state is ExciterState.RUNNING
                 assert bench.clock.now_s() - began_s > 0.25  # longer than the watchdog timeout...
+                sim.tick()
                 assert not sim.drive.watchdog_tripped  # ...and yet no trip
-                assert (await exciter.status()).state is ExciterState.RUNNING
-                await exciter.stop()
+                assert exciter.keepalives_sent == sim.drive.keepalives_received
+
+                received = sim.drive.keepalives_received
+                unsupervised_s = bench.clock.now_s()
+                while not sim.drive.watchdog_tripped:  # the host stops supervising (bounded wait)
+                    assert bench.clock.now_s() - unsupervised_s < 5.0
+                    await asyncio.sleep(0.02)
+                    sim.tick()
+                assert sim.drive.keepalives_received == received  # nothing fed it meanwhile
+                assert bench.clock.now_s() - unsupervised_s >= 0.25
+                status = await exciter.status()
+                assert status.fault_code == FAULT_WATCHDOG
 
     run(scenario)
