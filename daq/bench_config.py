@@ -45,7 +45,9 @@ Keys:
     installation's hard limits (by default the same values: a bench may lower them).
 [exciter] name, url: the plate drive, by a drivers.exciter.urls URL: modbus-tcp://HOST:PORT?unit=N,
     modbus-rtu:///dev/ttyUSB1?baudrate=19200&unit=1, can://INTERFACE/CHANNEL (python-can, e.g.
-    can://socketcan/can0, can://virtual/vcan0). register_map (Modbus only, optional): the drive's
+    can://socketcan/can0, can://virtual/vcan0; base_id=0x680 moves the frame set), or
+    canopen://INTERFACE/CHANNEL?node=N for a CiA 402 drive (host_node=127, watchdog_timeout=0.5 ...).
+    register_map (Modbus only, optional): the drive's
     register map file (format: drivers/exciter/default_register_map.toml), relative to this file;
     checked when the configuration is loaded.
 [[lasers]] name: unique among all devices. url: a drivers.compowayf.urls device URL that names the node:
@@ -99,7 +101,7 @@ from drivers.exciter.envelope import DEFAULT_HARD_LIMITS, EnvelopeLimits, Safety
 from drivers.exciter.errors import ExciterConfigError
 from drivers.exciter.interface import DEFAULT_KEEPALIVE_INTERVAL_S, PlateExciter
 from drivers.exciter.register_map import RegisterMap
-from drivers.exciter.urls import CanTarget, open_exciter, parse_exciter_url
+from drivers.exciter.urls import CanTarget, Cia402Target, open_exciter, parse_exciter_url
 from estimator.recording import AXLE_CHANNELS, QUARTER_CAR_CHANNELS
 from estimator.vehicle import ModelKind
 
@@ -289,8 +291,11 @@ class ExciterConfig:
 
     @property
     def kind(self) -> str:
-        """'can' or 'modbus'."""
-        return "can" if isinstance(parse_exciter_url(self.url), CanTarget) else "modbus"
+        """'can', 'canopen' or 'modbus'."""
+        target = parse_exciter_url(self.url)
+        if isinstance(target, Cia402Target):
+            return "canopen"
+        return "can" if isinstance(target, CanTarget) else "modbus"
 
 
 @dataclass(frozen=True)

@@ -5,6 +5,9 @@
     can://virtual/vcan0            python-can interface 'virtual', channel 'vcan0'
     can://socketcan/can0?bitrate=500000&timeout=0.5&heartbeat_timeout=0.5&base_id=0x680
                                    base_id: first CAN id of the exciter frame set (default 0x680)
+    canopen://virtual/vcan0?node=5 a CiA 402 drive, CANopen node 5 (drivers/exciter/cia402.py); also
+        host_node=127 (the host's heartbeat node id), bitrate=, timeout= (SDO), heartbeat_timeout= (the
+        drive's heartbeat), watchdog_timeout= (the drive's wait for the host's heartbeat)
 
 Unknown schemes and query parameters are an ExciterConfigError naming them. `parse_exciter_url` gives the
 typed target without touching any transport; `open_exciter` builds the back end and connects it.
@@ -18,6 +21,7 @@ from dataclasses import dataclass
 from urllib.parse import parse_qsl, unquote, urlsplit
 
 from drivers.exciter.can_bus import CanExciter
+from drivers.exciter.cia402 import DEFAULT_HOST_NODE_ID, Cia402Exciter
 from drivers.exciter.envelope import SafetyEnvelope
 from drivers.exciter.errors import ExciterConfigError
 from drivers.exciter.interface import DEFAULT_KEEPALIVE_INTERVAL_S, PlateExciter
@@ -49,7 +53,23 @@ class CanTarget:
     base_id: int | None = None
 
 
-ExciterTarget = ModbusTarget | CanTarget
+@dataclass(frozen=True)
+class Cia402Target:
+    """A CiA 402 drive: python-can interface and channel, the drive's CANopen node id, the host's node id
+    (its heartbeat is the drive's watchdog feed), optional bitrate, SDO timeout (`timeout_s`, as Modbus),
+    the drive-heartbeat timeout and the drive's watchdog timeout."""
+
+    interface: str
+    channel: str
+    node_id: int
+    host_node_id: int = DEFAULT_HOST_NODE_ID
+    bitrate: int | None = None
+    timeout_s: float = 0.5
+    heartbeat_timeout_s: float = 0.5
+    watchdog_timeout_s: float = 0.5
+
+
+ExciterTarget = ModbusTarget | CanTarget | Cia402Target
 
 
 def parse_exciter_url(url: str) -> ExciterTarget:
@@ -90,8 +110,30 @@ def parse_exciter_url(url: str) -> ExciterTarget:
             query.number("heartbeat_timeout", 0.5),
             query.can_id("base_id"),
         )
+    elif parts.scheme == "canopen":
+        interface, channel = parts.netloc, unquote(parts.path.lstrip("/"))
+        if not interface or not channel:
+            raise ExciterConfigError(f"{url}: expected canopen://<python-can interface>/<channel>?node=N")
+        node = query.integer("node", 0)
+        if not node:
+            raise ExciterConfigError(f"{url}: canopen:// needs node=<the drive's CANopen node id>")
+        host_node = query.integer("host_node", DEFAULT_HOST_NODE_ID)
+        if not (1 <= node <= 127 and 1 <= host_node <= 127) or node == host_node:
+            raise ExciterConfigError(f"{url}: node and host_node must be two different ids 1..127")
+        target = Cia402Target(
+            interface,
+            channel,
+            node,
+            host_node,
+            query.integer("bitrate", 0) or None,
+            query.number("timeout", 0.5),
+            query.number("heartbeat_timeout", 0.5),
+            query.number("watchdog_timeout", 0.5),
+        )
     else:
-        raise ExciterConfigError(f"{url}: unknown scheme {parts.scheme!r} (modbus-tcp, modbus-rtu or can)")
+        raise ExciterConfigError(
+            f"{url}: unknown scheme {parts.scheme!r} (modbus-tcp, modbus-rtu, can or canopen)"
+        )
     query.reject_leftovers()
     return target
 
@@ -113,6 +155,20 @@ async def open_exciter(
             unit=target.unit,
             register_map=register_map,
             timeout_s=target.timeout_s,
+            envelope=envelope,
+            keepalive_interval_s=keepalive_interval_s,
+            clock=clock,
+        )
+    elif isinstance(target, Cia402Target):
+        exciter = Cia402Exciter(
+            target.interface,
+            target.channel,
+            node_id=target.node_id,
+            host_node_id=target.host_node_id,
+            bus_kwargs={"bitrate": target.bitrate} if target.bitrate else None,
+            reply_timeout_s=target.timeout_s,
+            heartbeat_timeout_s=target.heartbeat_timeout_s,
+            watchdog_timeout_s=target.watchdog_timeout_s,
             envelope=envelope,
             keepalive_interval_s=keepalive_interval_s,
             clock=clock,
@@ -169,9 +225,7 @@ class _Query:
                 f"{self.url}: {name} must be a CAN id such as 0x680, got {raw!r}"
             ) from None
         if not 0 < value <= 0x7FF:
-            raise ExciterConfigError(
-                f"{self.url}: {name} must be an 11-bit CAN id 0x001..0x7FF, got {raw!r}"
-            )
+            raise ExciterConfigError(f"{self.url}: {name} must be an 11-bit CAN id 0x001..0x7FF, got {raw!r}")
         return value
 
     def choice(self, name: str, default: str, allowed: tuple[str, ...]) -> str:
