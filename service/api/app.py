@@ -18,6 +18,7 @@ from importlib.metadata import PackageNotFoundError, version
 from fastapi import APIRouter, FastAPI
 
 from service.access import KeyRing
+from service.api.contract import install_contract
 from service.api.errors import install_error_handlers
 from service.api.limits import UploadSizeLimit
 from service.api.routes import bench, events, jobs, schedules, status, sweeps
@@ -162,4 +163,5 @@ def create_app(settings: ServiceSettings) -> FastAPI:
     install_error_handlers(app)
     app.add_middleware(UploadSizeLimit, max_bytes=settings.max_upload_bytes)
     app.include_router(api_router())
+    install_contract(app)
     return app

@@ -1,16 +1,26 @@
-"""The API's response models (pydantic), and their construction from the store's records."""
+"""The API's response models (pydantic), and their construction from the store's records.
+
+Every body a client receives is typed here, so that the OpenAPI schema is a contract clients can be
+generated from: a job is `IdentifyJobOut` or `DiagnoseJobOut`, told apart by `kind`, each with its typed
+options and result (service.api.results); the bench and a sweep's settings are typed too.
+"""
 
 from __future__ import annotations
 
 from datetime import datetime
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
 from fastapi import Query
 from pydantic import BaseModel, Field
 
+from daq.sweep.model import SweepProgress
+from drivers.exciter.sweep import SweepLaw
+from service.api.results import DiagnoseResult, IdentifyResult
+from service.jobs.diagnose_job import DiagnoseJobOptions
+from service.jobs.identify_job import IdentifyJobOptions
 from service.jobs.messages import Progress
 from service.store.jobs import JobRecord
-from service.store.models import JobStatus
+from service.store.models import JobKind, JobStatus
 
 API_PREFIX = "/api/v1"
 
@@ -47,22 +57,17 @@ class JobLinks(BaseModel):
     )
 
 
-class JobOut(BaseModel):
+class JobOutBase(BaseModel):
+    """What every job carries; `kind` says which options and result (IdentifyJobOut, DiagnoseJobOut)."""
+
     id: int
-    kind: str = Field(description="identify or diagnose")
+    kind: str
     status: JobStatus
-    options: dict[str, Any]
-    input_source: str = Field(description="upload, or sweep")
+    options: BaseModel
+    input_source: str = Field(description="upload, sweep or recording")
     sweep_id: int | None = None
     progress: ProgressOut | None = None
-    result: dict[str, Any] | None = Field(
-        None,
-        description="identify: curves (velocity_m_s, force_N, tanh parameters, outliers per corner), "
-        "masses_kg, tyre_damping_Ns_per_m, inspection figures, objective, certified_gap, gap_m; the "
-        "shape of `shockbench identify --json`. diagnose: gap_before_m, steps (effect, gap_before_m, "
-        "gap_after_m, parameters, evidence), gap_after_m, unexplained; the shape of `shockbench diagnose "
-        "--json`",
-    )
+    result: BaseModel | None = None
     error: str | None = Field(None, description="why the job failed or was cancelled")
     submitted_by: str | None = Field(None, description="id of the key that submitted it (a hash)")
     created_at: datetime
@@ -70,24 +75,60 @@ class JobOut(BaseModel):
     finished_at: datetime | None = None
     links: JobLinks
 
-    @classmethod
-    def of(cls, record: JobRecord, live: Progress | None = None, *, with_result: bool = True) -> JobOut:
-        base = f"{API_PREFIX}/jobs/{record.id}"
-        return cls(
-            id=record.id,
-            kind=record.kind,
-            status=record.status,
-            options=record.options,
-            input_source=record.input_source,
-            sweep_id=record.sweep_id,
-            progress=ProgressOut.of(live if live is not None else record.progress),
-            result=record.result if with_result else None,
-            error=record.error,
-            submitted_by=record.submitted_by,
-            created_at=record.created_at,
-            started_at=record.started_at,
-            finished_at=record.finished_at,
-            links=JobLinks(
+
+class IdentifyJobOut(JobOutBase):
+    """An identification job (POST /jobs, or POST /sweeps/{id}/jobs)."""
+
+    kind: Literal["identify"] = Field(description="identify")
+    options: IdentifyJobOptions
+    result: IdentifyResult | None = Field(
+        None,
+        description="once succeeded (and in GET /jobs/{id} only): the shape of `shockbench identify --json`",
+    )
+
+
+class DiagnoseJobOut(JobOutBase):
+    """A diagnosis job, the model doctor (POST /diagnoses)."""
+
+    kind: Literal["diagnose"] = Field(description="diagnose")
+    options: DiagnoseJobOptions
+    result: DiagnoseResult | None = Field(
+        None,
+        description="once succeeded (and in GET /jobs/{id} only): the shape of `shockbench diagnose --json`",
+    )
+
+
+JobOut = Annotated[IdentifyJobOut | DiagnoseJobOut, Field(discriminator="kind")]
+"""A job of any kind, told apart by `kind`."""
+
+JOB_MODELS: dict[str, type[IdentifyJobOut] | type[DiagnoseJobOut]] = {
+    JobKind.IDENTIFY.value: IdentifyJobOut,
+    JobKind.DIAGNOSE.value: DiagnoseJobOut,
+}
+"""The response model of each job kind (service.jobs.kinds.KINDS); a new kind adds its model here."""
+
+
+def job_view(
+    record: JobRecord, live: Progress | None = None, *, with_result: bool = True
+) -> IdentifyJobOut | DiagnoseJobOut:
+    """The job as the API shows it: live progress while it runs, the result once it succeeded."""
+    base = f"{API_PREFIX}/jobs/{record.id}"
+    return JOB_MODELS[record.kind].model_validate(
+        {
+            "id": record.id,
+            "kind": record.kind,
+            "status": record.status,
+            "options": record.options,
+            "input_source": record.input_source,
+            "sweep_id": record.sweep_id,
+            "progress": ProgressOut.of(live if live is not None else record.progress),
+            "result": record.result if with_result else None,
+            "error": record.error,
+            "submitted_by": record.submitted_by,
+            "created_at": record.created_at,
+            "started_at": record.started_at,
+            "finished_at": record.finished_at,
+            "links": JobLinks(
                 self=base,
                 events=f"{base}/events",
                 cancel=f"{base}/cancel",
@@ -95,7 +136,8 @@ class JobOut(BaseModel):
                 plot_svg=f"{base}/plot.svg" if "plot.svg" in record.artefacts else None,
                 files={name: f"{base}/files/{name}" for name in record.artefacts},
             ),
-        )
+        }
+    )
 
 
 class JobList(BaseModel):
@@ -103,6 +145,86 @@ class JobList(BaseModel):
     total: int
     limit: int
     offset: int
+
+
+# ---- the job event stream (GET /jobs/{id}/events): the data of each event --------------------------------
+
+
+class ProgressEvent(ProgressOut):
+    """The data of a `progress` event."""
+
+    job_id: int
+
+
+class ClosingEvent(BaseModel):
+    """The data of a `closing` event: the service stops; reconnect, or poll the job."""
+
+    job_id: int
+    reason: str
+
+
+JOB_EVENTS: dict[str, tuple[str, str]] = {
+    "state": (
+        "IdentifyJobOut | DiagnoseJobOut",
+        "the job as GET /jobs/{id} returns it: first, and when it starts",
+    ),
+    "progress": ("ProgressEvent", "while it runs: stage, DE generation, best objective, ETA"),
+    "succeeded": ("IdentifyJobOut | DiagnoseJobOut", "last: the job with its result"),
+    "failed": ("IdentifyJobOut | DiagnoseJobOut", "last: the job with the reason in `error`"),
+    "cancelled": ("IdentifyJobOut | DiagnoseJobOut", "last: the job, cancelled"),
+    "closing": ("ClosingEvent", "last, when the service stops first"),
+}
+"""Event name -> (schema of its JSON data, when it comes)."""
+
+
+# ---- the bench and its sweeps ----------------------------------------------------------------------------
+
+
+class SweepProgressOut(BaseModel):
+    phase: str = Field(description="connecting, zeroing, sweeping, settling, stopping, done")
+    elapsed_s: float = Field(description="seconds into the recorded part of the run")
+    total_s: float = Field(description="seconds recorded in all (sweep plus settling)")
+    fraction: float = Field(description="elapsed_s / total_s, 0..1")
+    frequency_Hz: float = Field(description="the plate's frequency as the drive reports it")
+    rows: int = Field(description="recording rows written so far")
+    gap_rows: int = Field(description="rows with a missing sample so far")
+
+    @classmethod
+    def of(cls, progress: SweepProgress | None) -> SweepProgressOut | None:
+        if progress is None:
+            return None
+        return cls(
+            phase=progress.phase.value,
+            elapsed_s=progress.elapsed_s,
+            total_s=progress.total_s,
+            fraction=progress.fraction,
+            frequency_Hz=progress.frequency_Hz,
+            rows=progress.rows,
+            gap_rows=progress.gap_rows,
+        )
+
+
+class BenchOut(BaseModel):
+    name: str
+    model: str = Field(description="quarter-car or axle")
+    simulated: bool = Field(description="the in-process simulated bench (serve --simulated)")
+    busy: bool = Field(description="a sweep is running")
+    sweep_id: int | None = Field(None, description="the running sweep")
+    progress: SweepProgressOut | None = Field(None, description="the running sweep's latest progress")
+
+
+class SweepSettingsOut(BaseModel):
+    """A sweep's settings as submitted (POST /sweeps without the vehicle file)."""
+
+    start_Hz: float = Field(description="sweep start (Hz)")
+    stop_Hz: float = Field(description="sweep end (Hz)")
+    amplitude_m: float = Field(description="plate amplitude, zero to peak (m)")
+    duration_s: float = Field(description="the sweep itself, without settling (s)")
+    law: SweepLaw = Field(description="linear or logarithmic")
+    settle_s: float = Field(description="recorded after the sweep (s)")
+
+
+# ---- the service ---------------------------------------------------------------------------------------
 
 
 class WorkerOut(BaseModel):
@@ -114,7 +236,7 @@ class WorkerOut(BaseModel):
 
 class CurrentJobOut(BaseModel):
     id: int
-    kind: str
+    kind: str = Field(description="identify or diagnose")
     progress: ProgressOut | None
 
 
@@ -125,4 +247,4 @@ class StatusOut(BaseModel):
     worker: WorkerOut
     queue_length: int = Field(description="jobs waiting for the worker")
     current_job: CurrentJobOut | None
-    bench: dict[str, Any] | None = Field(None, description="the bench and its devices (acquisition layer)")
+    bench: BenchOut | None = Field(None, description="the bench at a glance (null: the service has none)")

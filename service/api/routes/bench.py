@@ -8,14 +8,13 @@ from __future__ import annotations
 
 import asyncio
 import logging
-from typing import Any
 
 from fastapi import APIRouter, Request
 from pydantic import BaseModel, Field
 
-from daq.sweep.model import SweepProgress
 from service.api.auth import Operator, Viewer
 from service.api.errors import ApiError, responses
+from service.api.schemas import BenchOut, SweepProgressOut
 from service.bench_control import BenchController
 
 router = APIRouter(tags=["bench"])
@@ -29,39 +28,6 @@ def require_bench(request: Request) -> BenchController:
     if bench is None:
         raise ApiError(503, NO_BENCH, code="no_bench")
     return bench
-
-
-class SweepProgressOut(BaseModel):
-    phase: str = Field(description="connecting, zeroing, sweeping, settling, stopping, done")
-    elapsed_s: float = Field(description="seconds into the recorded part of the run")
-    total_s: float = Field(description="seconds recorded in all (sweep plus settling)")
-    fraction: float = Field(description="elapsed_s / total_s, 0..1")
-    frequency_Hz: float = Field(description="the plate's frequency as the drive reports it")
-    rows: int = Field(description="recording rows written so far")
-    gap_rows: int = Field(description="rows with a missing sample so far")
-
-    @classmethod
-    def of(cls, progress: SweepProgress | None) -> SweepProgressOut | None:
-        if progress is None:
-            return None
-        return cls(
-            phase=progress.phase.value,
-            elapsed_s=progress.elapsed_s,
-            total_s=progress.total_s,
-            fraction=progress.fraction,
-            frequency_Hz=progress.frequency_Hz,
-            rows=progress.rows,
-            gap_rows=progress.gap_rows,
-        )
-
-
-class BenchOut(BaseModel):
-    name: str
-    model: str = Field(description="quarter-car or axle")
-    simulated: bool = Field(description="the in-process simulated bench (serve --simulated)")
-    busy: bool = Field(description="a sweep is running")
-    sweep_id: int | None = Field(None, description="the running sweep")
-    progress: SweepProgressOut | None = Field(None, description="the running sweep's latest progress")
 
 
 class DevicesOut(BaseModel):
@@ -89,28 +55,38 @@ def bench_out(bench: BenchController) -> BenchOut:
     )
 
 
-def bench_summary(request: Request) -> dict[str, Any] | None:
+def bench_summary(request: Request) -> BenchOut | None:
     """For GET /status: the bench at a glance, from memory (None without a bench)."""
     bench: BenchController | None = request.app.state.services.bench
     if bench is None:
         return None
-    return bench_out(bench).model_dump(mode="json")
+    return bench_out(bench)
 
 
-@router.get("/bench", response_model=BenchOut, responses=responses(401, 403, 503))
+@router.get("/bench", response_model=BenchOut, operation_id="get_bench", responses=responses(401, 403, 503))
 async def get_bench(request: Request, _principal: Viewer) -> BenchOut:
     """The bench: name, model, simulated or not, busy, and the running sweep with its progress. From
     memory only: fast while a sweep runs."""
     return bench_out(require_bench(request))
 
 
-@router.get("/bench/devices", response_model=DevicesOut, responses=responses(401, 403, 503))
+@router.get(
+    "/bench/devices",
+    response_model=DevicesOut,
+    operation_id="list_devices",
+    responses=responses(401, 403, 503),
+)
 async def get_devices(request: Request, _principal: Viewer) -> DevicesOut:
     """The devices the bench configuration names (a live check is `shockbench probe`'s job)."""
     return DevicesOut(devices=require_bench(request).devices())
 
 
-@router.post("/emergency-stop", response_model=EmergencyStopOut, responses=responses(401, 403, 503))
+@router.post(
+    "/emergency-stop",
+    response_model=EmergencyStopOut,
+    operation_id="emergency_stop",
+    responses=responses(401, 403, 503),
+)
 async def emergency_stop(request: Request, _principal: Operator) -> EmergencyStopOut:
     """Emergency stop of the plate. A running sweep ends with it (its recording kept, the sweep failed
     with reason "emergency stop by the operator"); with no sweep running the command goes straight to

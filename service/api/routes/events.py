@@ -19,6 +19,7 @@ from fastapi import APIRouter, Path, Request
 from fastapi.responses import StreamingResponse
 
 from service.api.auth import Viewer
+from service.api.contract import event_stream
 from service.api.errors import ApiError, responses
 from service.api.routes.jobs import job_out
 from service.api.schemas import ProgressOut
@@ -36,8 +37,8 @@ def sse(event: str, data: dict, event_id: int) -> str:
 @router.get(
     "/jobs/{job_id}/events",
     response_class=StreamingResponse,
-    responses={200: {"content": {"text/event-stream": {}}, "description": "the event stream"}}
-    | responses(401, 403, 404, 422),
+    operation_id="job_events",
+    responses=event_stream() | responses(401, 403, 404, 422),
 )
 async def job_events(
     request: Request, job_id: Annotated[int, Path(ge=1, le=2**62)], _principal: Viewer

@@ -9,14 +9,15 @@ import asyncio
 from pathlib import Path as FilePath
 from typing import Annotated
 
-from fastapi import APIRouter, File, Form, Path, Query, Request, Response, UploadFile
+from fastapi import APIRouter, Form, Path, Query, Request, Response
 from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import FileResponse
 
 from service.api.auth import Operator, Viewer
+from service.api.contract import UPLOAD_ENCODING, created, download, upload_model
 from service.api.errors import ApiError, responses
 from service.api.intake import accept_upload
-from service.api.schemas import API_PREFIX, JobList, JobOut, PageLimit, PageOffset
+from service.api.schemas import API_PREFIX, JOB_MODELS, JobList, JobOut, PageLimit, PageOffset, job_view
 from service.jobs.kinds import KINDS, JobKindSpec
 from service.store.jobs import JobRecord
 from service.store.models import JobStatus
@@ -28,6 +29,14 @@ FILE_MEDIA = {
     ".json": "application/json",
     **{f".{k}": v for k, v in PLOT_MEDIA.items()},
 }
+FILE_MEDIA_TYPES = (
+    "text/markdown",
+    "image/png",
+    "image/svg+xml",
+    "application/json",
+    "application/octet-stream",
+)
+"""What GET /jobs/{id}/files/{name} may answer with (FILE_MEDIA, else octet-stream)."""
 
 
 async def load_job(request: Request, job_id: int) -> JobRecord:
@@ -38,30 +47,31 @@ async def load_job(request: Request, job_id: int) -> JobRecord:
 
 
 def job_out(request: Request, record: JobRecord, *, with_result: bool = True) -> JobOut:
-    return JobOut.of(
+    return job_view(
         record, request.app.state.services.manager.live_progress(record.id), with_result=with_result
     )
 
 
 def _submit_endpoint(spec: JobKindSpec, router: APIRouter) -> None:
     options_model = spec.options_model
-    allowed = {"recording", "vehicle", *options_model.model_fields}
+    body_model = upload_model(spec)
+    allowed = set(body_model.model_fields)
 
     async def submit(
         request: Request,
         response: Response,
         principal: Operator,
-        recording: Annotated[
-            UploadFile, File(description="recording CSV (t,x_s,x_t,x_r or the axle columns)")
-        ],
-        vehicle: Annotated[UploadFile, File(description="vehicle file (TOML, one [vehicle] table)")],
-        options: Annotated[options_model, Form()],  # type: ignore[valid-type]
+        upload: Annotated[body_model, Form(media_type="multipart/form-data")],  # type: ignore[valid-type]
     ) -> JobOut:
         unknown = sorted(set((await request.form()).keys()) - allowed)
         if unknown:
             raise ApiError(
                 422, f"unknown field '{unknown[0]}' (known: {', '.join(sorted(allowed))})", field=unknown[0]
             )
+        options = options_model.model_validate(
+            {name: getattr(upload, name) for name in options_model.model_fields}
+        )
+        recording, vehicle = upload.recording, upload.vehicle  # type: ignore[attr-defined]
         services = request.app.state.services
         record = await run_in_threadpool(
             accept_upload,
@@ -88,10 +98,12 @@ def _submit_endpoint(spec: JobKindSpec, router: APIRouter) -> None:
         submit,
         methods=["POST"],
         status_code=201,
-        response_model=JobOut,
+        response_model=JOB_MODELS[spec.name],
         name=f"submit_{spec.name}",
+        operation_id=f"submit_{spec.name}",
         summary=f"Submit a {spec.name} job",
-        responses=responses(400, 401, 403, 413, 422),
+        responses=created(f"{spec.name} job") | responses(400, 401, 403, 413, 422),
+        openapi_extra={"requestBody": {"content": {"multipart/form-data": {"encoding": UPLOAD_ENCODING}}}},
     )
 
 
@@ -100,7 +112,7 @@ def router() -> APIRouter:
     for spec in KINDS.values():
         _submit_endpoint(spec, r)
 
-    @r.get("/jobs", response_model=JobList, responses=responses(401, 403, 422))
+    @r.get("/jobs", response_model=JobList, operation_id="list_jobs", responses=responses(401, 403, 422))
     async def list_jobs(
         request: Request,
         _principal: Viewer,
@@ -116,7 +128,12 @@ def router() -> APIRouter:
         jobs = [job_out(request, r, with_result=False) for r in records]
         return JobList(jobs=jobs, total=total, limit=limit, offset=offset)
 
-    @r.get("/jobs/{job_id}", response_model=JobOut, responses=responses(401, 403, 404, 422))
+    @r.get(
+        "/jobs/{job_id}",
+        response_model=JobOut,
+        operation_id="get_job",
+        responses=responses(401, 403, 404, 422),
+    )
     async def get_job(request: Request, job_id: JobId, _principal: Viewer) -> JobOut:
         """Status, progress (live while it runs), and when it succeeded the result: curves, tanh
         parameters, masses, tyre damping, inspection figures, objective and gaps. Poll this, or follow
@@ -126,7 +143,9 @@ def router() -> APIRouter:
     @r.post(
         "/jobs/{job_id}/cancel",
         response_model=JobOut,
-        responses={202: {"model": JobOut, "description": "cancel requested; the job stops shortly"}}
+        operation_id="cancel_job",
+        responses={200: {"description": "the queued job, now cancelled"}}
+        | {202: {"model": JobOut, "description": "cancel requested; the running job stops shortly"}}
         | responses(401, 403, 404, 409, 422),
     )
     async def cancel_job(request: Request, response: Response, job_id: JobId, _principal: Operator) -> JobOut:
@@ -148,7 +167,16 @@ def router() -> APIRouter:
     @r.get(
         "/jobs/{job_id}/files/{name}",
         response_class=FileResponse,
-        responses={200: {"description": "the file"}} | responses(401, 403, 404, 409, 422),
+        operation_id="get_job_file",
+        responses={
+            200: {
+                "description": "the file: text/markdown for report.md, image/png for a plot, image/svg+xml",
+                "content": {
+                    media: {"schema": {"type": "string", "format": "binary"}} for media in FILE_MEDIA_TYPES
+                },
+            }
+        }
+        | responses(401, 403, 404, 409, 422),
     )
     async def job_file(
         request: Request,
@@ -192,9 +220,9 @@ def _plot_endpoint(r: APIRouter, fmt: str, media: str) -> None:
         methods=["GET"],
         response_class=FileResponse,
         name=f"job_plot_{fmt}",
+        operation_id=f"get_job_plot_{fmt}",
         summary=f"Curve plot ({fmt.upper()})",
-        responses={200: {"content": {media: {}}, "description": "the plot"}}
-        | responses(401, 403, 404, 409, 422),
+        responses=download(media, f"the plot ({media})") | responses(401, 403, 404, 409, 422),
     )
 
 

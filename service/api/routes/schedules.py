@@ -11,15 +11,16 @@ import asyncio
 import secrets
 from datetime import datetime
 from pathlib import Path as FilePath
-from typing import Annotated, Any
+from typing import Annotated
 
 from fastapi import APIRouter, Path, Request, Response
 from pydantic import AwareDatetime, BaseModel, ConfigDict, Field
 
 from service.api.auth import Admin, Viewer
+from service.api.contract import created
 from service.api.errors import ApiError, responses
 from service.api.routes.bench import require_bench
-from service.api.schemas import API_PREFIX, PageLimit, PageOffset
+from service.api.schemas import API_PREFIX, PageLimit, PageOffset, SweepSettingsOut
 from service.api.settings import ServiceSettings
 from service.api.sweep_launch import SweepIn, check_sweep
 from service.bench_control import BenchController
@@ -62,8 +63,8 @@ class ScheduleOut(BaseModel):
     bench: str
     status: ScheduleStatus = Field(description="waiting, running, done, failed or cancelled")
     run_at: datetime | None = Field(None, description="when it is due; null: when the bench is free")
-    sweep_settings: dict[str, Any]
-    job_options: dict[str, Any]
+    sweep_settings: SweepSettingsOut = Field(description="the sweep as submitted (without the vehicle file)")
+    job_options: IdentifyJobOptions = Field(description="options of the identification job")
     sweep_id: int | None = Field(None, description="its sweep, once started")
     job_id: int | None = Field(None, description="its identification job, once the sweep completed")
     reason: str | None = Field(None, description="why it failed or was cancelled")
@@ -81,8 +82,8 @@ class ScheduleOut(BaseModel):
             bench=record.bench,
             status=record.status,
             run_at=record.run_at,
-            sweep_settings=record.sweep_settings,
-            job_options=record.job_options,
+            sweep_settings=SweepSettingsOut.model_validate(record.sweep_settings),
+            job_options=IdentifyJobOptions.model_validate(record.job_options),
             sweep_id=record.sweep_id,
             job_id=record.job_id,
             reason=record.reason,
@@ -153,7 +154,8 @@ def _create(
     "/schedules",
     status_code=201,
     response_model=ScheduleOut,
-    responses=responses(400, 401, 403, 422, 503),
+    operation_id="schedule_test",
+    responses=created("scheduled test") | responses(400, 401, 403, 422, 503),
 )
 async def schedule_test(
     request: Request, response: Response, body: ScheduleIn, principal: Admin
@@ -172,7 +174,12 @@ async def schedule_test(
     return out
 
 
-@router.get("/schedules", response_model=ScheduleList, responses=responses(401, 403, 422))
+@router.get(
+    "/schedules",
+    response_model=ScheduleList,
+    operation_id="list_scheduled_tests",
+    responses=responses(401, 403, 422),
+)
 async def list_tests(
     request: Request,
     _principal: Viewer,
@@ -187,7 +194,12 @@ async def list_tests(
     return ScheduleList(tests=[ScheduleOut.of(r) for r in records], total=total, limit=limit, offset=offset)
 
 
-@router.get("/schedules/{test_id}", response_model=ScheduleOut, responses=responses(401, 403, 404, 422))
+@router.get(
+    "/schedules/{test_id}",
+    response_model=ScheduleOut,
+    operation_id="get_scheduled_test",
+    responses=responses(401, 403, 404, 422),
+)
 async def get_test(request: Request, test_id: TestId, _principal: Viewer) -> ScheduleOut:
     """A scheduled test: waiting, running (its sweep), done (its sweep and its identification job), failed
     (why) or cancelled."""
@@ -197,6 +209,7 @@ async def get_test(request: Request, test_id: TestId, _principal: Viewer) -> Sch
 @router.post(
     "/schedules/{test_id}/cancel",
     response_model=ScheduleOut,
+    operation_id="cancel_scheduled_test",
     responses=responses(401, 403, 404, 409, 422),
 )
 async def cancel_test(request: Request, test_id: TestId, _principal: Admin) -> ScheduleOut:

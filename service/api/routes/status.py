@@ -15,7 +15,7 @@ from service.api.schemas import CurrentJobOut, ProgressOut, StatusOut, WorkerOut
 router = APIRouter(tags=["status"])
 
 
-@router.get("/status", response_model=StatusOut, responses=responses(401, 403))
+@router.get("/status", response_model=StatusOut, operation_id="get_status", responses=responses(401, 403))
 async def get_status(request: Request, _principal: Viewer) -> StatusOut:
     """Version, worker process, queue, the job that runs now, and the bench (null without one)."""
     services = request.app.state.services

@@ -13,7 +13,7 @@ import shutil
 import tempfile
 from datetime import datetime
 from pathlib import Path as FilePath
-from typing import Annotated, Any
+from typing import Annotated
 
 from fastapi import APIRouter, Body, Path, Request, Response
 from fastapi.responses import FileResponse
@@ -21,10 +21,18 @@ from pydantic import BaseModel, ConfigDict, Field
 from starlette.background import BackgroundTask
 
 from service.api.auth import Operator, Viewer
+from service.api.contract import created, download
 from service.api.errors import ApiError, responses
-from service.api.routes.bench import SweepProgressOut, require_bench
+from service.api.routes.bench import require_bench
 from service.api.routes.jobs import job_out
-from service.api.schemas import API_PREFIX, JobOut, PageLimit, PageOffset
+from service.api.schemas import (
+    API_PREFIX,
+    IdentifyJobOut,
+    PageLimit,
+    PageOffset,
+    SweepProgressOut,
+    SweepSettingsOut,
+)
 from service.api.sweep_launch import SweepIn, launch_sweep
 from service.api.sweep_recordings import accept_sweep_job, export, recording_path
 from service.bench_control import BenchController
@@ -48,7 +56,7 @@ class SweepOut(BaseModel):
     id: int
     bench: str
     status: SweepStatus = Field(description="requested, running, complete, failed or aborted")
-    settings: dict[str, Any] = Field(description="the sweep settings and settle_s as submitted")
+    settings: SweepSettingsOut = Field(description="the sweep settings and settle_s as submitted")
     complete: bool = Field(description="the recording holds the whole sweep without gaps")
     reason: str | None = Field(None, description="why the sweep failed or was aborted")
     operator: str | None = Field(None, description="id of the key that requested it (a hash)")
@@ -71,7 +79,7 @@ class SweepOut(BaseModel):
             id=record.id,
             bench=record.bench,
             status=record.status,
-            settings=record.settings,
+            settings=SweepSettingsOut.model_validate(record.settings),
             complete=record.complete,
             reason=record.reason,
             operator=record.operator,
@@ -137,7 +145,8 @@ def _export_to_temp(record: SweepRecord) -> tuple[FilePath, FilePath]:
     "/sweeps",
     status_code=201,
     response_model=SweepOut,
-    responses=responses(400, 401, 403, 409, 422, 503),
+    operation_id="start_sweep",
+    responses=created("sweep") | responses(400, 401, 403, 409, 422, 503),
 )
 async def start_sweep(request: Request, response: Response, body: SweepIn, principal: Operator) -> SweepOut:
     """Start a sweep. Checked before anything moves: the settings (422 naming the field, e.g.
@@ -154,7 +163,9 @@ async def start_sweep(request: Request, response: Response, body: SweepIn, princ
     return out
 
 
-@router.get("/sweeps", response_model=SweepList, responses=responses(401, 403, 422))
+@router.get(
+    "/sweeps", response_model=SweepList, operation_id="list_sweeps", responses=responses(401, 403, 422)
+)
 async def list_sweeps(
     request: Request,
     _principal: Viewer,
@@ -169,7 +180,12 @@ async def list_sweeps(
     return SweepList(sweeps=[sweep_out(request, r) for r in records], total=total, limit=limit, offset=offset)
 
 
-@router.get("/sweeps/{sweep_id}", response_model=SweepOut, responses=responses(401, 403, 404, 422))
+@router.get(
+    "/sweeps/{sweep_id}",
+    response_model=SweepOut,
+    operation_id="get_sweep",
+    responses=responses(401, 403, 404, 422),
+)
 async def get_sweep(request: Request, sweep_id: SweepId, _principal: Viewer) -> SweepOut:
     """Status (with live progress while it runs), settings, and why it failed or was aborted."""
     return sweep_out(request, await load_sweep(request, sweep_id))
@@ -179,6 +195,7 @@ async def get_sweep(request: Request, sweep_id: SweepId, _principal: Viewer) -> 
     "/sweeps/{sweep_id}/abort",
     status_code=202,
     response_model=SweepOut,
+    operation_id="abort_sweep",
     responses=responses(401, 403, 404, 409, 422, 503),
 )
 async def abort_sweep(request: Request, sweep_id: SweepId, _principal: Operator) -> SweepOut:
@@ -196,7 +213,8 @@ async def abort_sweep(request: Request, sweep_id: SweepId, _principal: Operator)
 @router.get(
     "/sweeps/{sweep_id}/recording.csv",
     response_class=FileResponse,
-    responses={200: {"content": {"text/csv": {}}, "description": "the recording CSV"}}
+    operation_id="get_sweep_recording_csv",
+    responses=download("text/csv", "the recording CSV (t,x_s,x_t,x_r with '# key: value' metadata)")
     | responses(401, 403, 404, 409, 422),
 )
 async def sweep_recording_csv(request: Request, sweep_id: SweepId, _principal: Viewer) -> FileResponse:
@@ -215,8 +233,9 @@ async def sweep_recording_csv(request: Request, sweep_id: SweepId, _principal: V
 @router.post(
     "/sweeps/{sweep_id}/jobs",
     status_code=201,
-    response_model=JobOut,
-    responses=responses(400, 401, 403, 404, 409, 422),
+    response_model=IdentifyJobOut,
+    operation_id="submit_sweep_identify",
+    responses=created("identify job") | responses(400, 401, 403, 404, 409, 422),
 )
 async def identify_sweep(
     request: Request,
@@ -224,7 +243,7 @@ async def identify_sweep(
     sweep_id: SweepId,
     principal: Operator,
     options: Annotated[SweepJobIn | None, Body()] = None,
-) -> JobOut:
+) -> IdentifyJobOut:
     """An identification job on the sweep's recording (JSON body: the options of POST /jobs, all
     optional). 409 until the sweep has ended. Answers 201 with Location: the job."""
     services = request.app.state.services

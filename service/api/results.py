@@ -1,0 +1,148 @@
+"""The results of the job kinds as typed API models: what `GET /jobs/{id}` carries once a job succeeded,
+in the shape of `shockbench identify --json` and `shockbench diagnose --json`.
+
+The worker stores a result as JSON (service.jobs.context.finite_json: a number that is not finite is
+stored as null), so every figure the estimator may fail to compute (a phase shift the sweep never reaches,
+a model that diverged) is `float | None` here. The models describe the stored JSON exactly: reading one
+back and dumping it gives the same keys and values (tests/service/test_api_contract_results.py checks it
+on real results), so typing the API did not change what clients receive.
+"""
+
+from __future__ import annotations
+
+from pydantic import BaseModel, Field
+
+from estimator.identify import Solver
+from estimator.vehicle import TyreModel
+
+MaybeNumber = float | None
+"""A figure that is null when the estimator could not compute a finite value."""
+
+
+# ---- identify ----------------------------------------------------------------------------------------------
+
+
+class TanhParameters(BaseModel):
+    """F(v) = c_s·v + kappa·(tanh(mu·v + beta) − tanh(beta)), F in N, v in m/s."""
+
+    c_s: float = Field(description="linear damping (N·s/m)")
+    kappa: float = Field(description="tanh amplitude (N)")
+    mu: float = Field(description="tanh slope (s/m)")
+    beta: float = Field(description="tanh asymmetry (dimensionless)")
+
+
+class CurveOut(BaseModel):
+    """One identified damper curve: its points, and the tanh model fitted to them."""
+
+    corner: str = Field(description="single (quarter car), or left / right (axle)")
+    velocity_m_s: list[float] = Field(description="damper velocity of each point (m/s), ascending")
+    force_N: list[float] = Field(description="damper force at each point (N)")
+    tanh: TanhParameters
+    tanh_rms_N: MaybeNumber = Field(description="rms of the tanh fit over the points (N)")
+    outliers: list[int] = Field(description="0-based indices of the points the robust fit set aside")
+
+
+class MassesOut(BaseModel):
+    sprung: float = Field(description="sprung mass (kg)")
+    unsprung: float = Field(description="unsprung mass per wheel (kg)")
+
+
+class InspectionOut(BaseModel):
+    """The inspection figures of one corner."""
+
+    eusama_percent: MaybeNumber = Field(description="EUSAMA road holding: least contact force / static (%)")
+    phase_shift_min_deg: MaybeNumber = Field(description="least phase shift above 6 Hz (degrees)")
+    damping_ratio: MaybeNumber = Field(description="damping ratio of the body mode")
+    equivalent_damping_Ns_per_m: MaybeNumber = Field(description="linear damping of equal energy (N·s/m)")
+
+
+class ImbalanceOut(BaseModel):
+    eusama_difference_points: MaybeNumber = Field(description="|left − right| EUSAMA (percentage points)")
+    damping_difference_percent: MaybeNumber = Field(
+        description="left/right equivalent damping difference (%)"
+    )
+
+
+class AxleInspectionOut(BaseModel):
+    """The inspection figures of an axle: each side, and how much they differ."""
+
+    left: InspectionOut
+    right: InspectionOut
+    imbalance: ImbalanceOut | None
+
+
+class FiltersOut(BaseModel):
+    kinematics_cutoff_Hz: MaybeNumber = Field(description="low-pass of the derived velocities (Hz)")
+    equation_cutoff_Hz: MaybeNumber = Field(description="low-pass of the equations (Hz)")
+    noise_floor_m: MaybeNumber = Field(description="estimated sensor noise (m rms)")
+
+
+class IdentifyResult(BaseModel):
+    """The result of an identification (`shockbench identify --json`)."""
+
+    curves: list[CurveOut] = Field(description="one curve (quarter car) or left and right (axle)")
+    masses_kg: MassesOut
+    tyre_damping_Ns_per_m: MaybeNumber = Field(description="identified tyre damping (N·s/m)")
+    tyre_model: TyreModel
+    objective: MaybeNumber = Field(description="the paper's objective GF at the solution")
+    solver: Solver
+    certified_gap: MaybeNumber = Field(
+        description="relative optimality gap, certified by the exact solver's dual bound (0: optimal)"
+    )
+    gap_m: MaybeNumber = Field(description="output-error gap (m rms); null when not simulated or diverged")
+    gap_diverged: bool = Field(description="the identified model diverged when simulated")
+    inspection: InspectionOut | AxleInspectionOut = Field(
+        description="quarter car: the corner's figures; axle: left, right and imbalance"
+    )
+    filters: FiltersOut
+    roll_inertia_kg_m2: MaybeNumber = Field(None, description="axle: identified roll inertia (kg·m²)")
+    refined_gap_m: MaybeNumber = Field(None, description="output-error gap after refinement (option refine)")
+
+
+# ---- diagnose ----------------------------------------------------------------------------------------------
+
+ParameterValue = float | str
+"""A fitted parameter of an effect: a number, or a word (e.g. the channel it applies to)."""
+
+
+class DiagnosisStepOut(BaseModel):
+    """One effect the doctor added to the model."""
+
+    effect: str = Field(description="stable name of the effect, e.g. sensor_offset")
+    gap_before_m: MaybeNumber = Field(description="output-error gap before adding it (m)")
+    gap_after_m: MaybeNumber = Field(description="output-error gap after adding it (m); null: diverged")
+    parameters: dict[str, ParameterValue] = Field(description="the effect's fitted parameters")
+    evidence: str = Field(description="why, in words")
+
+
+class CandidateOut(BaseModel):
+    """How one candidate effect fared in one round."""
+
+    effect: str
+    objective_ratio: MaybeNumber = Field(description="objective with the candidate / without")
+    heldout_ratio: MaybeNumber = Field(description="the same on held-out blocks")
+    gap_m: MaybeNumber = Field(description="output-error gap with it (m); null: screened out or diverged")
+    gap_ratio: MaybeNumber
+    bic_change: MaybeNumber = Field(description="change of the information criterion (negative favours it)")
+    correlation: MaybeNumber = Field(description="of the residual with what the candidate explains")
+    parameter_spread: MaybeNumber = Field(
+        description="relative spread of its parameter, first vs second half"
+    )
+    parameters: dict[str, ParameterValue]
+    verdict: str = Field(description="named, or why not")
+
+
+class DiagnoseResult(BaseModel):
+    """The result of a diagnosis (`shockbench diagnose --json`)."""
+
+    gap_before_m: MaybeNumber = Field(description="output-error gap of the starting model (m)")
+    steps: list[DiagnosisStepOut] = Field(description="the effects added, in order")
+    gap_after_m: MaybeNumber = Field(description="output-error gap of the final model (m)")
+    unexplained: bool = Field(description="a clear disagreement remains that no candidate explains")
+    conclusion: str = Field(description="the diagnosis in words")
+    starting_effects: list[str]
+    final_effects: list[str]
+    expected_gap_m: MaybeNumber = Field(description="the gap a model without missing effects reaches here")
+    residual_ratio: MaybeNumber
+    noise_floor_m: MaybeNumber
+    candidates: list[list[CandidateOut]] = Field(description="every candidate's score, per round")
