@@ -213,6 +213,10 @@ class Cia402Exciter(PlateExciter):
                 self._check_supervision(what)
                 raise ExciterDeviceExceptionError(exc.code, f"{what}: refused by the drive ({exc})") from None
             except SdoCommunicationError as exc:
+                if (reader_error := self._reader_error()) is not None:  # the answer may have come unheard
+                    raise ExciterConnectionLostError(
+                        f"{what}: CANopen reader stopped: {reader_error}"
+                    ) from exc
                 self._check_supervision(what)
                 raise ExciterTimeoutError(f"{what}: no SDO answer from {self.where} ({exc})") from None
             except (can.CanError, OSError, RuntimeError) as exc:

@@ -384,6 +384,8 @@ class _SimulatedTimeNetwork(canopen.Network):
         self._periodic_lock = threading.Lock()
         self._host_node: int | None = None
         self.periodic_frames_sent = 0
+        self.frames_ignored = 0
+        """Frames heard while silent (tests wait on it to know a request reached the drive)."""
 
     def send_periodic(  # type: ignore[override]
         self, can_id: int, data: bytes, period: float, remote: bool = False
@@ -421,6 +423,7 @@ class _SimulatedTimeNetwork(canopen.Network):
 
     def notify(self, can_id: int, data: bytearray, timestamp: float) -> None:
         if self._drive.silent:
+            self.frames_ignored += 1
             return
         if can_id == self._drive.node.sdo.rx_cobid and self._drive.node.nmt.state == "STOPPED":
             return

@@ -308,6 +308,31 @@ def test_sdo_transfers_leave_the_event_loop_running() -> None:
     asyncio.run(scenario())
 
 
+@pytest.mark.filterwarnings("ignore::pytest.PytestUnhandledThreadExceptionWarning")
+def test_reader_error_fails_the_call_then_a_new_bus_is_opened() -> None:
+    def reader_fails(timeout: float | None) -> tuple[can.Message | None, bool]:
+        raise can.CanOperationError("interface went down")
+
+    async def scenario() -> None:
+        async with rig() as (sim, exciter):
+            assert (await exciter.status()).state is ExciterState.IDLE
+            network = exciter._network
+            assert network is not None and network.bus is not None and network.notifier is not None
+            sim.go_silent()  # the status request below stays unanswered while the reader fails
+            heard = sim.network.frames_ignored
+            status = asyncio.get_running_loop().create_task(exciter.status())
+            await asyncio.to_thread(wait_until, lambda: sim.network.frames_ignored > heard, "the request")
+            network.bus._recv_internal = reader_fails  # type: ignore[method-assign]
+            with pytest.raises(ExciterConnectionLostError, match="interface went down"):
+                await status
+            sim.resume()
+            assert (await exciter.status()).state is ExciterState.IDLE  # on a new bus, brought up again
+            assert exciter._network is not network and network.bus is None  # the old one shut down
+            assert sim.nmt_state == "OPERATIONAL"
+
+    asyncio.run(scenario())
+
+
 # ---- NMT ---------------------------------------------------------------------------------------------------
 
 
