@@ -3,19 +3,22 @@ sample arrives once with its device time, losses are counted exactly, failures a
 
 from __future__ import annotations
 
+import re
 from collections.abc import Iterator
 
 import numpy as np
 import pytest
 
+from daq.bench_config import BenchConfigError, parse_bench_config
 from daq.sources.laser_source import LaserSource
-from drivers.compowayf.amplifier import ZxlAmplifier
-from drivers.compowayf.errors import CompowayFError
+from drivers.compowayf.amplifier import CountUnit, MeasuredArea, MeasuredValueConfig, ZxlAmplifier
+from drivers.compowayf.errors import AreaTypeError, CompowayFError
 from drivers.compowayf.transport import CompowayFPort
 from drivers.exciter.sweep import SweepSettings
-from simulators.devices.laser_amplifier import FaultKind
+from simulators.devices.laser_amplifier import FaultKind, SimulatedAmplifier, TcpAmplifierServer
 from simulators.devices.sim_bench import SimulatedBench
 from simulators.excitation import sweep_position_m
+from simulators.plate import PlateOnlyBench
 
 
 def _source(bench: SimulatedBench, channel: str) -> LaserSource:
@@ -114,3 +117,101 @@ def test_polled_source_stamps_host_time_and_reports_the_rate_it_got() -> None:
         assert stats.nominal_rate_Hz is None
         assert stats.achieved_rate_Hz == pytest.approx(250.0)
         assert str(stats.clock) == "host_monotonic"
+
+
+# ---- where the measured value lives: BENCH.toml keys to driver and simulator ------------------------------
+
+BENCH_TEXT = """\
+[bench]
+name = "b"
+model = "quarter-car"
+
+[exciter]
+name = "plate"
+url = "modbus-tcp://127.0.0.1:5020?unit=1"
+
+[[lasers]]
+name = "plate laser"
+url = "socket://127.0.0.1:9?node=1"
+channel = "x_r"
+head = "ZX-LD40"
+value_area = "variable"
+value_type = 0xC1
+value_address = 0x0100
+value_unit = "0.1um"
+
+[[lasers]]
+name = "default"
+url = "socket://127.0.0.1:9?node=2"
+channel = "x_s"
+head = "ZX-LD40"
+
+[[lasers]]
+name = "streaming"
+url = "socket://127.0.0.1:9?node=3"
+channel = "x_t"
+head = "ZX-LD40"
+sample_period_s = 0.001
+value_address = 0x0200
+"""
+
+
+def test_value_location_keys_reach_the_driver() -> None:
+    located, default, streaming = parse_bench_config(BENCH_TEXT).lasers
+    assert located.amplifier_config().measured == MeasuredValueConfig(
+        area=MeasuredArea.VARIABLE, area_type=0xC1, address=0x0100, count_unit=CountUnit.TENTH_MICROMETRE
+    )
+    assert default.amplifier_config().measured == MeasuredValueConfig(
+        area=MeasuredArea.PARAMETER, area_type=0xC020, address=0x3000, count_unit=CountUnit.NANOMETRE
+    )  # the ZS-series measurement result (drivers/compowayf/layout.py)
+    measured = streaming.amplifier_config().measured
+    assert (measured.area, measured.area_type, measured.counter_address, measured.address) == (
+        MeasuredArea.VARIABLE,
+        0xC0,
+        0x0200,
+        0x0201,
+    )
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "message"),
+    [
+        (
+            'value_area = "variable"',
+            'value_area = "eeprom"',
+            r":14: \[\[lasers\]\] #1 value_area: value_area must",
+        ),
+        ('value_unit = "0.1um"', 'value_unit = "mm"', r":17: \[\[lasers\]\] #1 value_unit: value_unit must"),
+        ("value_type = 0xC1", "value_type = 0x1C1", r".*value_type: measured value location: area_type"),
+        ("value_address = 0x0200", "value_address = 0xFFFF", r".*value_type: measured value location: addr"),
+        (
+            "value_address = 0x0100",
+            'value_address = "0100"',
+            r":16: \[\[lasers\]\] #1 value_address: .*integer",
+        ),
+    ],
+)
+def test_bad_value_location_keys_are_one_located_line(old: str, new: str, message: str) -> None:
+    with pytest.raises(BenchConfigError) as info:
+        parse_bench_config(BENCH_TEXT.replace(old, new), "bench.toml")
+    assert "\n" not in str(info.value)
+    assert re.match(r"bench\.toml" + message, str(info.value)), str(info.value)
+
+
+def test_a_polled_source_reads_where_the_configuration_says() -> None:
+    laser = parse_bench_config(BENCH_TEXT).lasers[0]
+    bench = PlateOnlyBench()
+    amplifier = SimulatedAmplifier.for_channel(
+        bench, "x_r", config=laser.amplifier_config(), noise_sigma_m=0.0, static_offset_m=0.0015
+    )
+    with TcpAmplifierServer({1: amplifier}) as server:
+        port = CompowayFPort(server.url)
+        source = LaserSource(
+            laser, ZxlAmplifier(port, 1, laser.amplifier_config()), host_clock=bench.clock.now_s
+        )
+        source.poll()
+        with pytest.raises(AreaTypeError):  # the default location is not where this amplifier keeps it
+            ZxlAmplifier(port, 1).read_position_m()
+        port.close()
+    _, values = _drain(source)
+    assert values.tolist() == pytest.approx([0.0015])  # read in 0.1 µm counts from variable area C1

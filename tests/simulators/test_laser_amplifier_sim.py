@@ -17,9 +17,11 @@ import pytest
 from drivers.compowayf import errors
 from drivers.compowayf.amplifier import AmplifierConfig, MeasuredArea, MeasuredValueConfig, ZxlAmplifier
 from drivers.compowayf.codec import build_command, parse_response
+from drivers.compowayf.layout import streaming_measured_config
 from drivers.compowayf.transport import CompowayFPort, LinkSettings
 from drivers.exciter.sweep import SweepSettings
 from simulators.devices.laser_amplifier import (
+    BUFFER_SIZE_BYTES,
     AmplifierLine,
     FaultKind,
     PtyAmplifierServer,
@@ -35,10 +37,10 @@ SWEEP = SweepSettings(start_Hz=1.0, stop_Hz=5.0, amplitude_m=0.004, duration_s=6
 
 
 def _serve(
-    transport: str, amplifiers: dict[int, SimulatedAmplifier]
+    transport: str, amplifiers: dict[int, SimulatedAmplifier], *, echo: bool = False
 ) -> PtyAmplifierServer | TcpAmplifierServer:
     server_cls = PtyAmplifierServer if transport == "pty" else TcpAmplifierServer
-    return server_cls(amplifiers).start()
+    return server_cls(amplifiers, echo=echo).start()
 
 
 @pytest.fixture
@@ -229,6 +231,98 @@ def test_amplifier_answers_bad_commands_with_end_codes(
     ):
         response = parse_response(port.exchange(text))
         assert (response.node, response.end_code) == (1, end_code)
+
+
+def test_model_reply_carries_the_buffer_size(rig: Rig) -> None:
+    response = parse_response(rig.driver.port.exchange(build_command(1, "0503")))
+    assert response.data == "ZX-LDA11-N" + "00D9"  # 10-character model, 4-hex-digit buffer size (217)
+    attributes = rig.driver.read_attributes()
+    assert (attributes.model, attributes.buffer_size_bytes) == ("ZX-LDA11-N", BUFFER_SIZE_BYTES)
+
+
+def test_reads_longer_than_one_reply_are_refused_and_the_driver_splits_them(
+    bench: PlateOnlyBench, transport: str
+) -> None:
+    measured = MeasuredValueConfig(area=MeasuredArea.VARIABLE, area_type=0xC0, address=0, buffer_length=60)
+    config = AmplifierConfig(measured=measured)
+    amplifier = SimulatedAmplifier.for_channel(bench, "x_r", config=config, noise_sigma_m=0.0)
+    with (
+        _serve(transport, {1: amplifier}) as server,
+        ZxlAmplifier.open(server.device_url(1), config=config, link=FAST) as driver,
+    ):
+        for data, limit in (("C0000000" + "001A", 25), ("C0200000" + "8018", 23)):  # 26 DW; 24 DW + echo
+            service = "0101" if data.startswith("C00") else "0201"
+            response = parse_response(driver.port.exchange(build_command(1, service, data)))
+            assert (response.end_code, response.response_code) == ("00", "110B"), limit
+        before = server.commands_received
+        assert len(driver.read_counts(60)) == 60
+        assert server.commands_received - before == 3  # 25 + 25 + 10
+
+
+def test_the_configured_area_type_and_address_are_served(bench: PlateOnlyBench, transport: str) -> None:
+    measured = MeasuredValueConfig(area=MeasuredArea.VARIABLE, area_type=0xC1, address=0x0100)
+    config = AmplifierConfig(measured=measured)
+    amplifier = SimulatedAmplifier.for_channel(
+        bench, "x_r", config=config, noise_sigma_m=0.0, static_offset_m=2e-3
+    )
+    with (
+        _serve(transport, {1: amplifier}) as server,
+        ZxlAmplifier.open(server.device_url(1), config=config, link=FAST) as driver,
+        CompowayFPort(server.device_url(1), link=FAST) as other_port,
+    ):
+        assert driver.read_position_m() == pytest.approx(2e-3)
+        with pytest.raises(errors.AreaTypeError):  # the default location (parameter area C020) is not it
+            ZxlAmplifier(other_port, 1).read_position_m()
+
+
+def test_a_null_byte_before_each_reply_is_skipped(rig: Rig) -> None:
+    driver = rig.driver
+    skipped = driver.port.counters.skipped_bytes
+    rig.server.inject_fault(FaultKind.NULL_BEFORE_STX)
+    for _ in range(3):
+        assert driver.read_position_m() == pytest.approx(rig.bench.position_m("x_r"), abs=1e-6)
+    assert driver.port.counters.skipped_bytes == skipped + 3
+
+
+def test_an_echoing_line_needs_echo_suppression(bench: PlateOnlyBench, transport: str) -> None:
+    """With echo=1 the driver reads back its own frame and every read works. Without it the echoed command
+    is taken for a reply: a garbled one for 0503 (a typed error), one that answers nothing for an area read
+    (discarded by the request matching)."""
+    amplifier = SimulatedAmplifier.for_channel(bench, "x_r", noise_sigma_m=0.0, static_offset_m=1e-3)
+    with _serve(transport, {1: amplifier}, echo=True) as server:
+        with ZxlAmplifier.open(server.device_url(1) + "&echo=1&timeout_s=0.2") as driver:
+            assert driver.port.link.echo
+            assert driver.read_model() == "ZX-LDA11-N"
+            assert [driver.read_position_m() for _ in range(3)] == pytest.approx([1e-3] * 3)
+            assert (driver.port.counters.discarded_frames, driver.port.counters.retries) == (0, 0)
+        with ZxlAmplifier.open(server.device_url(1), link=FAST) as driver:
+            with pytest.raises(errors.MalformedFrameError):
+                driver.read_model()
+            assert driver.read_position_m() == pytest.approx(1e-3)
+            assert driver.port.counters.discarded_frames == 1
+
+
+def test_a_1000_sample_ring_streams_in_requests_of_25(bench: PlateOnlyBench, transport: str) -> None:
+    config = AmplifierConfig(measured=streaming_measured_config(0.001, 1000))
+    amplifier = SimulatedAmplifier.for_channel(bench, "x_r", config=config, noise_sigma_m=0.0, origin_s=0.0)
+    bench.start_sweep(SWEEP)
+    bench.clock.advance(1.5)
+    with (
+        _serve(transport, {1: amplifier}) as server,
+        ZxlAmplifier.open(server.device_url(1), config=config, link=FAST) as driver,
+    ):
+        before = server.commands_received
+        read = driver.read_stream(1000)
+        # the counter; the ring from slot 501 (sample 501) to 999, then 0 to 500, in 20 + 21 requests of at
+        # most 25; the counter again (every slot was read)
+        assert server.commands_received - before == 1 + 20 + 21 + 1
+        assert read.counter == amplifier.samples_taken == 1501
+        newest_s = (read.counter - 1) * 0.001  # sample k is taken at k ms (origin 0)
+        expected = [
+            amplifier.head.quantise_m(bench.position_m("x_r", newest_s - k * 0.001)) for k in range(5)
+        ]
+        assert [c * 1e-9 for c in read.counts[:5]] == pytest.approx(expected, abs=1e-9)
+        assert len(set(read.counts)) > 900  # every slot its own sample (the plate moves)
 
 
 # --- faults --------------------------------------------------------------------------------------------
