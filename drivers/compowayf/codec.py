@@ -412,7 +412,7 @@ MAX_WORDS_PER_READ = 50
 RESPONSE_FRAME_OVERHEAD_BYTES = 17
 """Bytes of a response frame around its data: STX, node 2, sub-address 2, end code 2, MRC SRC 4, response
 code 4, ETX, BCC. With the 25 double words (200 characters) of a full read it gives 217 = 00D9 hex, the
-buffer size OMRON's controllers report in 0503."""
+buffer size the 900-TC controllers (OMRON-built, CompoWay/F) report in 0503; the E5CN reports 0028 (40)."""
 
 
 @dataclass(frozen=True)

@@ -23,7 +23,7 @@ this), and the counter says how many have been taken in all. Samples older than 
 never measured.
 
 Protocol limits as OMRON documents them: 0503 answers the model and the communications buffer size
-(BUFFER_SIZE_BYTES, 217 = 00D9 hex as OMRON's controllers report); a command frame longer than the buffer
+(BUFFER_SIZE_BYTES, 217 = 00D9 hex, as the 900-TC controllers report); a command frame longer than the buffer
 gets end code 18; a read of more elements than one reply may carry (25 double words, fewer when the buffer
 is smaller) gets response code 110B (response too long).
 
@@ -78,8 +78,8 @@ from simulators.devices.sensor_heads import ZX_LD40, HeadModel, SimulatedHead
 
 BUFFER_SIZE_BYTES = 217
 """The simulated amplifier's communications buffer (reported by 0503): longer command frames get end code 18,
-and a reply may not exceed it (response code 110B). 217 (00D9 hex) is what OMRON's controllers report: it
-holds a reply of 25 double words."""
+and a reply may not exceed it (response code 110B). 217 (00D9 hex) holds a reply of 25 double words; it is
+what the 900-TC controllers (OMRON-built, CompoWay/F) report. No ZX-L value was found."""
 PARAMETER_READ_ECHO_CHARS = 12
 
 GARBAGE_REPLY = b"\xff\x00\x7e#GARBAGE#\x03\x5a"
