@@ -20,7 +20,7 @@ from daq.bench_config import BenchConfig, ExciterConfig, LaserConfig
 from drivers.compowayf.amplifier import ZxlAmplifier
 from drivers.compowayf.transport import CompowayFPort, LinkSettings
 from drivers.compowayf.urls import parse_device_url
-from drivers.exciter.urls import CanTarget, open_exciter, parse_exciter_url
+from drivers.exciter.urls import CanTarget, parse_exciter_url
 
 DEFAULT_TIMEOUT_S = 0.5
 """Reply timeout of one CompoWay/F attempt while probing (unless the URL says otherwise)."""
@@ -128,7 +128,7 @@ async def probe_exciter(exciter: ExciterConfig, timeout_s: float = DEFAULT_TIMEO
 
     try:
         async with asyncio.timeout(deadline_s):
-            drive = await open_exciter(exciter.url, keepalive_interval_s=None)
+            drive = await exciter.open(keepalive_interval_s=None)  # with its register map, if any
             try:
                 status = await drive.status()
             finally:

@@ -4,11 +4,13 @@
         link.silence()      # connections stay up, every byte in either direction is lost
         link.drop()         # every connection is aborted, new ones are accepted and closed at once
         link.restore()      # bytes pass again; new connections reach the device
+        link.fail_on(lambda data: ..., LinkMode.SILENT)  # fail at the first host chunk the predicate picks
 
 What a cable pulled or a switch rebooting does to a Modbus TCP drive (or a serial-to-Ethernet converter),
 for any device served on a socket: the simulated ones of this package, or a plain pymodbus server.
 `sent` logs every chunk the host sent, with its time and whether it reached the device, so a test can
-tell what the host did during an outage (did it keep feeding a watchdog?).
+tell what the host did during an outage (did it keep feeding a watchdog?). `modbus_tcp_requests` reads
+the requests in a chunk, to pick one for `fail_on` or to count keep-alives.
 """
 
 from __future__ import annotations
@@ -58,6 +60,9 @@ class FaultyLink:
         self.sent: list[SentChunk] = []
         """Every chunk the host sent, in order."""
         self.connections_accepted = 0
+        self.failed_at_s: float | None = None
+        """When a fail_on trigger fired (the link's clock)."""
+        self._trigger: tuple[Callable[[bytes], bool], LinkMode] | None = None
         self._server: asyncio.Server | None = None
         self._pipes: set[_Pipe] = set()
 
@@ -98,6 +103,11 @@ class FaultyLink:
         """Pass bytes again, on the connections still open and on new ones."""
         self.mode = LinkMode.PASS
 
+    def fail_on(self, predicate: Callable[[bytes], bool], mode: LinkMode) -> None:
+        """Switch to `mode` (SILENT or DOWN) at the first chunk from the host for which predicate holds;
+        that chunk is lost. One shot: the trigger is cleared when it fires."""
+        self._trigger = (predicate, mode)
+
     # ---- forwarding ---------------------------------------------------------------------------------
 
     async def _accept(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
@@ -121,9 +131,15 @@ class FaultyLink:
             pipe.abort()
             self._pipes.discard(pipe)
 
-    async def _pump(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter, *, from_host: bool) -> None:
+    async def _pump(
+        self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter, *, from_host: bool
+    ) -> None:
         with contextlib.suppress(ConnectionError, OSError):
             while data := await reader.read(READ_SIZE):
+                if from_host and self._trigger is not None and self._trigger[0](data):
+                    mode, self._trigger = self._trigger[1], None
+                    self.failed_at_s = self.clock()
+                    self.drop() if mode is LinkMode.DOWN else self.silence()
                 deliver = self.mode is LinkMode.PASS
                 if from_host:
                     self.sent.append(SentChunk(self.clock(), data, deliver))
@@ -131,6 +147,16 @@ class FaultyLink:
                     writer.write(data)
                     await writer.drain()
         writer.transport.abort()  # one side gone: the other one goes too
+
+
+def modbus_tcp_requests(data: bytes) -> list[tuple[int, int]]:
+    """(function code, first register address) of each Modbus TCP request in `data` (whole frames)."""
+    requests = []
+    while len(data) >= 10:  # MBAP header (7 bytes: transaction, protocol, length, unit), then the PDU
+        length = int.from_bytes(data[4:6], "big")
+        frame, data = data[: 6 + length], data[6 + length :]
+        requests.append((frame[7], int.from_bytes(frame[8:10], "big")))
+    return requests
 
 
 @dataclass(eq=False)

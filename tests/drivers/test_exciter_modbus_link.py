@@ -26,7 +26,7 @@ from drivers.exciter.errors import ExciterConnectionLostError, ExciterError, Exc
 from drivers.exciter.modbus import ModbusExciter, ModbusTcpLink
 from drivers.exciter.register_map import RegisterMap
 from drivers.exciter.sweep import SweepSettings
-from simulators.devices.faulty_link import FaultyLink
+from simulators.devices.faulty_link import FaultyLink, modbus_tcp_requests
 
 TIMEOUT_S = 0.2
 KEEPALIVE_INTERVAL_S = 0.05
@@ -129,17 +129,12 @@ async def wait_for(predicate: Callable[[], bool]) -> None:
 
 def keepalives_sent(link: FaultyLink, since_s: float, until_s: float) -> int:
     """Keep-alive writes the host sent (whether or not they got through) within [since_s, until_s]."""
-    count = 0
-    for chunk in link.sent:
-        if not since_s <= chunk.at_s <= until_s:
-            continue
-        data = chunk.data
-        while len(data) >= 8:  # Modbus TCP: MBAP header (7 bytes), then function code, address...
-            length = int.from_bytes(data[4:6], "big")
-            frame, data = data[: 6 + length], data[6 + length :]
-            address = int.from_bytes(frame[8:10], "big")
-            count += frame[7] == WRITE_SINGLE_REGISTER and address == KEEPALIVE_ADDRESS
-    return count
+    return sum(
+        request == (WRITE_SINGLE_REGISTER, KEEPALIVE_ADDRESS)
+        for chunk in link.sent
+        if since_s <= chunk.at_s <= until_s
+        for request in modbus_tcp_requests(chunk.data)
+    )
 
 
 @pytest.mark.parametrize(
@@ -185,7 +180,11 @@ def test_link_recovers_after_an_outage_and_the_keepalive_stops_during_it(
             # S2: no keep-alive left the host between its first failed status read and the restore, so a
             # drive's watchdog sees the host silent for the whole outage
             assert keepalives_sent(link, first_failure_s, restored_s) == 0
-            fed = [t for t, fc, address in received if fc == WRITE_SINGLE_REGISTER and address == 1]
+            fed = [
+                t
+                for t, fc, address in received
+                if fc == WRITE_SINGLE_REGISTER and address == KEEPALIVE_ADDRESS
+            ]
             gap_s = min(t for t in fed if t > restored_s) - max(t for t in fed if t < outage_s + 1e-3)
             assert gap_s >= restored_s - outage_s
 
