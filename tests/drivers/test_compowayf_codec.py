@@ -13,6 +13,7 @@ from hypothesis import strategies as st
 from drivers.compowayf import errors
 from drivers.compowayf.codec import (
     CommandFrame,
+    ControllerAttributes,
     ResponseFrame,
     Service,
     StatusReport,
@@ -30,9 +31,11 @@ from drivers.compowayf.codec import (
     encode_parameter_area_read,
     encode_parameter_area_write,
     encode_variable_area_read,
+    max_elements_per_read,
     parse_command,
     parse_response,
     split_frame,
+    split_reply,
 )
 
 # Variable area read, node 01, type C0, address 0000, bit 00, 1 element.
@@ -218,6 +221,34 @@ def test_split_frame_on_a_stream() -> None:
     assert split_frame(SHORT_13_REPLY + READ_ONE_REPLY)[0] == SHORT_13_REPLY
 
 
+def test_split_reply_resynchronises_on_stx() -> None:
+    assert split_reply(b"\x00" + READ_ONE_REPLY) == (READ_ONE_REPLY, b"", 1)  # RS-485 turn-around byte
+    broken = b"\x02" + b"0100"  # a frame cut short: reception starts again at the next STX
+    assert split_reply(b"\xff" + broken + ECHO_REPLY + b"\x02") == (ECHO_REPLY, b"\x02", 1 + len(broken))
+    assert split_reply(b"\x00\x00" + ECHO_REPLY[:5]) == (None, ECHO_REPLY[:5], 2)  # noise dropped early
+    garbled = b"\xff#GARBAGE#\x03\x5a"  # ETX + BCC but no STX: returned for the parser to reject
+    assert split_reply(garbled) == (garbled, b"", 0)
+    with pytest.raises(errors.MalformedFrameError, match="STX"):
+        parse_response(garbled)
+    assert split_reply(SHORT_13_REPLY + READ_ONE_REPLY)[:2] == (SHORT_13_REPLY, READ_ONE_REPLY)
+
+
+def test_controller_attributes_are_model_and_buffer_size() -> None:
+    assert ControllerAttributes("E5CN-Q2", 0x28).encode() == "E5CN-Q2   0028"  # padded to 10, then 4 hex
+    assert ControllerAttributes.decode("ZX-LDA11-N00D9") == ControllerAttributes("ZX-LDA11-N", 217)
+    for bad in ("ZX-LDA11-N", "ZX-LDA11-N00D", "ZX-LDA11-N00G9"):
+        with pytest.raises(errors.MalformedFrameError):
+            ControllerAttributes.decode(bad)
+
+
+def test_elements_per_read_are_omrons_limit_or_what_the_buffer_holds() -> None:
+    assert (max_elements_per_read(8, None), max_elements_per_read(4, None)) == (25, 50)
+    assert max_elements_per_read(8, 217) == 25  # 17 bytes of frame + 200 characters
+    assert max_elements_per_read(8, 217, echoed_chars=12) == 23  # a parameter read repeats its request
+    assert max_elements_per_read(8, 40) == 2 and max_elements_per_read(8, 20) == 0
+    assert max_elements_per_read(8, 4096) == 25  # a large buffer does not lift OMRON's limit
+
+
 def test_integer_encodings_are_twos_complement() -> None:
     assert encode_int(-1000, 8) == "FFFFFC18"
     assert encode_int(0x7FFFFFFF, 8) == "7FFFFFFF"
@@ -283,6 +314,8 @@ def test_int32_round_trip(value: int) -> None:
 
 @given(raw=st.binary(max_size=80))
 def test_parsers_raise_only_typed_errors_on_random_bytes(raw: bytes) -> None:
+    frame, rest, skipped = split_reply(raw)  # never raises; keeps or drops, never invents bytes
+    assert skipped + len(frame or b"") + len(rest) == len(raw)
     for parse in (parse_response, parse_command):
         with contextlib.suppress(errors.CompowayFError):
             parse(raw)
