@@ -81,7 +81,9 @@ class MeasuredValueConfig:
         Defaults: the ZS-series measurement result (parameter area C020, address 3000), see the module
         docstring for the sources and the assumption.
     buffer_length: polled amplifiers: how many consecutive elements from `address` hold samples, newest
-        first (1 = only the current value). Streaming amplifiers: the slots of the sample ring.
+        first (1 = only the current value; a read of more than 25 is split into several requests, between
+        which such a buffer may shift). Streaming amplifiers: the slots of the sample ring, whose
+        addresses do not move, so split reads stay consistent.
     count_unit: metres per count (signed 32-bit counts for double-word areas); OMRON's ZS/ZFV send nm.
     sample_period_s: the amplifier's own sampling period when it samples on its own clock and buffers
         (None: it holds only the value at the moment of the read, which the host then timestamps).
