@@ -20,10 +20,11 @@ from __future__ import annotations
 import argparse
 import platform
 import statistics
+import sys
 import tempfile
 import time
 from collections import Counter, defaultdict
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -182,13 +183,15 @@ def main() -> None:
     )
     work = [(label, seed) for label in labels for seed in range(args.per_class)]
     start = time.perf_counter()
-    with tempfile.TemporaryDirectory(prefix="doctor-independent-") as folder:
-        if args.jobs > 1:
-            with ProcessPoolExecutor(args.jobs) as pool:
-                futures = [pool.submit(run_case, label, seed, folder, args.sweep_s) for label, seed in work]
-                outcomes = [f.result() for f in futures]
-        else:
-            outcomes = [run_case(label, seed, folder, args.sweep_s) for label, seed in work]
+    with (
+        tempfile.TemporaryDirectory(prefix="doctor-independent-") as folder,
+        ProcessPoolExecutor(args.jobs) as pool,
+    ):
+        futures = [pool.submit(run_case, label, seed, folder, args.sweep_s) for label, seed in work]
+        for done, future in enumerate(as_completed(futures), start=1):
+            o = future.result()
+            print(f"[{done}/{len(work)}] {o.label} {o.seed}: {o.said} ({o.doctor_s:.0f} s)", file=sys.stderr)
+        outcomes = [f.result() for f in futures]
     print_report(outcomes)
     print(f"total wall time {time.perf_counter() - start:.0f} s")
 
