@@ -153,9 +153,12 @@ def refine_on_output_error(
     ±spread (relative, with a floor of 5% of the peak force) around the equation-error solution, which
     seeds the population. Returns the refined model and its gap."""
     grids = [c.velocity_m_s for c in model.curves]
-    start = np.concatenate([*[c.force_N for c in model.curves], [model.tyre_damping_Ns_per_m]])
+    # a tyre damping the equation error made negative (Kelvin-Voigt on noisy data) starts from 0 instead:
+    # the search range is [0, ...], and the start must lie in it
+    tyre_start = max(float(model.tyre_damping_Ns_per_m), 0.0)
+    start = np.concatenate([*[c.force_N for c in model.curves], [tyre_start]])
     peak = max(float(np.max(np.abs(c.force_N))) for c in model.curves)
-    half = np.maximum(spread * np.abs(start), 0.05 * peak)
+    half = np.maximum(spread * np.abs(start), max(0.05 * peak, 1e-6))
     half[-1] = max(spread * abs(start[-1]), 50.0)
     bounds = np.column_stack([start - half, start + half])
     bounds[-1, 0] = max(bounds[-1, 0], 0.0)
