@@ -11,8 +11,11 @@ channel's achieved rate (Hz, the recording's `rate_Hz.<channel>` metadata):
   of the interpolation, and below 2 f the sweep's top aliases outright;
 * r < WARN_SAMPLES_PER_PERIOD * f: identified, with a warning naming the channel and its rate.
 
-Recordings without rate metadata (simulated, or CSVs from elsewhere) are taken as sampled at their grid.
-The sweep's top frequency comes from `sweep_stop_Hz`/`sweep_start_Hz` metadata, else DEFAULT_TOP_HZ.
+The sample grid itself is judged by the same rule: a channel cannot have been sampled faster than its grid,
+so the grid rate 1/Δt stands for every channel without rate metadata (simulated recordings, CSVs from
+elsewhere, decimated files). A recording on a 20 Hz grid cannot carry a 0-20 Hz sweep, whatever it claims.
+The sweep's top frequency comes from `sweep_stop_Hz`/`sweep_start_Hz` metadata, else DEFAULT_TOP_HZ (the
+bench's standard 0-20 Hz sweep): a CSV without metadata needs a grid of at least 100 Hz.
 """
 
 from __future__ import annotations
@@ -35,7 +38,7 @@ class InsufficientBandwidthError(ValueError):
 
 @dataclass(frozen=True)
 class BandwidthCheck:
-    slowest_channel: str | None
+    slowest_channel: str
     slowest_rate_Hz: float
     sweep_top_Hz: float
     warnings: tuple[str, ...]
@@ -59,15 +62,17 @@ def check_bandwidth(recording: Recording) -> BandwidthCheck:
         for key in metadata
         if key.startswith(RATE_PREFIX) and (rate := _number(metadata, key)) is not None
     }
-    rates = {channel: rate for channel, rate in rates.items() if channel in recording.channels}
-    if not rates:
-        return BandwidthCheck(None, 1.0 / recording.sample_time_s, top_Hz, ())
+    grid_Hz = 1.0 / recording.sample_time_s
+    rates = {
+        channel: min(rates.get(channel, grid_Hz), grid_Hz) for channel in sorted(recording.channels)
+    }
     channel = min(rates, key=rates.__getitem__)
     rate = rates[channel]
     per_period = rate / top_Hz if top_Hz > 0 else math.inf
+    what = f"channel {channel} was sampled at" if rate < grid_Hz else "the recording's sample grid is"
     if per_period < REFUSE_SAMPLES_PER_PERIOD:
         raise InsufficientBandwidthError(
-            f"channel {channel} was sampled at {rate:.1f} Hz, {per_period:.1f} samples per period of the "
+            f"{what} {rate:.1f} Hz, {per_period:.1f} samples per period of the "
             f"sweep's {top_Hz:g} Hz top; at least {REFUSE_SAMPLES_PER_PERIOD * top_Hz:.0f} Hz is needed "
             "(a faster line, fewer amplifiers per line, or a streaming amplifier)"
         )

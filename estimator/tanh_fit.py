@@ -87,14 +87,18 @@ def _linear_fits(
     return np.column_stack([coef, mu, beta]), cost
 
 
+MIN_POINTS = 5
+"""The fewest curve points a tanh fit takes (four parameters, and one more to judge the fit)."""
+
+
 def fit_tanh(velocity_m_s: np.ndarray, force_N: np.ndarray) -> TanhFit:
     """Robust fit of f = c_s·v + κ·(tanh(μ·v + β) − tanh(β)) to curve points; needs at least 5 points."""
     v = np.asarray(velocity_m_s, dtype=float)
     f = np.asarray(force_N, dtype=float)
     if v.shape != f.shape or v.ndim != 1:
         raise ValueError("velocity and force must be 1-D arrays of the same length")
-    if v.size < 5:
-        raise ValueError(f"a tanh fit needs at least 5 points, got {v.size}")
+    if v.size < MIN_POINTS:
+        raise ValueError(f"a tanh fit needs at least {MIN_POINTS} points, got {v.size}")
     if not (np.all(np.isfinite(v)) and np.all(np.isfinite(f))):
         raise ValueError("curve points must be finite numbers")
     span = float(np.max(np.abs(v)))

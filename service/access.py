@@ -47,15 +47,18 @@ class KeysFileError(ValueError):
 
 @dataclass(frozen=True)
 class Principal:
-    """The caller behind a valid key: its role, and a key id (a short hash) to record who did what without
+    """The caller behind a valid key: its role, and a key id (a keyed hash) to record who did what without
     storing the key itself."""
 
     role: Role
     key_id: str
 
 
-def key_id(key: str) -> str:
-    return hashlib.sha256(key.encode()).hexdigest()[:12]
+def key_id(key: str, secret: bytes) -> str:
+    """12 hex digits of HMAC-SHA256(secret, key). Viewers see key ids (who submitted a job); an unsalted
+    hash of the key would let anyone holding an id test guessed keys offline, a keyed one needs the
+    service's secret (KeyRing.fingerprint_secret, kept in the data directory)."""
+    return hmac.new(secret, key.encode(), hashlib.sha256).hexdigest()[:12]
 
 
 class KeyRing:
@@ -64,6 +67,9 @@ class KeyRing:
     def __init__(self, keys: Mapping[str, Role], source: str = "keys") -> None:
         self._keys = [(k.encode(), role) for k, role in keys.items()]
         self.source = source
+        self.fingerprint_secret = secrets.token_bytes(32)
+        """The key of the key ids' HMAC: random per ring; the service replaces it with the one kept in its
+        data directory, so that ids stay the same across restarts."""
 
     def __len__(self) -> int:
         return len(self._keys)
@@ -74,7 +80,7 @@ class KeyRing:
         for key, role in self._keys:  # no early exit: the time taken does not depend on which key matched
             if hmac.compare_digest(key, candidate):
                 found = role
-        return Principal(found, key_id(presented)) if found is not None else None
+        return Principal(found, key_id(presented, self.fingerprint_secret)) if found is not None else None
 
     @classmethod
     def generated(cls) -> tuple[KeyRing, str]:

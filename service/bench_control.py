@@ -14,6 +14,7 @@ configuration the devices run on their own and sweeps follow the wall clock.
 from __future__ import annotations
 
 import asyncio
+import logging
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -25,6 +26,13 @@ from daq.sweep.pacing import Pacing, RealtimePacing, SimulatedPacing
 from daq.sweep.run import SweepError, check_request, run_sweep
 from drivers.exciter.urls import open_exciter
 from simulators.devices.sim_bench import SimulatedBench, vehicle_preset
+
+log = logging.getLogger("shockbench.bench")
+
+SERVICE_STOPPED = "service stopped"
+"""The reason a sweep cut short by the service's own stop (Ctrl-C, SIGTERM) is recorded with; such a sweep
+is failed, not aborted (nobody asked for it to end)."""
+STARTUP_STOP_TIMEOUT_S = 5.0
 
 SweepDone = Callable[[str, SweepOutcome | None, str], None]
 """Called in the sweep's thread when it ends: (sweep id, outcome or None, error message if it never began)."""
@@ -67,9 +75,36 @@ class BenchController:
         self._progress: SweepProgress | None = None
         self._abort = threading.Event()
         self._emergency = threading.Event()
+        self._service_stopping = False
+
+    def stop_drive(self, timeout_s: float = STARTUP_STOP_TIMEOUT_S) -> str:
+        """Command the drive to stop (controlled stop), whatever it is doing: at start-up, before anything
+        else, because a service that crashed (SIGKILL, power cut on the host) may have left the plate
+        running, and only the drive's watchdog would otherwise stop it. Returns what happened, in words;
+        never raises (an unreachable drive is logged, and the bench's endpoints then say so themselves)."""
+        try:
+            asyncio.run(asyncio.wait_for(self._direct_stop(), timeout_s))
+        except Exception as exc:
+            message = f"could not command the drive {self.config.exciter.name!r} to stop at start-up: " + (
+                str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+            )
+            log.error("%s", message)
+            return message
+        message = f"drive {self.config.exciter.name!r} commanded to stop at start-up"
+        log.info("%s", message)
+        return message
+
+    async def _direct_stop(self) -> None:
+        exciter = await open_exciter(self.config.exciter.url, envelope=self.config.safety_envelope())
+        try:
+            await exciter.stop()
+        finally:
+            await exciter.close()
 
     def close(self) -> None:
-        """Abort a running sweep (controlled stop, recording kept), wait for it, stop simulated devices."""
+        """The service stops: abort a running sweep (controlled stop, recording kept, the sweep recorded as
+        failed, "service stopped"), wait for it, stop simulated devices."""
+        self._service_stopping = True
         self._abort.set()
         thread = self._thread
         if thread is not None:
@@ -159,6 +194,7 @@ class BenchController:
                     progress=self._on_progress,
                     abort=self._abort,
                     emergency=self._emergency,
+                    abort_reason=self._abort_reason,
                 )
             )
         except SweepError as exc:
@@ -170,6 +206,9 @@ class BenchController:
                 self._thread = None
                 self._sweep_id = None
             done(sweep_id, outcome, error)
+
+    def _abort_reason(self) -> str:
+        return SERVICE_STOPPED if self._service_stopping else "aborted by the operator"
 
     def abort(self, sweep_id: str) -> bool:
         """Controlled stop of the running sweep if it is `sweep_id`; False if that sweep is not running."""

@@ -103,12 +103,16 @@ async def run_sweep(
     abort: threading.Event | None = None,
     emergency: threading.Event | None = None,
     silence_timeout_s: float = DEFAULT_SILENCE_TIMEOUT_S,
+    abort_reason: Callable[[], str] | None = None,
 ) -> SweepOutcome:
     """Run one sweep on the bench `config` describes and record it at out_path (HDF5). See the module.
 
     abort: set it to end the sweep with a controlled stop; emergency: set it for an emergency stop (both
-    are looked at every orchestration cycle, STEP_S)."""
+    are looked at every orchestration cycle, STEP_S). abort_reason: what an abort is recorded as (default
+    "aborted by the operator"; the service says "service stopped" when its own stop aborts the sweep)."""
     run = _SweepRun(config, request, Path(out_path), pacing or RealtimePacing(), progress, abort)
+    if abort_reason is not None:
+        run.abort_reason = abort_reason
     run.emergency = emergency or threading.Event()
     run.silence_timeout_s = silence_timeout_s
     return await run.run()
@@ -156,6 +160,7 @@ class _SweepRun:
         self.clock = pacing.host_clock
         self.on_progress = progress
         self.abort = abort or threading.Event()
+        self.abort_reason: Callable[[], str] = lambda: "aborted by the operator"
         self.emergency = threading.Event()
         self.silence_timeout_s = DEFAULT_SILENCE_TIMEOUT_S
         self.ports: list[CompowayFPort] = []
@@ -196,7 +201,7 @@ class _SweepRun:
         except (SweepAbortedError, asyncio.CancelledError, KeyboardInterrupt) as exc:
             if not isinstance(exc, SweepAbortedError):
                 cancelled = exc
-            reason = "aborted by the operator"
+            reason = self.abort_reason() if isinstance(exc, SweepAbortedError) else "aborted by the operator"
             stop = await self._stop_if_moving(stop, emergency=False)
         except SweepFaultError as fault:
             reason = fault.reason

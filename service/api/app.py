@@ -9,22 +9,28 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import os
+import secrets
 import time
 from collections.abc import AsyncIterator, Callable
 from contextlib import AbstractAsyncContextManager, asynccontextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from importlib.metadata import PackageNotFoundError, version
+from pathlib import Path
 
 from fastapi import APIRouter, FastAPI
 
 from service.access import KeyRing
 from service.api.contract import install_contract
 from service.api.errors import install_error_handlers
-from service.api.limits import UploadSizeLimit
+from service.api.input_check import CHECKER
+from service.api.limits import BodyTimeout, UploadSizeLimit
+from service.api.methods import AllowedMethods
 from service.api.routes import bench, events, jobs, schedules, status, sweeps
 from service.api.scheduler import InspectionScheduler
 from service.api.schemas import API_PREFIX
 from service.api.settings import ServiceSettings
+from service.api.stream_limit import StreamLimit
 from service.bench_control import BenchController
 from service.jobs.manager import JobManager
 from service.store.database import Database
@@ -55,6 +61,8 @@ class Services:
     version: str
     started_at: float
     """time.monotonic() at start-up."""
+    streams: StreamLimit = field(default_factory=StreamLimit)
+    """Open event streams per key."""
     sweeps: SweepStore | None = None
     bench: BenchController | None = None
     """None when the service was started without --simulated or --config: bench endpoints answer 503."""
@@ -70,15 +78,41 @@ class Services:
 
 
 def open_bench(settings: ServiceSettings) -> BenchController | None:
-    """The bench of `--config` (loaded and checked), else the in-process simulated bench of `--simulated`,
-    else None. Blocking (files, simulated devices starting): call it in a thread."""
+    """The bench of `--config` (loaded and checked), its drive commanded to stop at once (a crashed
+    predecessor may have left the plate running); else the in-process simulated bench of `--simulated`,
+    else None. Blocking (files, devices): call it in a thread."""
     if settings.bench_config is not None:
         from daq.bench_config import load_bench_config
 
-        return BenchController(load_bench_config(settings.bench_config))
+        bench = BenchController(load_bench_config(settings.bench_config))
+        bench.stop_drive()
+        return bench
     if settings.simulated:
         return BenchController(simulated=True)
     return None
+
+
+FINGERPRINT_SECRET_FILE = "key-id.secret"
+
+
+def fingerprint_secret(data_dir: Path) -> bytes:
+    """The secret of the key ids' HMAC (service.access.key_id), made once per data directory (32 random
+    bytes, readable by the service's user only) so that the ids recorded with jobs and sweeps stay the
+    same across restarts."""
+    path = data_dir / FINGERPRINT_SECRET_FILE
+    try:
+        secret = path.read_bytes()
+        if len(secret) >= 32:
+            return secret
+    except FileNotFoundError:
+        pass
+    secret = secrets.token_bytes(32)
+    partial = path.with_name(f".{path.name}.{secrets.token_hex(4)}")
+    descriptor = os.open(partial, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+    with os.fdopen(descriptor, "wb") as out:
+        out.write(secret)
+    os.replace(partial, path)
+    return secret
 
 
 Lifespan = Callable[[FastAPI], AbstractAsyncContextManager[None]]
@@ -93,17 +127,23 @@ def lifespan_factory(settings: ServiceSettings) -> Lifespan:
         def prepare() -> Database:
             for folder in (settings.data_dir, settings.jobs_dir, settings.uploads_dir):
                 folder.mkdir(parents=True, exist_ok=True)
+            settings.keys.fingerprint_secret = fingerprint_secret(settings.data_dir)
             database = Database(settings.resolved_database_url)
             database.create_tables()
             return database
 
-        database = await asyncio.to_thread(prepare)
+        bench = await asyncio.to_thread(open_bench, settings)  # first: the drive stops before anything
+        try:
+            database = await asyncio.to_thread(prepare)
+        except BaseException:
+            if bench is not None:
+                await asyncio.to_thread(bench.close)
+            raise
         store = JobStore(database)
         sweep_store = SweepStore(database)
         failed_sweeps = await asyncio.to_thread(sweep_store.recover_interrupted)
         if failed_sweeps:
             log.warning("sweeps %s were cut off by a restart; marked failed", failed_sweeps)
-        bench = await asyncio.to_thread(open_bench, settings)
         manager = JobManager(store, settings.worker)
         tests = ScheduleStore(database)
         scheduler = None
@@ -117,12 +157,14 @@ def lifespan_factory(settings: ServiceSettings) -> Lifespan:
             manager,
             service_version(),
             time.monotonic(),
+            streams=StreamLimit(settings.max_streams_per_key),
             sweeps=sweep_store,
             bench=bench,
             tests=tests,
             scheduler=scheduler,
         )
         try:
+            await asyncio.to_thread(CHECKER.start)
             await manager.start()
             if scheduler is not None:
                 await scheduler.start()
@@ -134,6 +176,7 @@ def lifespan_factory(settings: ServiceSettings) -> Lifespan:
             if bench is not None:
                 await asyncio.to_thread(bench.close)  # a running sweep ends (and is stored) first
             await manager.stop()
+            await asyncio.to_thread(CHECKER.close)
             database.dispose()
 
     return lifespan
@@ -162,6 +205,8 @@ def create_app(settings: ServiceSettings) -> FastAPI:
     )
     install_error_handlers(app)
     app.add_middleware(UploadSizeLimit, max_bytes=settings.max_upload_bytes)
+    app.add_middleware(BodyTimeout, timeout_s=settings.body_timeout_s)
     app.include_router(api_router())
     install_contract(app)
+    app.add_middleware(AllowedMethods, routes=app.router.routes)
     return app

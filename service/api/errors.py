@@ -4,6 +4,7 @@ message; a stack trace never leaves the service (it goes to the log)."""
 from __future__ import annotations
 
 import logging
+import secrets
 from typing import Any
 
 from fastapi import FastAPI, Request
@@ -21,10 +22,12 @@ CODES = {
     404: "not_found",
     405: "method_not_allowed",
     406: "not_acceptable",
+    408: "request_timeout",
     409: "conflict",
     413: "payload_too_large",
     415: "unsupported_media_type",
     422: "invalid",
+    429: "too_many_requests",
     500: "internal",
     503: "unavailable",
 }
@@ -60,10 +63,26 @@ class ApiError(Exception):
         self.headers = headers
 
 
+MAX_MESSAGE_CHARS = 300
+"""An error message is one line of at most this many characters: input echoed in a message (a header of a
+million columns, a 1 MB TOML line) is cut, so an error body stays small whatever was sent."""
+MAX_FIELD_CHARS = 80
+
+
+def clip(text: str, limit: int = MAX_MESSAGE_CHARS) -> str:
+    """The first line of `text`, cut to `limit` characters with an ellipsis saying how much was left out."""
+    lines = text.strip().splitlines()
+    line = lines[0] if lines else ""
+    if len(line) <= limit:
+        return line
+    return f"{line[: limit - 30]}... ({len(line) - limit + 30} more characters)"
+
+
 def error_response(
     status: int, code: str, message: str, field: str | None = None, headers: dict[str, str] | None = None
 ) -> JSONResponse:
-    body = ErrorBody(error=ErrorDetail(code=code, message=message.strip().splitlines()[0], field=field))
+    field = clip(field, MAX_FIELD_CHARS) if field is not None else None
+    body = ErrorBody(error=ErrorDetail(code=code, message=clip(message) or code, field=field))
     return JSONResponse(body.model_dump(exclude_none=True), status_code=status, headers=headers)
 
 
@@ -107,8 +126,20 @@ async def _http_error(_request: Request, exc: Exception) -> JSONResponse:
 
 
 async def _unexpected(request: Request, exc: Exception) -> JSONResponse:
-    log.error("unexpected error in %s %s", request.method, request.url.path, exc_info=exc)
-    return error_response(500, "internal", "internal error; the service log has the details")
+    """A bug, not an input the checks foresaw: logged with a fresh error id that the answer carries, so
+    that a user's report finds its traceback. `Connection: close` makes the client open a new connection
+    for its next request (uvicorn drops this one after an unhandled exception, and a client reusing it
+    would see its next request fail too)."""
+    error_id = secrets.token_hex(6)
+    log.error(
+        "error id %s: unexpected error in %s %s", error_id, request.method, request.url.path, exc_info=exc
+    )
+    return error_response(
+        500,
+        "internal",
+        f"internal error (error id {error_id}); the service log has the details under that id",
+        headers={"Connection": "close", "X-Error-Id": error_id},
+    )
 
 
 def install_error_handlers(app: FastAPI) -> None:

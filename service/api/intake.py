@@ -3,7 +3,9 @@ refused at submit (422 naming the field) instead of failing in the queue; then s
 
 Two ways in: `accept_upload` (recording CSV and vehicle file uploaded with the request; they are kept in
 the job's folder) and `accept_recording` (a recording already on disk, e.g. a sweep's, with a vehicle
-file: the files stay where they are). Both are synchronous (file I/O, parsing): call them in a thread.
+file: the files stay where they are). Both are synchronous (file I/O): call them in a thread. The files
+are read and checked in the input checker's process (service.api.input_check), so that a large upload
+never holds the service's interpreter.
 """
 
 from __future__ import annotations
@@ -44,12 +46,20 @@ def _read_inputs(
         raise ApiError(422, message, field="recording") from None
     try:
         text = vehicle_path.read_text(encoding="utf-8")
-        vehicle = parse_vehicle(text, source=vehicle_name)
     except UnicodeDecodeError:
         raise ApiError(422, f"{vehicle_name}: not a text file (UTF-8 expected)", field="vehicle") from None
+    return recording, parse_vehicle_field(text, vehicle_name, "vehicle")
+
+
+def parse_vehicle_field(text: str, source: str, field: str) -> VehicleParameters:
+    """The vehicle file's text as parameters, or ApiError 422 naming `field`: not TOML, wrong keys, or
+    nested so deep that the TOML parser runs out of stack (RecursionError, not a TOMLDecodeError)."""
+    try:
+        return parse_vehicle(text, source=source)
     except ValueError as exc:  # VehicleFileError
-        raise ApiError(422, str(exc), field="vehicle") from None
-    return recording, vehicle
+        raise ApiError(422, str(exc), field=field) from None
+    except RecursionError:
+        raise ApiError(422, f"{source}: not valid TOML (nested too deeply)", field=field) from None
 
 
 def _check(spec: JobKindSpec, options: BaseModel, recording: Recording, vehicle: VehicleParameters) -> None:
@@ -57,6 +67,27 @@ def _check(spec: JobKindSpec, options: BaseModel, recording: Recording, vehicle:
         spec.check(options, recording, vehicle)
     except InputError as exc:
         raise ApiError(422, str(exc), field=exc.field) from None
+
+
+def check_files(
+    spec: JobKindSpec,
+    options: BaseModel,
+    recording_path: Path,
+    recording_name: str,
+    vehicle_path: Path,
+    vehicle_name: str,
+) -> None:
+    """Read both files and run the kind's checks (ApiError 422 naming the field). Runs in the input
+    checker's process (service.api.input_check), never in the service's."""
+    _check(spec, options, *_read_inputs(recording_path, recording_name, vehicle_path, vehicle_name))
+
+
+def _check_elsewhere(
+    spec: JobKindSpec, options: BaseModel, recording: tuple[Path, str], vehicle: tuple[Path, str]
+) -> None:
+    from service.api.input_check import CHECKER
+
+    CHECKER.check(spec.name, options.model_dump(mode="json"), recording, vehicle)
 
 
 def _job_folder(settings: ServiceSettings, job_id: int) -> Path:
@@ -81,10 +112,8 @@ def accept_upload(
         for (_, source), target in ((recording, recording_path), (vehicle, vehicle_path)):
             with target.open("wb") as out:
                 shutil.copyfileobj(source, out, 1 << 20)
-        parsed = _read_inputs(
-            recording_path, recording[0] or "recording", vehicle_path, vehicle[0] or "vehicle"
-        )
-        _check(spec, options, *parsed)
+        names = (recording[0] or "recording", vehicle[0] or "vehicle")
+        _check_elsewhere(spec, options, (recording_path, names[0]), (vehicle_path, names[1]))
 
         def place(job_id: int) -> JobFiles:
             folder = _job_folder(settings, job_id)
@@ -116,8 +145,7 @@ def accept_recording(
 ) -> JobRecord:
     """A job on a recording already on disk (a sweep's): checked alike, the files stay where they are.
     `submitted_by` is the key id of whoever asked (an operator, or the author of a scheduled test)."""
-    parsed = _read_inputs(recording_path, recording_path.name, vehicle_path, vehicle_path.name)
-    _check(spec, options, *parsed)
+    _check_elsewhere(spec, options, (recording_path, recording_path.name), (vehicle_path, vehicle_path.name))
 
     def place(job_id: int) -> JobFiles:
         folder = _job_folder(settings, job_id)

@@ -1,4 +1,6 @@
-"""The upload size limit: a request body larger than the limit is refused with 413 and a clear message,
+"""Request bodies: the size limit (UploadSizeLimit) and the read timeout (BodyTimeout).
+
+The upload size limit: a request body larger than the limit is refused with 413 and a clear message,
 before it is stored anywhere.
 
 A declared Content-Length over the limit is refused before the body is read. A body without one
@@ -7,6 +9,8 @@ that FastAPI passes through its form parsing unchanged and the error handlers re
 """
 
 from __future__ import annotations
+
+import asyncio
 
 from fastapi import HTTPException
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
@@ -61,3 +65,44 @@ class UploadSizeLimit:
             return message
 
         await self.app(scope, counted, send)
+
+
+class BodyReadTimeout(HTTPException):
+    def __init__(self, timeout_s: float) -> None:
+        super().__init__(
+            408,
+            f"the request body stopped arriving: nothing for {timeout_s:g} s before it was complete",
+            headers={"Connection": "close"},
+        )
+
+
+class BodyTimeout:
+    """A server-side timeout for request bodies (uvicorn has one for idle keep-alive connections, none for a
+    body that stops arriving): each read of the body must bring something within `timeout_s`, or the
+    request is answered 408 with `Connection: close` and the connection freed. A slow upload that keeps
+    arriving is never cut; a client that declared more than it sends is. Pure ASGI middleware: reading the
+    body raises BodyReadTimeout, an HTTPException the error handlers render (as for BodyTooLarge)."""
+
+    def __init__(self, app: ASGIApp, timeout_s: float) -> None:
+        self.app = app
+        self.timeout_s = timeout_s
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        body_done = False
+
+        async def timed() -> Message:
+            nonlocal body_done
+            if body_done:  # after the body only a disconnect can come: waiting for it is no body read
+                return await receive()
+            try:
+                message = await asyncio.wait_for(receive(), self.timeout_s)
+            except TimeoutError:
+                raise BodyReadTimeout(self.timeout_s) from None
+            if message["type"] != "http.request" or not message.get("more_body", False):
+                body_done = True
+            return message
+
+        await self.app(scope, timed, send)

@@ -10,6 +10,10 @@ from service.access import KeyRing
 from service.jobs.manager import WorkerSettings
 from service.store.database import default_database_url
 
+DEFAULT_MAX_STREAMS_PER_KEY = 8
+DEFAULT_BODY_TIMEOUT_S = 30.0
+"""Longest pause within a request body (s): generous for a slow link, short enough that clients which
+declare more than they send cannot hold connections for ever."""
 DEFAULT_MAX_UPLOAD_BYTES = 64 * 1024 * 1024
 """64 MiB: a 20 s quarter-car recording at 1 kHz is about 1 MB of CSV, a 10-minute axle recording ~40 MB."""
 
@@ -27,6 +31,10 @@ class ServiceSettings:
     simulated: bool = False
     """Start simulated devices, so that the whole service runs with nothing attached."""
     max_upload_bytes: int = DEFAULT_MAX_UPLOAD_BYTES
+    body_timeout_s: float = DEFAULT_BODY_TIMEOUT_S
+    """A request body that brings nothing for this long before it is complete is answered 408."""
+    max_streams_per_key: int = DEFAULT_MAX_STREAMS_PER_KEY
+    """Event streams one key may hold open at once; one more is answered 429."""
     worker: WorkerSettings = field(default_factory=WorkerSettings)
 
     @property

@@ -15,20 +15,26 @@ from pathlib import Path
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from daq.formats.vehicle_file import parse_vehicle
 from daq.sweep.model import DEFAULT_SETTLE_S, StopKind, SweepOutcome, SweepRequest
-from daq.sweep.run import SweepError
+from daq.sweep.run import SAMPLE_TIME_S, SweepError
 from drivers.exciter.errors import EnvelopeViolationError
 from drivers.exciter.sweep import SweepLaw, SweepSettings
+from estimator.bandwidth import REFUSE_SAMPLES_PER_PERIOD
 from estimator.vehicle import VehicleParameters
 from service.api.errors import ApiError
+from service.api.intake import parse_vehicle_field
 from service.bench_control import BenchBusyError, BenchController, SweepDone
+from service.jobs.bounds import check_vehicle_bounds
+from service.jobs.context import InputError
 from service.store.models import SweepStatus
 from service.store.sweeps import SweepRecord, SweepStore
 
 log = logging.getLogger("shockbench.api")
 
 SETTINGS_FIELDS = ("start_Hz", "stop_Hz", "amplitude_m", "duration_s", "law")
+MIN_SWEEP_DURATION_S = 1.0
+"""A shorter sweep records nothing to identify (and a drive may refuse its START)."""
+MAX_SWEEP_DURATION_S = 3600.0
 
 
 class SweepSettingsIn(BaseModel):
@@ -41,7 +47,12 @@ class SweepSettingsIn(BaseModel):
     amplitude_m: float = Field(
         0.004, ge=0, le=1, description="plate amplitude, zero to peak (m); the bench envelope limits it"
     )
-    duration_s: float = Field(20.0, gt=0, le=3600, description="the sweep itself, without settling (s)")
+    duration_s: float = Field(
+        20.0,
+        ge=MIN_SWEEP_DURATION_S,
+        le=MAX_SWEEP_DURATION_S,
+        description="the sweep itself, without settling (s)",
+    )
     law: SweepLaw = Field(SweepLaw.LINEAR, description="linear or logarithmic")
     settle_s: float = Field(DEFAULT_SETTLE_S, ge=0, le=600, description="recorded after the sweep (s)")
 
@@ -69,10 +80,7 @@ def check_sweep(bench: BenchController, body: SweepIn) -> tuple[SweepSettings, V
     """Everything checkable without the bench moving (ApiError 422 naming the field): the settings, the
     vehicle file and its model against the bench's, the safety envelope."""
     settings = body.sweep_settings()
-    try:
-        vehicle = parse_vehicle(body.vehicle_toml, source="vehicle_toml")
-    except ValueError as exc:
-        raise ApiError(422, str(exc), field="vehicle_toml") from None
+    vehicle = parse_vehicle_field(body.vehicle_toml, "vehicle_toml", "vehicle_toml")
     if vehicle.model != bench.config.model:
         raise ApiError(
             422,
@@ -80,10 +88,36 @@ def check_sweep(bench: BenchController, body: SweepIn) -> tuple[SweepSettings, V
             field="vehicle_toml",
         )
     try:
+        check_vehicle_bounds(vehicle, field="vehicle_toml")
+    except InputError as exc:
+        raise ApiError(422, f"vehicle_toml: {exc}", field=exc.field) from None
+    try:
         bench.config.safety_envelope().check(settings)
     except EnvelopeViolationError as exc:
         raise ApiError(422, str(exc), field=exc.field) from None
+    check_recordable(bench, settings)
     return settings, vehicle
+
+
+def check_recordable(bench: BenchController, settings: SweepSettings) -> None:
+    """ApiError 422 (stop_Hz) when the bench's recording could not carry the sweep, by the rule the job
+    on its recording applies (estimator.bandwidth): the grid (1 kHz), or a streaming amplifier's slower
+    sampling, must give REFUSE_SAMPLES_PER_PERIOD samples per period of the sweep's top frequency. Polled
+    amplifiers' rates are known only once recorded: the job on the recording judges them."""
+    periods = [SAMPLE_TIME_S] + [
+        laser.sample_period_s for laser in bench.config.lasers if laser.sample_period_s is not None
+    ]
+    rate_Hz = 1.0 / max(periods)
+    top_Hz = max(settings.start_Hz, settings.stop_Hz)
+    if top_Hz > 0 and rate_Hz / top_Hz < REFUSE_SAMPLES_PER_PERIOD:
+        field = "stop_Hz" if settings.stop_Hz >= settings.start_Hz else "start_Hz"
+        raise ApiError(
+            422,
+            f"{field}: the bench records at {rate_Hz:g} Hz, too slow for a sweep up to {top_Hz:g} Hz: "
+            f"identification needs {REFUSE_SAMPLES_PER_PERIOD:g} samples per period, so at most "
+            f"{rate_Hz / REFUSE_SAMPLES_PER_PERIOD:g} Hz",
+            field=field,
+        )
 
 
 def outcome_status(outcome: SweepOutcome) -> SweepStatus:

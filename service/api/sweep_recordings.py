@@ -7,7 +7,9 @@ from __future__ import annotations
 import os
 import secrets
 from pathlib import Path as FilePath
+from pathlib import PurePath
 
+from daq.formats.recording_csv import write_recording_csv
 from daq.storage.hdf5_recording import RecordingFileError, RecordingGapError, export_csv
 from service.api.errors import ApiError
 from service.api.intake import accept_recording
@@ -30,9 +32,21 @@ def recording_path(record: SweepRecord) -> FilePath:
     return path
 
 
+PATH_METADATA = ("source", "vehicle_file")
+"""Metadata lines of an exported CSV that hold a path: written with the file name only, since viewers
+download the CSV and the data directory's place on the server is none of theirs."""
+EXPORT_VERSION = 2
+"""Part of the CSV's name: a CSV exported before paths were stripped is exported again, not served."""
+
+
 def export(h5: FilePath, csv: FilePath) -> None:
     try:
-        export_csv(h5, csv)
+        recording = export_csv(h5, csv)
+        recording.metadata = {
+            key: (PurePath(value).name if key in PATH_METADATA else value)
+            for key, value in recording.metadata.items()
+        }
+        write_recording_csv(csv, recording)
     except RecordingGapError as exc:
         raise ApiError(422, str(exc).replace(str(h5), h5.name), code="recording_gaps") from None
     except RecordingFileError as exc:
@@ -42,7 +56,7 @@ def export(h5: FilePath, csv: FilePath) -> None:
 def sweep_csv(record: SweepRecord) -> FilePath:
     """The recording as CSV beside the HDF5 file (exported once; a finished recording never changes)."""
     h5 = recording_path(record)
-    csv = h5.with_suffix(".csv")
+    csv = h5.with_suffix(f".v{EXPORT_VERSION}.csv")
     if not csv.is_file():
         partial = csv.with_name(f".{csv.name}.{secrets.token_hex(4)}.part")
         try:

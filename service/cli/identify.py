@@ -15,9 +15,11 @@ from daq.formats.vehicle_file import read_vehicle, write_vehicle
 from estimator.bandwidth import check_bandwidth
 from estimator.identify import IdentificationResult, IdentifyOptions, Solver, identify
 from estimator.solvers.differential_evolution import DEProgress, DESettings
+from estimator.tanh_fit import MIN_POINTS as MIN_TANH_POINTS
 from estimator.tanh_fit import fit_tanh
 from estimator.vehicle import TyreModel
 from service.cli.errors import CliError
+from service.jobs.bounds import check_physical_bounds
 from service.plots import save_curve_plot
 from simulators.vehicle_sim import SimulationSettings, default_quarter_car, simulate, true_damper
 
@@ -88,8 +90,8 @@ def summary(result: IdentificationResult) -> str:
 
 
 def options_from_args(args: argparse.Namespace) -> IdentifyOptions:
-    if args.points is not None and not 3 <= args.points <= 60:
-        raise CliError("--points must lie between 3 and 60")
+    if args.points is not None and not MIN_TANH_POINTS <= args.points <= 60:
+        raise CliError(f"--points must lie between {MIN_TANH_POINTS} (the tanh fit needs as many) and 60")
     de = DESettings(generations=args.generations, seed=args.seed)
     return IdentifyOptions(
         tyre=TyreModel(args.tyre),
@@ -105,6 +107,7 @@ def run_identify(args: argparse.Namespace) -> int:
     vehicle = read_vehicle(args.vehicle)
     for warning in check_bandwidth(recording).warnings:  # refuses (ValueError, one line) when hopeless
         print(f"shockbench identify: warning: {warning}", file=sys.stderr)
+    check_physical_bounds(recording, vehicle)  # the service's submit check (ValueError, one line)
     options = options_from_args(args)
     progress = _ProgressLine() if options.solver is Solver.DE and not args.json else None
     result = identify(recording, vehicle, options, progress=progress)

@@ -1,7 +1,8 @@
 """`shockbench serve`: run the bench service (FastAPI under uvicorn, with its worker process).
 
     shockbench serve [--config BENCH.toml] [--simulated] [--host H] [--port P] [--keys KEYS.toml]
-                     [--data DIR] [--database URL] [--max-upload-mb N]
+                     [--data DIR] [--database URL] [--max-upload-mb N] [--max-streams-per-key N]
+                     [--body-timeout-s S]
 
 Listens on loopback by default; any other address needs a keys file. Without a keys file an operator key
 is generated and printed at start-up (as Jupyter prints its token). Port 0 takes a free port; the line
@@ -44,6 +45,10 @@ def run_serve(args: argparse.Namespace) -> int:
         raise CliError(f"{args.config}: no such bench configuration")
     if not args.max_upload_mb > 0:
         raise CliError("--max-upload-mb must be > 0")
+    if args.max_streams_per_key is not None and not args.max_streams_per_key >= 1:
+        raise CliError("--max-streams-per-key must be at least 1")
+    if args.body_timeout_s is not None and not 0 < args.body_timeout_s <= 3600:
+        raise CliError("--body-timeout-s must lie in (0, 3600]")
     generated_key = None
     if args.keys is not None:
         keys = load_keys(args.keys)
@@ -55,6 +60,14 @@ def run_serve(args: argparse.Namespace) -> int:
     from service.jobs.manager import WorkerSettings
     from service.store.database import Database
 
+    limits = {  # those given; the others keep the service's defaults (service.api.settings)
+        name: value
+        for name, value in (
+            ("max_streams_per_key", args.max_streams_per_key),
+            ("body_timeout_s", args.body_timeout_s),
+        )
+        if value is not None
+    }
     settings = ServiceSettings(
         data_dir=Path(args.data).resolve(),
         keys=keys,
@@ -62,6 +75,7 @@ def run_serve(args: argparse.Namespace) -> int:
         bench_config=Path(args.config).resolve() if args.config else None,
         simulated=args.simulated,
         max_upload_bytes=int(args.max_upload_mb * 2**20),
+        **limits,  # type: ignore[arg-type]
         worker=WorkerSettings(nice=args.worker_nice),
     )
     database = Database(settings.resolved_database_url)  # a bad URL or an unreachable server: one line now
@@ -111,6 +125,19 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--data", default="shockbench-data", help="data directory (default ./shockbench-data)")
     p.add_argument("--database", default=None, help="SQLAlchemy URL (default: SQLite in the data directory)")
     p.add_argument("--max-upload-mb", type=float, default=64.0, help="upload size limit in MiB (default 64)")
+    p.add_argument(
+        "--max-streams-per-key",
+        type=int,
+        default=None,
+        help="event streams one key may hold open at once; one more is answered 429 (default 8)",
+    )
+    p.add_argument(
+        "--body-timeout-s",
+        type=float,
+        default=None,
+        help="a request body that brings nothing for this long before it is complete is answered 408 "
+        "(default 30)",
+    )
     p.add_argument("--worker-nice", type=int, default=5, help="nice increment of the worker (default 5)")
     p.add_argument("--log-level", default="info", choices=["critical", "error", "warning", "info", "debug"])
     p.set_defaults(handler=run_serve)

@@ -7,7 +7,9 @@ from __future__ import annotations
 from pydantic import BaseModel, Field
 
 from estimator.recording import Recording
+from estimator.tanh_fit import MIN_POINTS as MIN_TANH_POINTS
 from estimator.vehicle import TyreModel, VehicleParameters
+from service.jobs.bounds import check_physical_bounds
 from service.jobs.context import (
     JobContext,
     JobOutcome,
@@ -24,7 +26,10 @@ class DiagnoseJobOptions(BaseModel):
 
     tyre: TyreModel = Field(TyreModel.MAXWELL, description="tyre of the starting model")
     points: int | None = Field(
-        None, ge=3, le=60, description="damper curve points (default 30; axle 15 per side)"
+        None,
+        ge=MIN_TANH_POINTS,
+        le=60,
+        description=f"damper curve points (default 30; axle 15 per side; at least {MIN_TANH_POINTS})",
     )
     max_steps: int = Field(4, ge=1, le=8, description="at most this many effects are added")
 
@@ -33,6 +38,7 @@ def check_diagnose_inputs(options: BaseModel, recording: Recording, vehicle: Veh
     if not isinstance(options, DiagnoseJobOptions):
         raise TypeError("check_diagnose_inputs needs DiagnoseJobOptions")
     check_recording_fits(recording, vehicle)
+    check_physical_bounds(recording, vehicle)
 
 
 def run(job: JobContext) -> JobOutcome:

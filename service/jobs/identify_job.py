@@ -3,12 +3,16 @@ worker runs (estimator.identify.identify, then the curve plots as PNG and SVG ar
 
 from __future__ import annotations
 
-from pydantic import BaseModel, Field
+from typing import Annotated, Any
+
+from pydantic import BaseModel, BeforeValidator, Field
 
 from estimator.identify import IdentifyOptions, Solver
 from estimator.recording import Recording
 from estimator.solvers.differential_evolution import DESettings
+from estimator.tanh_fit import MIN_POINTS as MIN_TANH_POINTS
 from estimator.vehicle import ModelKind, TyreModel, VehicleParameters
+from service.jobs.bounds import check_physical_bounds
 from service.jobs.context import (
     InputError,
     JobContext,
@@ -18,6 +22,21 @@ from service.jobs.context import (
 )
 
 PLOT_FORMATS = ("png", "svg")
+
+
+def _true_or_false(value: Any) -> Any:
+    """Only true/false (any case) for a flag: pydantic's lax booleans take 0, 1, "yes", "off" ..., and a
+    client that sends output_error=0 meaning "0 seconds" or "no limit" should hear that it was not
+    understood, not find the flag silently off."""
+    if isinstance(value, bool):
+        return value
+    if isinstance(value, str) and value.strip().lower() in ("true", "false"):
+        return value.strip().lower() == "true"
+    raise ValueError("must be true or false")
+
+
+Flag = Annotated[bool, BeforeValidator(_true_or_false)]
+"""A boolean option that accepts only true or false (JSON booleans, or the words in a form)."""
 
 
 class IdentifyJobOptions(BaseModel):
@@ -30,13 +49,19 @@ class IdentifyJobOptions(BaseModel):
     tyre: TyreModel = Field(TyreModel.MAXWELL, description="tyre model")
     solver: Solver = Field(Solver.EXACT, description="exact (default) or de (differential evolution)")
     points: int | None = Field(
-        None, ge=3, le=60, description="damper curve points (default 20; axle 10 per side)"
+        None,
+        ge=MIN_TANH_POINTS,
+        le=60,
+        description="damper curve points (default 20; axle 10 per side); the tanh fit needs at least "
+        f"{MIN_TANH_POINTS}",
     )
     generations: int = Field(3000, ge=1, le=200_000, description="DE generations (solver de)")
     seed: int = Field(0, ge=0, le=2**31 - 1, description="DE seed (solver de)")
-    refine: bool = Field(False, description="refine the curve by DE on the output-error gap")
-    output_error: bool = Field(
-        True, description="simulate the identified model for the output-error gap (off saves seconds)"
+    refine: Flag = Field(False, description="refine the curve by DE on the output-error gap (true|false)")
+    output_error: Flag = Field(
+        True,
+        description="simulate the identified model for the output-error gap (off saves seconds; "
+        "true|false)",
     )
 
     def identify_options(self) -> IdentifyOptions:
@@ -58,6 +83,7 @@ def check_identify_inputs(options: BaseModel, recording: Recording, vehicle: Veh
             "model", f"model is {options.model.value} but the vehicle file says {vehicle.model.value}"
         )
     check_recording_fits(recording, vehicle)
+    check_physical_bounds(recording, vehicle)
 
 
 def run(job: JobContext) -> JobOutcome:

@@ -73,6 +73,13 @@ def _one_line(exc: BaseException) -> str:
     return text.splitlines()[0] if text else type(exc).__name__
 
 
+def _without_paths(reason: str, job: RunJob) -> str:
+    """The reason as viewers may read it: the job's files by their names, not their places on the server."""
+    for path in (job.recording_path, job.vehicle_path, job.output_dir):
+        reason = reason.replace(str(Path(path).parent) + os.sep, "").replace(str(path), Path(path).name)
+    return reason
+
+
 def _listen(conn: Connection, jobs: queue.Queue[RunJob], cancellation: _Cancellation) -> None:
     while True:
         try:
@@ -106,6 +113,9 @@ def run_job(
         runner = getattr(importlib.import_module(module), function)
         recording = read_recording_csv(job.recording_path)
         vehicle = read_vehicle(job.vehicle_path)
+        # the submit checks again (bounds, bandwidth, model): a job queued before a check existed, or
+        # whose files changed on disk, fails here in words instead of deep in the estimator
+        spec.check(spec.options_model.model_validate(job.options), recording, vehicle)
         output_dir = Path(job.output_dir)
         output_dir.mkdir(parents=True, exist_ok=True)
         if cancel.is_set():
@@ -116,10 +126,11 @@ def run_job(
     except InterruptedError:
         send(JobCancelled(job.job_id))
     except (ValueError, OSError, KeyError) as exc:
-        send(JobFailed(job.job_id, _one_line(exc)))
+        send(JobFailed(job.job_id, _without_paths(_one_line(exc), job)))
     except Exception as exc:
         traceback.print_exc(file=sys.stderr)
-        send(JobFailed(job.job_id, f"internal error in the worker ({type(exc).__name__}: {_one_line(exc)})"))
+        reason = f"internal error in the worker ({type(exc).__name__}: {_one_line(exc)})"
+        send(JobFailed(job.job_id, _without_paths(reason, job)))
     else:
         send(JobSucceeded(job.job_id, outcome.result, outcome.artefacts))
 

@@ -148,7 +148,11 @@ def test_unknown_routes_and_methods_are_typed_errors(client: httpx.Client) -> No
 def test_an_unexpected_error_is_a_typed_500_without_details(client: httpx.Client) -> None:
     response = client.get("/api/v1/broken")
     assert response.status_code == 500
+    error_id = response.headers["X-Error-Id"]
     assert response.json() == {
-        "error": {"code": "internal", "message": "internal error; the service log has the details"}
+        "error": {
+            "code": "internal",
+            "message": f"internal error (error id {error_id}); the service log has the details under that id",
+        }
     }
     assert "secret" not in response.text and "Traceback" not in response.text

@@ -23,6 +23,7 @@ from service.api.contract import event_stream
 from service.api.errors import ApiError, responses
 from service.api.routes.jobs import job_out
 from service.api.schemas import ProgressOut
+from service.api.stream_limit import HeldStreamingResponse
 from service.jobs.broker import JobEvent
 
 KEEPALIVE_S = 15.0
@@ -41,19 +42,21 @@ def sse(event: str, data: dict, event_id: int) -> str:
     responses=event_stream() | responses(401, 403, 404, 422),
 )
 async def job_events(
-    request: Request, job_id: Annotated[int, Path(ge=1, le=2**62)], _principal: Viewer
+    request: Request, job_id: Annotated[int, Path(ge=1, le=2**62)], principal: Viewer
 ) -> StreamingResponse:
     """Progress and outcome of a job as Server-Sent Events (see the module text for the event names)."""
     services = request.app.state.services
+    streams = services.streams
+    streams.acquire(principal.key_id)  # 429 when this key has its most streams open
     queue = services.manager.broker.subscribe(job_id)  # before reading: no event can fall in between
     try:
         record = await asyncio.to_thread(services.jobs.get, job_id)
+        if record is None:
+            raise ApiError(404, f"no job {job_id}")
     except BaseException:
         services.manager.broker.unsubscribe(job_id, queue)
+        streams.release(principal.key_id)
         raise
-    if record is None:
-        services.manager.broker.unsubscribe(job_id, queue)
-        raise ApiError(404, f"no job {job_id}")
 
     async def stream() -> AsyncIterator[str]:
         sequence = 0
@@ -90,8 +93,9 @@ async def job_events(
         finally:
             services.manager.broker.unsubscribe(job_id, queue)
 
-    return StreamingResponse(
+    return HeldStreamingResponse(
         stream(),
         media_type="text/event-stream",
         headers={"Cache-Control": "no-cache", "X-Accel-Buffering": "no"},
+        on_close=lambda: streams.release(principal.key_id),
     )

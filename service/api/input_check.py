@@ -1,0 +1,115 @@
+"""Reading and checking a job's input files in a process of their own, so that the event loop never waits.
+
+A 60 MB recording CSV takes the pure-Python reader (daq.formats.recording_csv) some seconds, and turning its
+rows into an array holds the interpreter lock for about a second at a time. In a thread of the service that
+stalls every request (GET /status waited 3.8 s behind one upload). Here the files are read and checked by
+the same functions in one spawned helper process (`InputChecker`), which answers only "fine" or the 422
+(message, field): nothing large crosses the pipe, and the service's interpreter lock stays free.
+
+The checker is shared by the apps of one process (tests run several): `start` and `close` count users. A
+helper process that died (killed, out of memory) is replaced on the next check.
+"""
+
+from __future__ import annotations
+
+import logging
+import multiprocessing
+import threading
+from concurrent.futures import Future, ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
+from pathlib import Path
+from typing import Any
+
+from service.api.errors import ApiError
+
+log = logging.getLogger("shockbench.api")
+
+Refusal = tuple[int, str, str | None]
+"""(HTTP status, message, field) of an input the checks refuse."""
+
+
+def inspect_inputs(
+    kind: str,
+    options: dict[str, Any],
+    recording_path: str,
+    recording_name: str,
+    vehicle_path: str,
+    vehicle_name: str,
+) -> Refusal | None:
+    """Runs in the helper process: read both files and run the kind's checks; None when the job can run."""
+    from service.api.intake import check_files
+    from service.jobs.kinds import kind_spec
+
+    spec = kind_spec(kind)
+    try:
+        check_files(
+            spec,
+            spec.options_model.model_validate(options),
+            Path(recording_path),
+            recording_name,
+            Path(vehicle_path),
+            vehicle_name,
+        )
+    except ApiError as exc:
+        return exc.status, exc.message, exc.field
+    return None
+
+
+def _warm_up() -> None:
+    """Load the readers and the checks in the helper now, not in the first upload."""
+    import service.api.intake
+    import service.jobs.kinds  # noqa: F401
+
+
+class InputChecker:
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._pool: ProcessPoolExecutor | None = None
+        self._users = 0
+
+    def start(self) -> None:
+        """Start the helper process (blocking for the time its imports take: call it in a thread)."""
+        with self._lock:
+            self._users += 1
+            pool = self._ensure_pool()
+        pool.submit(_warm_up).result()
+
+    def close(self) -> None:
+        with self._lock:
+            self._users = max(0, self._users - 1)
+            pool, self._pool = (self._pool, None) if self._users == 0 else (None, self._pool)
+        if pool is not None:
+            pool.shutdown(wait=True, cancel_futures=True)
+
+    def _ensure_pool(self) -> ProcessPoolExecutor:
+        if self._pool is None:
+            self._pool = ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("spawn"))
+        return self._pool
+
+    def _submit(self, *args: Any) -> Future[Refusal | None]:
+        with self._lock:
+            return self._ensure_pool().submit(inspect_inputs, *args)
+
+    def check(
+        self,
+        kind: str,
+        options: dict[str, Any],
+        recording: tuple[Path, str],
+        vehicle: tuple[Path, str],
+    ) -> None:
+        """ApiError (422 naming the field) when the input cannot run. Blocking: call it in a thread."""
+        args = (kind, options, str(recording[0]), recording[1], str(vehicle[0]), vehicle[1])
+        try:
+            refusal = self._submit(*args).result()
+        except BrokenProcessPool:
+            log.warning("the input checker process died; starting a new one")
+            with self._lock:
+                self._pool = None
+            refusal = self._submit(*args).result()
+        if refusal is not None:
+            status, message, field = refusal
+            raise ApiError(status, message, field=field)
+
+
+CHECKER = InputChecker()
+"""The checker of this process (service.api.intake submits to it; the app's lifespan starts and closes it)."""
