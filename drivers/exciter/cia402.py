@@ -197,31 +197,39 @@ class Cia402Exciter(PlateExciter):
         assert isinstance(value, int)
         return value
 
-    async def _write(self, what: str, index: int, value: int, subindex: int = 0) -> None:
+    async def _write(
+        self, what: str, index: int, value: int, subindex: int = 0, *, supervise: bool = True
+    ) -> None:
         def write(node: canopen.RemoteNode) -> None:
             _variable(node, index, subindex).raw = value
 
-        await self._transfer(what, write)
+        await self._transfer(what, write, supervise)
 
-    async def _transfer(self, what: str, action: Callable[[canopen.RemoteNode], Any]) -> Any:
-        """One SDO transfer in a worker thread, its failures typed, then the supervision checks."""
+    async def _transfer(
+        self, what: str, action: Callable[[canopen.RemoteNode], Any], supervise: bool = True
+    ) -> Any:
+        """One SDO transfer in a worker thread, its failures typed, then the supervision checks (unless
+        `supervise` is False: a stop sequence checks once it has been sent whole)."""
         _, node = await self._live_node()
         async with self._lock:
             try:
                 result = await asyncio.to_thread(action, node)
             except SdoAbortedError as exc:
-                self._check_supervision(what)
+                if supervise:
+                    self._check_supervision(what)
                 raise ExciterDeviceExceptionError(exc.code, f"{what}: refused by the drive ({exc})") from None
             except SdoCommunicationError as exc:
                 if (reader_error := self._reader_error()) is not None:  # the answer may have come unheard
                     raise ExciterConnectionLostError(
                         f"{what}: CANopen reader stopped: {reader_error}"
                     ) from exc
-                self._check_supervision(what)
+                if supervise:
+                    self._check_supervision(what)
                 raise ExciterTimeoutError(f"{what}: no SDO answer from {self.where} ({exc})") from None
             except (can.CanError, OSError, RuntimeError) as exc:
                 raise ExciterConnectionLostError(f"{what}: {self.where}: {exc}") from exc
-            self._check_supervision(what)
+            if supervise:
+                self._check_supervision(what)
             return result
 
     async def _send(self, what: str, send: Callable[[canopen.Network, canopen.RemoteNode], None]) -> None:
@@ -282,8 +290,8 @@ class Cia402Exciter(PlateExciter):
         except ValueError as exc:
             raise ExciterError(f"{self.where}: {exc}") from None
 
-    async def _controlword(self, what: str, word: int) -> None:
-        await self._write(what, objects.CONTROLWORD, word)
+    async def _controlword(self, what: str, word: int, *, supervise: bool = True) -> None:
+        await self._write(what, objects.CONTROLWORD, word, supervise=supervise)
 
     async def _enable_operation(self) -> None:
         """Shutdown -> switch on -> enable operation, each step confirmed by the statusword."""
@@ -332,17 +340,21 @@ class Cia402Exciter(PlateExciter):
             await self._write("configure sweep", objects.SWEEP, value, subindex)
 
     async def _send_command(self, command: CommandCode) -> None:
+        # Stops: each step only after the previous one was accepted (a failed halt leaves the watchdog
+        # armed, to stop the plate); a supervision fault (heartbeat) is reported after the whole sequence.
         if command is CommandCode.EMERGENCY_STOP:
-            await self._controlword("emergency stop", objects.CW_QUICK_STOP)
-            await self._controlword("emergency stop", objects.CW_DISABLE_VOLTAGE)
+            await self._controlword("emergency stop", objects.CW_QUICK_STOP, supervise=False)
+            await self._controlword("emergency stop", objects.CW_DISABLE_VOLTAGE, supervise=False)
             await self._disarm_watchdog()
+            self._check_supervision("emergency stop")
             return
         await self._ensure_ready()
         if command is CommandCode.START:
             await self._start_sweep()
         elif command is CommandCode.STOP:
-            await self._controlword("stop", objects.CW_ENABLE_OPERATION | objects.CW_HALT)
+            await self._controlword("stop", objects.CW_ENABLE_OPERATION | objects.CW_HALT, supervise=False)
             await self._disarm_watchdog()
+            self._check_supervision("stop")
         elif command is CommandCode.RESET_FAULT:
             state, _ = await self._drive_state()
             if state is DriveState.FAULT:
@@ -363,7 +375,7 @@ class Cia402Exciter(PlateExciter):
         await self._controlword("start", objects.CW_ENABLE_OPERATION | objects.CW_START_SWEEP)
 
     async def _disarm_watchdog(self) -> None:
-        await self._write("disarm the drive watchdog", objects.CONSUMER_HEARTBEAT_TIME, 0, 1)
+        await self._write("disarm the drive watchdog", objects.CONSUMER_HEARTBEAT_TIME, 0, 1, supervise=False)
 
     async def _send_keepalive(self, counter: int) -> None:
         """The host's NMT heartbeat (state operational); the drive consumes it as its watchdog feed."""

@@ -136,8 +136,8 @@ def test_sweep_start_stop_and_emergency_stop() -> None:
             assert sim.state is DriveState.OPERATION_ENABLED
             assert stored(sim, objects.CONSUMER_HEARTBEAT_TIME, 1) == (127 << 16) | 500
             bench = sim.bench
-            for _ in range(8):
-                sim.advance(0.25)
+            for _ in range(10):
+                sim.advance(0.2)
                 status = await exciter.status()
             assert status.state is ExciterState.RUNNING
             assert status.frequency_Hz == pytest.approx(2.0, abs=0.001)  # 16 ** (2 / 8)
@@ -274,6 +274,24 @@ def test_stale_heartbeat_is_reported_even_when_the_drive_answers() -> None:
                 await exciter.status()
             sim.tick()
             await exciter.status()
+
+    asyncio.run(scenario())
+
+
+def test_emergency_stop_goes_out_whole_before_a_heartbeat_fault_is_reported() -> None:
+    async def scenario() -> None:
+        async with rig(heartbeat_timeout_s=0.3) as (sim, exciter):
+            await exciter.configure_sweep(SWEEP)
+            await exciter.start()
+            sim.advance(0.2)
+            await exciter.status()  # ends with a keep-alive, which is not answered:
+            await exciter.status()  # an answered request after it means the drive has taken it
+            sim.clock.advance(0.4)  # the drive's heartbeat goes stale (no tick), its watchdog (0.5 s) holds
+            with pytest.raises(ExciterHeartbeatLostError):
+                await exciter.emergency_stop()
+            assert sim.controlwords[-2:] == [objects.CW_QUICK_STOP, objects.CW_DISABLE_VOLTAGE]
+            assert stored(sim, objects.CONSUMER_HEARTBEAT_TIME, 1) == 0
+            assert sim.state is DriveState.SWITCH_ON_DISABLED
 
     asyncio.run(scenario())
 
