@@ -18,6 +18,7 @@ not unexplained; pair → exactly both named and not unexplained; outside → un
 from __future__ import annotations
 
 import argparse
+import json
 import platform
 import statistics
 import sys
@@ -25,7 +26,7 @@ import tempfile
 import time
 from collections import Counter, defaultdict
 from concurrent.futures import ProcessPoolExecutor, as_completed
-from dataclasses import dataclass, replace
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -172,7 +173,22 @@ def main() -> None:
     parser.add_argument("--jobs", type=int, default=1, help="worker processes")
     parser.add_argument("--classes", default=",".join(CLASSES), help="comma-separated subset of classes")
     parser.add_argument("--sweep-s", type=float, default=12.0, help="sweep length (s), 10-30")
+    parser.add_argument(
+        "--results", default=None, help="append each case's outcome to this file (JSON lines)"
+    )
+    parser.add_argument(
+        "--from-results", default=None, help="print the report of a --results file, run nothing"
+    )
     args = parser.parse_args()
+    if args.from_results:
+        lines = Path(args.from_results).read_text().splitlines()
+        outcomes = [
+            Outcome(**{**row, "hidden": tuple(row["hidden"]), "named": tuple(row["named"])})
+            for row in map(json.loads, lines)
+        ]
+        order = {label: i for i, label in enumerate(CLASSES)}
+        print_report(sorted(outcomes, key=lambda o: (order[o.label], o.seed)))
+        return
     labels = [c.strip() for c in args.classes.split(",") if c.strip()]
     unknown = [c for c in labels if c not in CLASSES]
     if unknown:
@@ -181,7 +197,8 @@ def main() -> None:
         f"machine: {platform.machine()}, Python {platform.python_version()}, numpy {np.__version__}; "
         f"{args.per_class} per class, {args.jobs} jobs, {args.sweep_s:.0f} s sweeps 0-20 Hz ±4 mm"
     )
-    work = [(label, seed) for label in labels for seed in range(args.per_class)]
+    # seed by seed over all classes, so that a run cut short still covers every class
+    work = [(label, seed) for seed in range(args.per_class) for label in labels]
     start = time.perf_counter()
     with (
         tempfile.TemporaryDirectory(prefix="doctor-independent-") as folder,
@@ -191,8 +208,12 @@ def main() -> None:
         for done, future in enumerate(as_completed(futures), start=1):
             o = future.result()
             print(f"[{done}/{len(work)}] {o.label} {o.seed}: {o.said} ({o.doctor_s:.0f} s)", file=sys.stderr)
+            if args.results:
+                with open(args.results, "a") as handle:
+                    handle.write(json.dumps(asdict(o)) + "\n")
         outcomes = [f.result() for f in futures]
-    print_report(outcomes)
+    order = {label: i for i, label in enumerate(CLASSES)}
+    print_report(sorted(outcomes, key=lambda o: (order[o.label], o.seed)))
     print(f"total wall time {time.perf_counter() - start:.0f} s")
 
 
