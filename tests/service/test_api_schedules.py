@@ -28,7 +28,7 @@ KEYS = KeyRing({ADMIN: Role.ADMIN, OPERATOR: Role.OPERATOR, VIEWER: Role.VIEWER}
 VEHICLE_TOML = format_vehicle(default_quarter_car().known)
 FAST_JOB = {"output_error": False}
 TEST = {"duration_s": 2, "settle_s": 0.5, "vehicle_toml": VEHICLE_TOML, "job": FAST_JOB}
-LONG = {"duration_s": 600, "settle_s": 0.5, "vehicle_toml": VEHICLE_TOML}
+LONG = {"duration_s": 300, "settle_s": 0.5, "vehicle_toml": VEHICLE_TOML}  # the envelope's longest
 """A sweep that runs for minutes on the simulated clock: something to abort."""
 ENDED = ("done", "failed", "cancelled")
 

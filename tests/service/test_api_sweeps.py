@@ -29,7 +29,7 @@ VIEWER = "viewer-key-0123456789"
 AUTH = {"Authorization": f"Bearer {OPERATOR}"}
 VEHICLE_TOML = format_vehicle(default_quarter_car().known)
 SHORT = {"duration_s": 2, "settle_s": 0.5, "vehicle_toml": VEHICLE_TOML}
-LONG = {"duration_s": 600, "settle_s": 0.5, "vehicle_toml": VEHICLE_TOML}
+LONG = {"duration_s": 300, "settle_s": 0.5, "vehicle_toml": VEHICLE_TOML}  # the envelope's longest
 """A sweep that runs for minutes on the simulated clock: something to abort or stop."""
 
 
