@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import dataclasses
 import os
 import platform
 import signal
@@ -37,6 +38,7 @@ from daq.storage.hdf5_recording import load_recording
 from daq.sweep.model import SweepRequest
 from daq.sweep.pacing import RealtimePacing
 from daq.sweep.run import run_sweep
+from drivers.exciter.envelope import EnvelopeLimits
 from drivers.exciter.sweep import SweepSettings
 
 START_TIMEOUT_S = 30.0
@@ -106,7 +108,9 @@ def main() -> int:
         config_path = Path(folder) / "bench.toml"
         simulator = start_simulator(config_path)
         try:
-            config = load_bench_config(config_path)
+            # a soak bench: sweeps longer than the default envelope's 300 s (up to the hard limit, 1 h)
+            limits = EnvelopeLimits(max_duration_s=max(args.seconds, EnvelopeLimits.max_duration_s))
+            config = dataclasses.replace(load_bench_config(config_path), envelope=limits)
             request = SweepRequest(SweepSettings(duration_s=args.seconds), settle_s=0.0)
             sim_cpu0 = process_cpu_s(simulator.pid)
             out = Path(folder) / "soak.h5"

@@ -42,7 +42,7 @@ Keys:
     (the same per side: x_s_l, x_s_r, x_t_l, x_t_r, x_r_l, x_r_r).
 [bench.envelope] max_amplitude_m, max_frequency_Hz, max_duration_s: the bench's safety envelope
     (drivers.exciter.envelope); each may be left out (default 4 mm, 25 Hz, 300 s); none may exceed the
-    installation's hard limits (by default the same values: a bench may lower them).
+    installation's hard limits (by default 4 mm, 25 Hz and 3600 s: only the duration may be raised).
 [exciter] name, url: the plate drive, by a drivers.exciter.urls URL: modbus-tcp://HOST:PORT?unit=N,
     modbus-rtu:///dev/ttyUSB1?baudrate=19200&unit=1, can://INTERFACE/CHANNEL (python-can, e.g.
     can://socketcan/can0, can://virtual/vcan0; base_id=0x680 moves the frame set), or

@@ -6,6 +6,7 @@ Two layers of limits:
   installation, not from a bench recipe;
 * bench limits — what one bench configuration allows (4 mm, 25 Hz, 300 s by default); a bench may lower
   them, never raise them above the hard limits (`ExciterConfigError` naming the field and the hard limit).
+  The duration is the one default below its hard limit (3600 s): a soak or endurance bench may lengthen it.
 
 Every back end checks a sweep with `SafetyEnvelope.check` before anything goes on the wire, so a refused
 sweep leaves the drive untouched. While the sweep runs, each status the drive reports is checked with
@@ -51,9 +52,9 @@ class EnvelopeLimits:
         return cls(**values)  # type: ignore[arg-type]
 
 
-DEFAULT_HARD_LIMITS = EnvelopeLimits()
+DEFAULT_HARD_LIMITS = EnvelopeLimits(max_duration_s=3600.0)
 """Installation hard limits when none are configured: the plate's rated ±4 mm and 25 Hz, sweeps of at
-most 300 s."""
+most an hour (a bench allows 300 s unless its configuration says more)."""
 
 REPORTED_MARGIN = 0.05
 """A reported frequency or position may exceed its limit by this fraction of it (measurement noise,

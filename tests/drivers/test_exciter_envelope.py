@@ -80,7 +80,7 @@ def test_configured_hard_limits_bound_the_bench() -> None:
         SafetyEnvelope(EnvelopeLimits(0.004, 31.0), hard)
     low_hard = EnvelopeLimits(max_amplitude_m=0.003, max_frequency_Hz=20.0)
     assert SafetyEnvelope(hard_limits=low_hard).limits == low_hard  # defaults clamp to the hard limits
-    assert EnvelopeLimits(0.004, 25.0) == DEFAULT_HARD_LIMITS
+    assert EnvelopeLimits(0.004, 25.0, 3600.0) == DEFAULT_HARD_LIMITS  # duration: an hour, benches 300 s
 
 
 def test_limits_from_config_table() -> None:
@@ -172,8 +172,10 @@ def test_default_duration_limit_and_bench_may_shorten_it() -> None:
     envelope = SafetyEnvelope(EnvelopeLimits(max_duration_s=60.0))
     with pytest.raises(EnvelopeViolationError, match=r"duration_s=61\.0.*max_duration_s=60\.0"):
         envelope.check(SweepSettings(duration_s=61.0))
+    soak = SafetyEnvelope(EnvelopeLimits(max_duration_s=600.0))  # a bench may lengthen it
+    soak.check(SweepSettings(duration_s=600.0))
     with pytest.raises(ExciterConfigError, match="max_duration_s"):
-        SafetyEnvelope(EnvelopeLimits(max_duration_s=301.0))  # above the hard limit
+        SafetyEnvelope(EnvelopeLimits(max_duration_s=3601.0))  # above the hard limit
 
 
 @pytest.mark.parametrize(
