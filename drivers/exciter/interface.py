@@ -99,7 +99,7 @@ class PlateExciter(ABC):
         self.keepalive_interval_s = keepalive_interval_s
         self.clock = clock
         self.keepalives_sent = 0
-        """Keep-alives sent since open (each one after a supervision step that passed its checks)."""
+        """Keep-alives sent by this driver (each one after a supervision step that passed its checks)."""
         self._sweep: SweepSettings | None = None
         self._running = False
         """Supervised: from start() until stop(), emergency_stop() or close(); keep-alives only then."""

@@ -113,8 +113,7 @@ async def rig(received: list[tuple[float, int, int]]) -> AsyncIterator[tuple[Fau
             try:
                 yield link, exciter
             finally:
-                exciter._moving = False  # a plain register server: nothing to stop on close
-                await exciter.close()
+                await exciter.close()  # a sweep was started: this writes STOP to the plain server too
     finally:
         await server.shutdown()
 
