@@ -4,6 +4,11 @@ run so the ratios are measured side by side.
 
     .venv/bin/python benchmarks/bench_identify.py            # full: 3000 generations for every DE
     .venv/bin/python benchmarks/bench_identify.py --quick    # 300 generations (a smoke run)
+    .venv/bin/python benchmarks/bench_identify.py --identify-only   # the identify timings only
+
+First, identify (exact solver, no output-error simulation) on a 12 s recording at 1 kHz (11 s sweep plus
+1 s settling) with the complete vehicle file and with a mass-only one (spring, tyre stiffness and ϑ
+identified): median of 7 runs, in-process; target < 0.3 s for the mass-only file.
 
 The recording is the embedded default quarter car (valve-model damper, Maxwell tyre, 5 µm noise), a 20 s
 sweep; the objective uses nsample = 5000 samples and 20 curve points. scipy runs rand1bin with F = 1,
@@ -18,10 +23,12 @@ import argparse
 import platform
 import statistics
 import time
+from dataclasses import replace
 
 import numpy as np
 from scipy.optimize import differential_evolution
 
+from drivers.exciter.sweep import SweepSettings
 from estimator.equations import build
 from estimator.identify import Coordinates, IdentifyOptions, de_problem, identify
 from estimator.solvers.differential_evolution import DESettings, DifferentialEvolution
@@ -47,9 +54,47 @@ def timed(fn, repeats: int = 1):
     return statistics.median(times), value
 
 
+MASS_ONLY_TARGET_S = 0.3
+
+
+def bench_mass_only() -> None:
+    """identify on 12 s at 1 kHz: complete vehicle file against a mass-only one."""
+    vehicle = default_quarter_car()
+    recording = simulate(vehicle, SimulationSettings(sweep=SweepSettings(duration_s=11.0), seed=0)).recording
+    known = vehicle.known
+    alone = replace(
+        known, spring_stiffness_N_per_m=None, tyre_stiffness_N_per_m=None, tyre_viscoelastic_coefficient=None
+    )
+    options = IdentifyOptions(output_error=False)
+    identify(recording, alone, options)  # warm-up: imports, filter design caches
+    print(
+        f"\nidentify, exact solver, {recording.time_s.size} samples "
+        f"({recording.sample_time_s * 1e3:g} ms), nsample 5000, 20 points, median of 7:\n"
+    )
+    print("| vehicle file | time (s) | spring | tyre | relaxation time | sprung mass error |")
+    print("|---|---:|---:|---:|---:|---:|")
+    for label, stated in (("complete", known), ("mass only", alone)):
+        seconds, result = timed(lambda v=stated: identify(recording, v, options), repeats=7)
+        found = result.model.vehicle
+        print(
+            f"| {label} | {seconds:.3f} | {found.spring_stiffness_N_per_m:.0f} N/m | "
+            f"{found.tyre_stiffness_N_per_m:.0f} N/m | {found.tyre_relaxation_time_s * 1e3:.2f} ms | "
+            f"{100 * (result.model.sprung_mass_kg / vehicle.sprung_mass_kg - 1):+.2f}% |"
+        )
+        if stated is alone:
+            verdict = "met" if seconds < MASS_ONLY_TARGET_S else "NOT met"
+            print(f"\nmass-only identify {seconds:.3f} s; target < {MASS_ONLY_TARGET_S} s: {verdict}")
+    print(
+        f"truth: spring {known.spring_stiffness_N_per_m:.0f} N/m, "
+        f"tyre {known.tyre_stiffness_N_per_m:.0f} N/m, "
+        f"relaxation time {known.tyre_relaxation_time_s * 1e3:.2f} ms"
+    )
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="300 generations instead of 3000")
+    parser.add_argument("--identify-only", action="store_true", help="only the identify timings")
     args = parser.parse_args()
     generations = 300 if args.quick else 3000
     print(
@@ -57,6 +102,9 @@ def main() -> None:
         f"Python {platform.python_version()}, "
         f"numpy {np.__version__}"
     )
+    bench_mass_only()
+    if args.identify_only:
+        return
     vehicle = default_quarter_car()
     recording = simulate(vehicle, SimulationSettings(seed=0)).recording
     truth = true_damper(vehicle.dampers[0])

@@ -1,21 +1,29 @@
 """The equations of motion as residuals that are affine in the unknowns: the paper's f1, f2 (eqs 6-7) for
 the quarter car and f1..f4 (eqs 11-14, with the anti-roll bar made physically consistent) for the axle.
 
-With ϑ and the stiffnesses known, every residual at sample i is r_ei = A[e, i, :] @ θ + c[e, i], where θ is
-the vector of unknowns. The mass constraint of eq (9) (M_s + M_u = M_1/4; axle: M_s + 2·M_u = M_1/2 with
-M_u^l = M_u^r) is substituted, so θ = [M_s, (I,) C, C_a^1..C_a^N (, right curve's points)].
+With ϑ known, every residual at sample i is r_ei = A[e, i, :] @ θ + c[e, i], where θ is the vector of
+unknowns. The mass constraint of eq (9) (M_s + M_u = M_1/4; axle: M_s + 2·M_u = M_1/2 with M_u^l = M_u^r) is
+substituted, so θ = [M_s, (I,) C, C_a^1..C_a^N (, right curve's points), free stiffnesses]. A stiffness the
+vehicle file states goes into c (its force is known); one that is free (not stated, or `identify --free`)
+is one more unknown whose column is its force per unit stiffness, like a damper basis function: the spring
+K_s·ζ in the suspension, the tyre K_t·δ in the wheel equation(s), the axle's bar K_e·(ζ_l − ζ_r). An axle
+has one K_s and one K_t for both sides.
 
-The tyre term C·g: with the Maxwell model of eq (4) the viscoelastic force is
-f_v(t) = C_γ·δ̇(t) + ϑ·f_v(t−1), i.e. C_γ times g = δ̇ filtered by 1/(1 − ϑ·z⁻¹); the unknown is C_γ and
-the tyre damping is C_d = C_γ·(1+γ) = C_γ/(1−ϑ). Kelvin-Voigt: g = δ̇, C = C_d. Constant stiffness: no term.
-
+The tyre term C_d·g: the viscous force of the tyre is C_d (the unknown tyre damping) times a regressor g
+made from the tyre deflection rate δ̇. Kelvin-Voigt: g = δ̇. Constant stiffness: no term. Maxwell (eq 3,
+τ·ḟ_v + f_v = C_d·δ̇ with τ = C_d/K_d = Δt·ϑ/(1−ϑ)): g is δ̇ through the element discretised by the bilinear
+transform, g_k = a·g_(k−1) + b·(δ̇_k + δ̇_(k−1)), a = (3ϑ−1)/(1+ϑ), b = (1−ϑ)/(1+ϑ) (= (2τ−Δt)/(2τ+Δt) and
+Δt/(2τ+Δt)). Deviation from the paper's eq (4), f_v(t) = C_γ·δ̇(t) + ϑ·f_v(t−1), which is the backward-Euler
+discretisation of the same element: its phase error grows with ω·Δt, and on simulated sweeps (tests) it
+biases an identified τ by −10% at 1 ms and −20% at 2 ms, the tyre stiffness by +1-2% and the masses by up
+to 1%; the bilinear transform leaves them unbiased at both rates. ϑ keeps the paper's meaning.
 The roll equation is divided by b/2 so that every residual is a force in newtons (the paper's eq 17 sums
 squares of a moment and forces; the scaling only weighs the roll equation like the others).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy import signal as sps
@@ -23,13 +31,21 @@ from scipy import signal as sps
 from estimator.damper import hat_basis
 from estimator.recording import AXLE_CHANNELS, QUARTER_CAR_CHANNELS, Recording
 from estimator.signals import FilterChoice, Kinematics, choose_filters, derivative, kinematics, lowpass
-from estimator.vehicle import TyreModel, VehicleParameters
+from estimator.vehicle import TyreModel, VehicleConstant, VehicleParameters
 
 EDGE_TRIM_S = 0.25
 """Samples this close to either end are left out of the objective (filter start-up transients)."""
 GRID_QUANTILE = 0.002
 """The damper velocity grid spans the measured suspension velocities from this quantile to 1 − it; the end
 segments extend linearly beyond, so the few samples outside still count."""
+STIFFNESS_NAMES = {
+    VehicleConstant.SPRING: "spring_stiffness_N_per_m",
+    VehicleConstant.TYRE: "tyre_stiffness_N_per_m",
+    VehicleConstant.BAR: "anti_roll_bar_stiffness_N_per_m",
+}
+"""The unknown's name in θ of each stiffness that can be free (the vehicle file's key)."""
+TYRE_DAMPING = "tyre_damping_Ns_per_m"
+"""The unknown's name in θ of the tyre damping C_d (Kelvin-Voigt and Maxwell)."""
 
 
 @dataclass
@@ -52,12 +68,48 @@ class LinearResiduals:
     kinematics: dict[str, Kinematics] = field(default_factory=dict, repr=False)
     """Every channel low-passed at the kinematics cutoff (full length): what output error and the inspection
     figures reuse instead of filtering the recording again."""
+    tyre_theta: float | None = None
+    """The ϑ (at the recording's sample time) the Maxwell tyre column was built with."""
+    tyre_rates_m_s: list[np.ndarray] = field(default_factory=list, repr=False)
+    """Tyre deflection rate δ̇ per corner, full length, after the equation low-pass: the tyre column is
+    tyre_regressor of it at the selected samples (the regressor is a linear time-invariant filter, so
+    filtering before it equals filtering after it except within the trimmed edges: 3e-9 of the column at
+    ϑ = 0.97)."""
+    tyre_equations: list[int] = field(default_factory=list)
+    """The equation (row of matrix) that carries each corner's tyre column."""
     _flat: np.ndarray | None = field(default=None, repr=False)
     _flat_offset: np.ndarray | None = field(default=None, repr=False)
 
     @property
     def n_params(self) -> int:
         return self.matrix.shape[2]
+
+    def value(self, theta: np.ndarray, name: str) -> float | None:
+        """The unknown called `name` in θ (None when the system has no such unknown)."""
+        return float(theta[self.parameter_names.index(name)]) if name in self.parameter_names else None
+
+    def with_tyre_theta(self, theta: float) -> LinearResiduals:
+        """The same system with the Maxwell tyre column built for another ϑ (at the recording's sample
+        time): only that column changes, so a search over ϑ does not rebuild the system."""
+        if self.tyre_model is not TyreModel.MAXWELL:
+            raise ValueError("ϑ applies to the maxwell tyre model only")
+        column = self.parameter_names.index(TYRE_DAMPING)
+        matrix = self.matrix.copy()
+        for rate, equation in zip(self.tyre_rates_m_s, self.tyre_equations, strict=True):
+            matrix[equation, :, column] = maxwell_regressor(rate, theta)[self.sample_index]
+        return replace(self, matrix=matrix, tyre_theta=theta, _flat=None, _flat_offset=None)
+
+    def subset(self, keep: np.ndarray) -> LinearResiduals:
+        """The same system on some of its selected samples (keep: indices or a mask over sample_index)."""
+        return replace(
+            self,
+            matrix=self.matrix[:, keep],
+            offset=self.offset[:, keep],
+            sample_index=self.sample_index[keep],
+            velocity_m_s=[v[keep] for v in self.velocity_m_s],
+            _flat=None,
+            _flat_offset=None,
+        )
 
     def residuals(self, theta: np.ndarray) -> np.ndarray:
         """Residuals for one θ (shape (p,)) -> (e, n), or a population (P, p) -> (P, e, n)."""
@@ -87,18 +139,25 @@ def population_sum_of_norms(
     return norms.sum(axis=1, dtype=np.float64)
 
 
-def tyre_regressor(rate_m_s: np.ndarray, tyre: TyreModel, theta: float) -> np.ndarray | None:
-    """g such that the tyre's viscous force is C·g (None for constant stiffness)."""
+def maxwell_regressor(rate_m_s: np.ndarray, theta: float) -> np.ndarray:
+    """g with f_v = C_d·g for the Maxwell element at ϑ (at the rate's sample time), by the bilinear
+    transform (module docstring). ϑ = 0 (τ = 0) is the element's limit, a dashpot: g = δ̇."""
+    if theta == 0.0:
+        return np.asarray(rate_m_s, dtype=float)
+    gain = (1.0 - theta) / (1.0 + theta)
+    return sps.lfilter([gain, gain], [1.0, -(3.0 * theta - 1.0) / (1.0 + theta)], rate_m_s)
+
+
+def tyre_regressor(rate_m_s: np.ndarray, tyre: TyreModel, theta: float | None) -> np.ndarray | None:
+    """g such that the tyre's viscous force is C_d·g (None for constant stiffness); theta: ϑ at the rate's
+    sample time (Maxwell only)."""
     if tyre is TyreModel.SPRING:
         return None
     if tyre is TyreModel.KELVIN_VOIGT:
         return rate_m_s
-    return sps.lfilter([1.0], [1.0, -theta], rate_m_s)
-
-
-def tyre_damping_from_coefficient(coefficient: float, tyre: TyreModel, theta: float) -> float:
-    """C_d from the identified C (C_γ for Maxwell: C_d = C_γ/(1−ϑ))."""
-    return coefficient / (1.0 - theta) if tyre is TyreModel.MAXWELL else coefficient
+    if theta is None:
+        raise ValueError("the maxwell tyre needs ϑ")
+    return maxwell_regressor(rate_m_s, theta)
 
 
 def select_samples(n: int, sample_time_s: float, nsample: int | None) -> np.ndarray:
@@ -134,7 +193,11 @@ class _Columns:
 
     def eq(self, x: np.ndarray) -> np.ndarray:
         """Equation-filtered column at the selected samples."""
-        return lowpass(x, self.f.equation_cutoff_Hz, self.dt)[self.index]
+        return self.eq_full(x)[self.index]
+
+    def eq_full(self, x: np.ndarray) -> np.ndarray:
+        """Equation-filtered series, full length."""
+        return lowpass(x, self.f.equation_cutoff_Hz, self.dt)
 
     def acceleration(self, name: str) -> np.ndarray:
         filtered = lowpass(self.rec.channels[name], self.f.equation_cutoff_Hz, self.dt)
@@ -148,6 +211,49 @@ class _Columns:
         return self.kin[name].velocity_m_s
 
 
+def free_stiffnesses(
+    vehicle: VehicleParameters, free: frozenset[VehicleConstant] = frozenset()
+) -> frozenset[VehicleConstant]:
+    """The stiffnesses that are unknowns of the system: those the vehicle does not state, and those asked
+    for (`free`); the anti-roll bar only on an axle."""
+    wanted = (vehicle.unknown | free) & set(STIFFNESS_NAMES)
+    if VehicleConstant.BAR in wanted and not vehicle.is_axle:
+        raise ValueError("the anti-roll bar applies to an axle only")
+    return frozenset(wanted)
+
+
+def _stiffness_terms(
+    vehicle: VehicleParameters,
+    free: frozenset[VehicleConstant],
+    unit_forces: dict[VehicleConstant, np.ndarray],
+) -> tuple[list[np.ndarray], list[str], np.ndarray]:
+    """Free stiffnesses become columns (their (equations, samples) force per N/m), stated ones add their
+    force to the offset. Returns the columns, their names and the offset to add."""
+    stated = {
+        VehicleConstant.SPRING: vehicle.spring_stiffness_N_per_m,
+        VehicleConstant.TYRE: vehicle.tyre_stiffness_N_per_m,
+        VehicleConstant.BAR: vehicle.anti_roll_bar_stiffness_N_per_m,
+    }
+    columns, names = [], []
+    offset = np.zeros_like(next(iter(unit_forces.values())))
+    for constant, unit in unit_forces.items():
+        if constant in free:
+            columns.append(unit[:, :, None])
+            names.append(STIFFNESS_NAMES[constant])
+        elif stated[constant]:
+            offset = offset + float(stated[constant]) * unit
+    return columns, names, offset
+
+
+def _tyre_theta(vehicle: VehicleParameters, tyre: TyreModel, sample_time_s: float) -> float | None:
+    """ϑ at the recording's sample time for the Maxwell tyre (None for the other tyre models)."""
+    if tyre is not TyreModel.MAXWELL:
+        return None
+    if vehicle.tyre_viscoelastic_coefficient is None:
+        raise ValueError("the maxwell tyre needs ϑ: state it, or identify it (estimator.identify)")
+    return vehicle.viscoelastic_coefficient_at(sample_time_s)
+
+
 def build_quarter_car(
     recording: Recording,
     vehicle: VehicleParameters,
@@ -156,12 +262,15 @@ def build_quarter_car(
     nsample: int | None = 5000,
     filters: FilterChoice | None = None,
     grids: list[np.ndarray] | None = None,
+    free: frozenset[VehicleConstant] = frozenset(),
 ) -> LinearResiduals:
-    """f1 = M_s·ẍ_s + F_d(v) + K·ζ ; f2 = (M − M_s)·ẍ_t − F_d(v) − K·ζ + C·g + K_t·δ (paper eqs 6-7).
+    """f1 = M_s·ẍ_s + F_d(v) + K_s·ζ ; f2 = (M − M_s)·ẍ_t − F_d(v) − K_s·ζ + C·g + K_t·δ (paper eqs 6-7).
 
     grids: the damper velocity grid to use instead of one spanning the measured velocities (so that systems
-    built from corrected versions of one recording share their unknowns)."""
+    built from corrected versions of one recording share their unknowns). free: stiffnesses to identify
+    although the vehicle states them (see free_stiffnesses)."""
     recording.require(QUARTER_CAR_CHANNELS)
+    free = free_stiffnesses(vehicle, free)
     filters = filters or choose_filters(recording.channels, recording.sample_time_s)
     index = select_samples(recording.time_s.size, recording.sample_time_s, nsample)
     cols = _Columns(recording, filters, index)
@@ -173,25 +282,36 @@ def build_quarter_car(
     a_s, a_t = cols.acceleration("x_s"), cols.acceleration("x_t")
     zeta = cols.eq(ch["x_s"] - ch["x_t"])
     tyre_defl = cols.eq(ch["x_t"] - ch["x_r"])
-    g = tyre_regressor(
-        cols.velocity("x_t") - cols.velocity("x_r"), tyre, vehicle.tyre_viscoelastic_coefficient
-    )
+    theta = _tyre_theta(vehicle, tyre, recording.sample_time_s)
+    rate = cols.eq_full(cols.velocity("x_t") - cols.velocity("x_r"))
+    g = tyre_regressor(rate, tyre, theta)
     n = index.size
     zeros = np.zeros((n, 1))
-    tyre_col = [cols.eq(g)[:, None]] if g is not None else []
+    tyre_col = [g[index][:, None]] if g is not None else []
     tyre_zero = [zeros] if g is not None else []
-    k, kt, m = vehicle.spring_stiffness_N_per_m, vehicle.tyre_stiffness_N_per_m, vehicle.mass_kg
+    stiffness_cols, stiffness_names, known_force = _stiffness_terms(
+        vehicle,
+        free,
+        {
+            VehicleConstant.SPRING: np.stack([zeta, -zeta]),
+            VehicleConstant.TYRE: np.stack([np.zeros(n), tyre_defl]),
+        },
+    )
     f1 = np.hstack([a_s[:, None], *tyre_zero, phi])
     f2 = np.hstack([-a_t[:, None], *tyre_col, -phi])
     names = [
         "sprung_mass_kg",
-        *(["tyre_coefficient"] if g is not None else []),
+        *([TYRE_DAMPING] if g is not None else []),
         *[f"C_a{j + 1}" for j in range(points)],
+        *stiffness_names,
     ]
     start = 1 + len(tyre_col)
+    matrix = np.stack([f1, f2])
+    if stiffness_cols:
+        matrix = np.concatenate([matrix, *stiffness_cols], axis=2)
     return LinearResiduals(
-        matrix=np.stack([f1, f2]),
-        offset=np.stack([k * zeta, m * a_t - k * zeta + kt * tyre_defl]),
+        matrix=matrix,
+        offset=np.stack([np.zeros(n), vehicle.mass_kg * a_t]) + known_force,
         parameter_names=names,
         grids_m_s=[grid],
         curve_slices=[slice(start, start + points)],
@@ -200,6 +320,9 @@ def build_quarter_car(
         sample_index=index,
         velocity_m_s=[v[index]],
         kinematics=cols.kin,
+        tyre_theta=theta,
+        tyre_rates_m_s=[rate] if g is not None else [],
+        tyre_equations=[1] if g is not None else [],
     )
 
 
@@ -211,26 +334,24 @@ def build_axle(
     nsample: int | None = 5000,
     filters: FilterChoice | None = None,
     grids: list[np.ndarray] | None = None,
+    free: frozenset[VehicleConstant] = frozenset(),
 ) -> LinearResiduals:
-    """Wheel equations f1 (left), f2 (right), heave f3, roll f4/(b/2); θ = [M_s, I, C, left pts, right pts].
-    grids: (left, right) damper velocity grids to use, as for build_quarter_car.
+    """Wheel equations f1 (left), f2 (right), heave f3, roll f4/(b/2); θ = [M_s, I, C, left pts, right pts,
+    free stiffnesses]. grids and free: as for build_quarter_car.
 
-    Q_side = F_d(v_side) + K·ζ_side ± K_e·(ζ_l − ζ_r) (+ left, − right) is the suspension force;
+    Q_side = F_d(v_side) + K_s·ζ_side ± K_e·(ζ_l − ζ_r) (+ left, − right) is the suspension force;
     f_wheel = M_u·ẍ_t − Q + C·g + K_t·δ, M_u = (M − M_s)/2; f3 = M_s·ẍ_G + Q_l + Q_r;
     f4 = I·θ̈·(2/b) + Q_l − Q_r with x_G = (x_s_l + x_s_r)/2 and θ = (x_s_l − x_s_r)/b.
     """
     recording.require(AXLE_CHANNELS)
+    free = free_stiffnesses(vehicle, free)
     filters = filters or choose_filters(recording.channels, recording.sample_time_s)
     index = select_samples(recording.time_s.size, recording.sample_time_s, nsample)
     cols = _Columns(recording, filters, index)
     ch = recording.channels
     n = index.size
-    k, kt, m = vehicle.spring_stiffness_N_per_m, vehicle.tyre_stiffness_N_per_m, vehicle.mass_kg
-    ke, b = vehicle.anti_roll_bar_stiffness_N_per_m, float(vehicle.track_m or 0.0)
+    b = float(vehicle.track_m or 0.0)
     zeta = {s: cols.eq(ch[f"x_s_{s}"] - ch[f"x_t_{s}"]) for s in "lr"}
-    bar = ke * (zeta["l"] - zeta["r"])
-    # per side: the part of Q that is known (spring + bar), and the damper basis
-    q_known = {"l": k * zeta["l"] + bar, "r": k * zeta["r"] - bar}
     vel, used_grids, phis = [], [], {}
     for number, s in enumerate("lr"):
         v = cols.velocity(f"x_s_{s}") - cols.velocity(f"x_t_{s}")
@@ -245,12 +366,9 @@ def build_axle(
     a_s = {s: cols.acceleration(f"x_s_{s}") for s in "lr"}
     a_heave = 0.5 * (a_s["l"] + a_s["r"])
     roll_acc = (a_s["l"] - a_s["r"]) / b
-    g = {
-        s: tyre_regressor(
-            cols.velocity(f"x_t_{s}") - cols.velocity(f"x_r_{s}"), tyre, vehicle.tyre_viscoelastic_coefficient
-        )
-        for s in "lr"
-    }
+    theta = _tyre_theta(vehicle, tyre, recording.sample_time_s)
+    rates = {s: cols.eq_full(cols.velocity(f"x_t_{s}") - cols.velocity(f"x_r_{s}")) for s in "lr"}
+    g = {s: tyre_regressor(rates[s], tyre, theta) for s in "lr"}
     has_tyre = g["l"] is not None
     zero = np.zeros((n, 1))
     zero_pts = np.zeros((n, points))
@@ -259,32 +377,41 @@ def build_axle(
         parts = [ms[:, None], inertia[:, None], *([tyre_col] if has_tyre else []), left, right]
         return np.hstack(parts)
 
-    tyre_cols = {s: cols.eq(g[s])[:, None] if has_tyre else zero for s in "lr"}
+    tyre_cols = {s: g[s][index][:, None] if has_tyre else zero for s in "lr"}
     z = np.zeros(n)
     f1 = row(-0.5 * a_t["l"], z, tyre_cols["l"], -phis["l"], zero_pts)
     f2 = row(-0.5 * a_t["r"], z, tyre_cols["r"], zero_pts, -phis["r"])
     f3 = row(a_heave, z, zero, phis["l"], phis["r"])
     f4 = row(z, roll_acc * 2.0 / b, zero, phis["l"], -phis["r"])
     defl = {s: cols.eq(ch[f"x_t_{s}"] - ch[f"x_r_{s}"]) for s in "lr"}
-    offset = np.stack(
-        [
-            0.5 * m * a_t["l"] - q_known["l"] + kt * defl["l"],
-            0.5 * m * a_t["r"] - q_known["r"] + kt * defl["r"],
-            q_known["l"] + q_known["r"],
-            q_known["l"] - q_known["r"],
-        ]
+    roll_deflection = zeta["l"] - zeta["r"]
+    stiffness_cols, stiffness_names, known_force = _stiffness_terms(
+        vehicle,
+        free,
+        {
+            VehicleConstant.SPRING: np.stack(
+                [-zeta["l"], -zeta["r"], zeta["l"] + zeta["r"], zeta["l"] - zeta["r"]]
+            ),
+            VehicleConstant.TYRE: np.stack([defl["l"], defl["r"], z, z]),
+            VehicleConstant.BAR: np.stack([-roll_deflection, roll_deflection, z, 2.0 * roll_deflection]),
+        },
     )
+    base = np.stack([0.5 * vehicle.mass_kg * a_t["l"], 0.5 * vehicle.mass_kg * a_t["r"], z, z])
     names = [
         "sprung_mass_kg",
         "roll_inertia_kg_m2",
-        *(["tyre_coefficient"] if has_tyre else []),
+        *([TYRE_DAMPING] if has_tyre else []),
         *[f"C_a{j + 1}_left" for j in range(points)],
         *[f"C_a{j + 1}_right" for j in range(points)],
+        *stiffness_names,
     ]
     start = 3 if has_tyre else 2
+    matrix = np.stack([f1, f2, f3, f4])
+    if stiffness_cols:
+        matrix = np.concatenate([matrix, *stiffness_cols], axis=2)
     return LinearResiduals(
-        matrix=np.stack([f1, f2, f3, f4]),
-        offset=offset,
+        matrix=matrix,
+        offset=base + known_force,
         parameter_names=names,
         grids_m_s=used_grids,
         curve_slices=[slice(start, start + points), slice(start + points, start + 2 * points)],
@@ -293,6 +420,9 @@ def build_axle(
         sample_index=index,
         velocity_m_s=vel,
         kinematics=cols.kin,
+        tyre_theta=theta,
+        tyre_rates_m_s=[rates["l"], rates["r"]] if has_tyre else [],
+        tyre_equations=[0, 1] if has_tyre else [],
     )
 
 
@@ -304,9 +434,11 @@ def build(
     nsample: int | None = 5000,
     filters: FilterChoice | None = None,
     grids: list[np.ndarray] | None = None,
+    free: frozenset[VehicleConstant] = frozenset(),
 ) -> LinearResiduals:
     """The residual system for the vehicle's model (default points: 20 for a quarter car, 10 for an axle).
-    filters and grids, when given, are used instead of being chosen from the recording."""
+    filters and grids, when given, are used instead of being chosen from the recording; the stiffnesses the
+    vehicle does not state, and those in `free`, are unknowns (free_stiffnesses)."""
     if vehicle.is_axle:
-        return build_axle(recording, vehicle, tyre, points or 10, nsample, filters, grids)
-    return build_quarter_car(recording, vehicle, tyre, points or 20, nsample, filters, grids)
+        return build_axle(recording, vehicle, tyre, points or 10, nsample, filters, grids, free)
+    return build_quarter_car(recording, vehicle, tyre, points or 20, nsample, filters, grids, free)

@@ -1,40 +1,60 @@
 """Identification: from a recording and the known vehicle constants to the damper curve(s), masses, tyre
 damping, inspection figures and the output-error gap.
 
-Steps: build the affine residual system (estimator.equations); minimise the paper's objective GF, exactly
-(default, estimator.solvers.exact) or by differential evolution (estimator.solvers.differential_evolution),
-in which case the exact optimum certifies how close DE got; fit the tanh model to each curve's points;
-simulate the identified model from the measured plate motion (output error); compute the inspection figures.
+Steps: build the affine residual system (estimator.equations), with the stiffnesses the vehicle file does
+not state (or `free` asks for) as further unknowns; minimise the paper's objective GF, exactly (default,
+estimator.solvers.exact) or by differential evolution (estimator.solvers.differential_evolution), in which
+case the exact optimum certifies how close DE got; when ϑ is not stated (Maxwell tyre), find it first by the
+bounded search over exact solves of estimator.relaxation (DE then runs at that ϑ); fit the tanh model to each
+curve's points; simulate the identified model from the measured plate motion (output error); compute the
+inspection figures.
 """
 
 from __future__ import annotations
 
 import threading
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from enum import StrEnum
 
 import numpy as np
 
 from estimator.damper import PiecewiseLinearCurve
 from estimator.equations import (
+    STIFFNESS_NAMES,
+    TYRE_DAMPING,
     LinearResiduals,
     build,
     population_sum_of_norms,
-    tyre_damping_from_coefficient,
     tyre_regressor,
 )
 from estimator.inspection import CornerInspection, corner_inspection, imbalance
 from estimator.output_error import IdentifiedModel, refine_on_output_error, simulate_identified
 from estimator.recording import Recording
+from estimator.relaxation import RELAXATION_TIME_BOUNDS_S, fit_relaxation_time
 from estimator.solvers.differential_evolution import DEProgress, DESettings, DifferentialEvolution
 from estimator.solvers.exact import solve_exact
 from estimator.tanh_fit import TanhFit, fit_tanh
-from estimator.vehicle import TyreModel, VehicleParameters
+from estimator.vehicle import (
+    REFERENCE_SAMPLE_TIME_S,
+    TyreModel,
+    VehicleConstant,
+    VehicleParameters,
+    relaxation_time_from_coefficient,
+)
 
 SPRUNG_FRACTION_BOUNDS = (0.5, 0.99)
 """DE search range of the sprung mass as a fraction of the mass carried by the wheel(s)."""
 TYRE_DAMPING_MAX_NS_PER_M = 5000.0
+STIFFNESS_BOUNDS_N_PER_M = {
+    VehicleConstant.SPRING: (1e3, 3e5),
+    VehicleConstant.TYRE: (3e4, 2e6),
+    VehicleConstant.BAR: (0.0, 2e5),
+}
+"""DE search ranges of free stiffnesses: wheel rates from a motorcycle fork (14 kN/m in the paper) to a
+truck; tyres from a motorcycle (101 kN/m) to a truck; anti-roll bars at the wheel."""
+STARTING_RELAXATION_TIME_S = relaxation_time_from_coefficient(0.97, REFERENCE_SAMPLE_TIME_S)
+"""Where the search for an unstated ϑ starts: the paper's ϑ = 0.97 at 1 ms (τ = 32 ms)."""
 DAMPER_FORCE_MARGIN = 1.5
 """DE searches damper points within ± this × the largest force the body equation can ask of the damper."""
 
@@ -66,6 +86,8 @@ class IdentifyOptions:
     de_coordinates: Coordinates = Coordinates.DECORRELATED
     output_error: bool = True
     refine_output_error: bool = False
+    free: frozenset[VehicleConstant] = frozenset()
+    """Constants to identify although the vehicle file states them (those it does not state always are)."""
 
 
 @dataclass(frozen=True)
@@ -89,6 +111,9 @@ class IdentificationResult:
     system: LinearResiduals
     de_generations: int | None = None
     refined_gap_m: float | None = None
+    identified: frozenset[VehicleConstant] = frozenset()
+    """The vehicle constants found from the recording (the rest are the vehicle file's)."""
+    warnings: list[str] = field(default_factory=list)
 
     def to_json(self) -> dict[str, object]:
         """The stable JSON shape of `shockbench identify --json`."""
@@ -112,6 +137,10 @@ class IdentificationResult:
                 for c in self.curves
             ],
             "masses_kg": {"sprung": m.sprung_mass_kg, "unsprung": m.unsprung_mass_kg},
+            "stiffness_N_per_m": self.stiffness_json(),
+            "tyre_viscoelastic_coefficient": m.vehicle.tyre_viscoelastic_coefficient,
+            "tyre_relaxation_time_s": m.vehicle.tyre_relaxation_time_s,
+            "tyre_viscoelastic_identified": VehicleConstant.THETA in self.identified,
             "tyre_damping_Ns_per_m": m.tyre_damping_Ns_per_m,
             "tyre_model": m.tyre_model.value,
             "objective": self.objective,
@@ -130,30 +159,45 @@ class IdentificationResult:
             out["roll_inertia_kg_m2"] = m.roll_inertia_kg_m2
         if self.refined_gap_m is not None:
             out["refined_gap_m"] = self.refined_gap_m
+        out["warnings"] = list(self.warnings)
+        return out
+
+    def stiffness_json(self) -> dict[str, object]:
+        """{spring, tyre, (anti_roll_bar,) identified: [names]} in N/m; ϑ is reported beside it."""
+        v = self.model.vehicle
+        out: dict[str, object] = {"spring": v.spring_stiffness_N_per_m, "tyre": v.tyre_stiffness_N_per_m}
+        if v.is_axle:
+            out["anti_roll_bar"] = v.anti_roll_bar_stiffness_N_per_m
+        found = self.identified & set(STIFFNESS_NAMES)
+        out["identified"] = [c.value for c in VehicleConstant if c in found]
         return out
 
 
 def de_bounds(system: LinearResiduals, vehicle: VehicleParameters) -> np.ndarray:
-    """Physical search box: sprung mass fraction, roll inertia, tyre coefficient, damper forces."""
+    """Physical search box, by unknown: sprung mass fraction, roll inertia, tyre damping, damper forces,
+    free stiffnesses."""
     mass = vehicle.mass_kg
+    stiffness_of = {name: constant for constant, name in STIFFNESS_NAMES.items()}
+    body_equation = 2 if vehicle.is_axle else 0  # heave, or the quarter car's body
+    # the body equation bounds what the dampers can be asked for: |F_d| <~ M·|ẍ_s| + |spring and bar|
+    body = np.abs(system.matrix[body_equation, :, 0]) * mass + np.abs(system.offset[body_equation])
+    for index, name in enumerate(system.parameter_names):
+        if name in stiffness_of:
+            upper = STIFFNESS_BOUNDS_N_PER_M[stiffness_of[name]][1]
+            body = body + upper * np.abs(system.matrix[body_equation, :, index])
+    force_limit = DAMPER_FORCE_MARGIN * float(np.max(body))
     bounds: list[tuple[float, float]] = []
     for name in system.parameter_names:
         if name == "sprung_mass_kg":
             bounds.append((SPRUNG_FRACTION_BOUNDS[0] * mass, SPRUNG_FRACTION_BOUNDS[1] * mass))
         elif name == "roll_inertia_kg_m2":
             bounds.append((0.0, mass * float(vehicle.track_m) ** 2 / 2.0))
-        elif name == "tyre_coefficient":
-            scale = (
-                1.0 - vehicle.tyre_viscoelastic_coefficient if system.tyre_model is TyreModel.MAXWELL else 1.0
-            )
-            bounds.append((0.0, TYRE_DAMPING_MAX_NS_PER_M * scale))
-    # the body equations bound what the dampers can be asked for: |F_d| <~ M·|ẍ_s| + |spring and bar|
-    body = np.abs(system.matrix[-1 if vehicle.is_axle else 0, :, 0]) * mass + np.abs(
-        system.offset[-2 if vehicle.is_axle else 0]
-    )
-    force_limit = DAMPER_FORCE_MARGIN * float(np.max(body))
-    n_points = sum(s.stop - s.start for s in system.curve_slices)
-    bounds.extend([(-force_limit, force_limit)] * n_points)
+        elif name == TYRE_DAMPING:
+            bounds.append((0.0, TYRE_DAMPING_MAX_NS_PER_M))
+        elif name in stiffness_of:
+            bounds.append(STIFFNESS_BOUNDS_N_PER_M[stiffness_of[name]])
+        else:
+            bounds.append((-force_limit, force_limit))
     return np.array(bounds)
 
 
@@ -213,19 +257,20 @@ def run_de(
 
 
 def _inspection(
-    model: IdentifiedModel, recording: Recording, system: LinearResiduals, tyre_coefficient: float
+    model: IdentifiedModel, recording: Recording, system: LinearResiduals
 ) -> tuple[dict[str, CornerInspection], dict[str, float] | None]:
     v = model.vehicle
     dt = recording.sample_time_s
     kin = system.kinematics
+    theta = v.viscoelastic_coefficient_at(dt) if model.tyre_model is TyreModel.MAXWELL else None
     sides = [("single", "")] if not v.is_axle else [("left", "_l"), ("right", "_r")]
     sprung_per_corner = model.sprung_mass_kg / len(sides)
     result: dict[str, CornerInspection] = {}
     for (corner, suffix), curve, velocity in zip(sides, model.curves, system.velocity_m_s, strict=True):
         t, r = kin[f"x_t{suffix}"], kin[f"x_r{suffix}"]
-        g = tyre_regressor(t.velocity_m_s - r.velocity_m_s, model.tyre_model, v.tyre_viscoelastic_coefficient)
-        viscous = tyre_coefficient * g if g is not None else 0.0
-        dynamic = -v.tyre_stiffness_N_per_m * (t.position_m - r.position_m) - viscous
+        g = tyre_regressor(t.velocity_m_s - r.velocity_m_s, model.tyre_model, theta)
+        viscous = model.tyre_damping_Ns_per_m * g if g is not None else 0.0
+        dynamic = -float(v.tyre_stiffness_N_per_m) * (t.position_m - r.position_m) - viscous
         keep = system.sample_index[0], system.sample_index[-1] + 1  # leave out filter start-up transients
         result[corner] = corner_inspection(
             static_load_N=v.static_wheel_load_N,
@@ -234,11 +279,54 @@ def _inspection(
             sample_time_s=dt,
             damper_force_N=curve.force(velocity),
             velocity_m_s=velocity,
-            spring_stiffness_N_per_m=v.spring_stiffness_N_per_m,
+            spring_stiffness_N_per_m=float(v.spring_stiffness_N_per_m),
             sprung_mass_kg=sprung_per_corner,
         )
     balance = imbalance(result["left"], result["right"]) if v.is_axle else None
     return result, balance
+
+
+def constants_to_identify(
+    vehicle: VehicleParameters, options: IdentifyOptions
+) -> frozenset[VehicleConstant]:
+    """What the recording has to give: the constants the vehicle does not state and those `free` asks for.
+    ϑ only with the Maxwell tyre (the other tyre models have no ϑ); the bar only on an axle."""
+    wanted = vehicle.unknown | options.free
+    if VehicleConstant.BAR in wanted and not vehicle.is_axle:
+        raise ValueError("the anti-roll bar ('bar') applies to an axle only")
+    if options.tyre is not TyreModel.MAXWELL:
+        if VehicleConstant.THETA in options.free:
+            raise ValueError("ϑ ('theta') belongs to the maxwell tyre model only")
+        wanted = wanted - {VehicleConstant.THETA}
+    return frozenset(wanted)
+
+
+def _resolved(
+    vehicle: VehicleParameters, system: LinearResiduals, theta: np.ndarray, relaxation_time_s: float | None
+) -> VehicleParameters:
+    """The vehicle with every identified constant filled in (what the output error and inspection use)."""
+    changes: dict[str, float] = {}
+    for name in STIFFNESS_NAMES.values():
+        value = system.value(theta, name)
+        if value is not None:
+            if not value > 0:
+                raise ValueError(
+                    f"the identified {name} is {value:.4g}, not positive: the recording does not "
+                    "determine it (state it in the vehicle file)"
+                )
+            changes[name] = value
+    resolved = replace(vehicle, **changes)
+    return resolved.with_relaxation_time(relaxation_time_s) if relaxation_time_s is not None else resolved
+
+
+def _edge_warning(relaxation_time_s: float) -> list[str]:
+    low, high = RELAXATION_TIME_BOUNDS_S
+    if relaxation_time_s < low * 1.02 or relaxation_time_s > high / 1.02:
+        return [
+            f"the tyre's relaxation time came out at the edge of its search range ({low * 1e3:g}-"
+            f"{high * 1e3:g} ms): {relaxation_time_s * 1e3:.3g} ms; this recording does not determine ϑ well"
+        ]
+    return []
 
 
 def identify(
@@ -248,41 +336,51 @@ def identify(
     progress: Callable[[DEProgress], bool | None] | None = None,
     cancel: threading.Event | None = None,
 ) -> IdentificationResult:
-    """Identify the damper curve(s) and the unknown masses and tyre damping from a recording."""
+    """Identify the damper curve(s), the masses, the tyre damping and the vehicle constants the file does not
+    state (or options.free names) from a recording."""
     if vehicle.is_axle != recording.is_axle:
         kind = "axle" if vehicle.is_axle else "quarter-car"
         raise ValueError(f"the vehicle file is for a {kind} model but the recording's channels are not")
-    system = build(recording, vehicle, options.tyre, options.points, options.nsample)
-    exact = solve_exact(system)
+    unknown = constants_to_identify(vehicle, options)
+    search_theta = VehicleConstant.THETA in unknown
+    start = vehicle
+    if options.tyre is TyreModel.MAXWELL and vehicle.tyre_viscoelastic_coefficient is None:
+        start = vehicle.with_relaxation_time(STARTING_RELAXATION_TIME_S)
+    system = build(recording, start, options.tyre, options.points, options.nsample, free=unknown)
+    relaxation_time = None
+    warnings: list[str] = []
+    if search_theta:
+        fit = fit_relaxation_time(system)
+        system, exact, relaxation_time = fit.system, fit.solution, fit.relaxation_time_s
+        warnings += _edge_warning(relaxation_time)
+    else:
+        exact = solve_exact(system)
     generations = None
     if options.solver is Solver.DE:
-        theta, generations, cancelled = run_de(system, vehicle, options, progress, cancel)
+        theta, generations, cancelled = run_de(system, start, options, progress, cancel)
         if cancelled:
             raise InterruptedError("identification cancelled")
     else:
         theta = exact.theta
     objective = float(system.objective(theta))
     certified_gap = (objective - exact.lower_bound) / objective if objective > 0 else 0.0
-    names = system.parameter_names
-    coefficient = float(theta[names.index("tyre_coefficient")]) if "tyre_coefficient" in names else 0.0
     curves = tuple(
         PiecewiseLinearCurve(g, theta[s]) for g, s in zip(system.grids_m_s, system.curve_slices, strict=True)
     )
+    resolved = _resolved(start, system, theta, relaxation_time)
     model = IdentifiedModel(
-        vehicle=vehicle,
+        vehicle=resolved,
         tyre_model=options.tyre,
         curves=curves,
         sprung_mass_kg=float(theta[0]),
-        tyre_damping_Ns_per_m=tyre_damping_from_coefficient(
-            coefficient, options.tyre, vehicle.tyre_viscoelastic_coefficient
-        ),
+        tyre_damping_Ns_per_m=system.value(theta, TYRE_DAMPING) or 0.0,
         roll_inertia_kg_m2=float(theta[1]) if vehicle.is_axle else None,
     )
     gap = simulate_identified(model, recording, system.kinematics).gap_m if options.output_error else None
     refined_gap = None
     if options.refine_output_error:
         model, refined_gap = refine_on_output_error(model, recording, system.kinematics, cancel=cancel)
-    inspection, balance = _inspection(model, recording, system, coefficient)
+    inspection, balance = _inspection(model, recording, system)
     corners = ["single"] if not vehicle.is_axle else ["left", "right"]
     fitted = [
         CornerCurve(c, curve, fit_tanh(curve.velocity_m_s, curve.force_N))
@@ -300,4 +398,6 @@ def identify(
         system,
         generations,
         refined_gap,
+        unknown,
+        warnings,
     )

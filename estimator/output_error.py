@@ -40,7 +40,8 @@ negative tyre damping; the gap is then reported as infinite (JSON: null with gap
 
 @dataclass(frozen=True)
 class IdentifiedModel:
-    """The model as identified: curves (one, or left and right), masses, tyre damping, roll inertia."""
+    """The model as identified: curves (one, or left and right), masses, tyre damping, roll inertia; vehicle
+    holds every constant, stated or identified."""
 
     vehicle: VehicleParameters
     tyre_model: TyreModel
@@ -55,17 +56,20 @@ class IdentifiedModel:
         wheels = 2 if self.vehicle.is_axle else 1
         return (self.vehicle.mass_kg - self.sprung_mass_kg) / wheels
 
-    def physics(self, sample_time_s: float, curves: tuple[object, ...] | None = None):
+    def physics(self, curves: tuple[object, ...] | None = None):
         curves = curves or self.curves
+
+        maxwell = self.tyre_model is TyreModel.MAXWELL
+        extra = {"maxwell_time_constant_s": self.vehicle.maxwell_time_constant_s()} if maxwell else {}
 
         def corner(curve: object) -> CornerPhysics:
             return CornerPhysics(
                 damper=curve,  # type: ignore[arg-type]
-                spring_stiffness_N_per_m=self.vehicle.spring_stiffness_N_per_m,
-                tyre_stiffness_N_per_m=self.vehicle.tyre_stiffness_N_per_m,
+                spring_stiffness_N_per_m=float(self.vehicle.spring_stiffness_N_per_m),  # type: ignore[arg-type]
+                tyre_stiffness_N_per_m=float(self.vehicle.tyre_stiffness_N_per_m),  # type: ignore[arg-type]
                 tyre_model=self.tyre_model,
                 tyre_damping_Ns_per_m=self.tyre_damping_Ns_per_m,
-                maxwell_time_constant_s=self.vehicle.maxwell_time_constant_s(sample_time_s),
+                **extra,
             )
 
         if not self.vehicle.is_axle:
@@ -126,7 +130,7 @@ def simulate_identified(
     """Drive the model with the measured plate; `kinematics` are the recording's channels low-passed (as
     LinearResiduals.kinematics holds them); `curves` may be CurveBatch objects with `batch` columns."""
     plate, rate, state0 = _measured_drive(kinematics, model.vehicle)
-    physics = model.physics(recording.sample_time_s, curves)
+    physics = model.physics(curves)
     if batch is not None:
         state0 = np.repeat(state0[:, None], batch, axis=1)
     with np.errstate(over="ignore", invalid="ignore"):  # an unstable model is reported as a diverged gap

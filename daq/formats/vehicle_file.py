@@ -3,14 +3,18 @@
     [vehicle]
     model = "quarter-car"            # or "axle"
     mass_kg = 420.0                  # mass carried by the wheel(s) under test: M_1/4, or M_1/2 for an axle
+    # optional: what is not stated is identified from the recording
     spring_stiffness_N_per_m = 26000
     tyre_stiffness_N_per_m = 210000
-    tyre_viscoelastic_coefficient = 0.97   # ϑ of the Maxwell tyre (paper eq 5)
+    tyre_viscoelastic_coefficient = 0.97   # ϑ of the Maxwell tyre (paper eq 5), referred to Δt = 1 ms
+    # tyre_relaxation_time_s = 0.0323      # or τ = C_d/K_d instead of ϑ (ϑ = τ/(τ + 1 ms))
     # axle only:
     track_m = 1.5
     anti_roll_bar_stiffness_N_per_m = 18000   # absent = no bar
 
-An unknown key is an error; a missing required key is an error that names it.
+Only model and mass_kg (and track_m for an axle) are required. An unknown key is an error; a missing
+required key is an error that names it. ϑ is referred to 1 ms whatever the recording's sample time
+(estimator.vehicle), so a file stays right for a recording from a 500 Hz rig.
 """
 
 from __future__ import annotations
@@ -21,15 +25,15 @@ from pathlib import Path
 from daq.formats.atomic import atomic_write
 from estimator.vehicle import ModelKind, VehicleParameters
 
-REQUIRED = (
-    "model",
-    "mass_kg",
+REQUIRED = ("model", "mass_kg")
+AXLE_REQUIRED = ("track_m",)
+OPTIONAL = (
     "spring_stiffness_N_per_m",
     "tyre_stiffness_N_per_m",
     "tyre_viscoelastic_coefficient",
+    "tyre_relaxation_time_s",
+    "anti_roll_bar_stiffness_N_per_m",
 )
-AXLE_REQUIRED = ("track_m",)
-OPTIONAL = ("anti_roll_bar_stiffness_N_per_m",)
 
 
 class VehicleFileError(ValueError):
@@ -73,10 +77,19 @@ def parse_vehicle(text: str, source: str = "vehicle file") -> VehicleParameters:
         if isinstance(value, bool) or not isinstance(value, int | float):
             raise VehicleFileError(f"{source}: '{key}' must be a number, got {value!r}")
         numbers[key] = float(value)
+    relaxation_time_s = numbers.pop("tyre_relaxation_time_s", None)
+    if relaxation_time_s is not None:
+        if "tyre_viscoelastic_coefficient" in numbers:
+            raise VehicleFileError(
+                f"{source}: give tyre_viscoelastic_coefficient or tyre_relaxation_time_s, not both"
+            )
+        if not relaxation_time_s > 0:
+            raise VehicleFileError(f"{source}: tyre_relaxation_time_s must be > 0, got {relaxation_time_s}")
     try:
-        return VehicleParameters(model=model, **numbers)
+        vehicle = VehicleParameters(model=model, **numbers)
     except ValueError as exc:
         raise VehicleFileError(f"{source}: {exc}") from None
+    return vehicle.with_relaxation_time(relaxation_time_s) if relaxation_time_s is not None else vehicle
 
 
 def read_vehicle(path: Path | str) -> VehicleParameters:
@@ -91,10 +104,11 @@ def format_vehicle(vehicle: VehicleParameters) -> str:
         "[vehicle]",
         f'model = "{vehicle.model.value}"',
         f"mass_kg = {vehicle.mass_kg!r}",
-        f"spring_stiffness_N_per_m = {vehicle.spring_stiffness_N_per_m!r}",
-        f"tyre_stiffness_N_per_m = {vehicle.tyre_stiffness_N_per_m!r}",
-        f"tyre_viscoelastic_coefficient = {vehicle.tyre_viscoelastic_coefficient!r}",
     ]
+    for key in ("spring_stiffness_N_per_m", "tyre_stiffness_N_per_m", "tyre_viscoelastic_coefficient"):
+        value = getattr(vehicle, key)
+        if value is not None:  # not stated: identified from the recording
+            lines.append(f"{key} = {value!r}")
     if vehicle.is_axle:
         lines.append(f"track_m = {vehicle.track_m!r}")
         if vehicle.anti_roll_bar_stiffness_N_per_m:

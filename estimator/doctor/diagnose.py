@@ -58,6 +58,7 @@ from estimator.doctor.model import (
 from estimator.doctor.residuals import Localisation, effective_samples, locate, sweep_frequency_Hz
 from estimator.doctor.result import CandidateScore, DiagnosisResult, DiagnosisStep
 from estimator.doctor.simulation import BatchOutputError, simulate_models
+from estimator.identify import IdentifyOptions, identify
 from estimator.recording import Recording
 from estimator.vehicle import TyreModel, VehicleParameters
 
@@ -511,5 +512,13 @@ def diagnose(
     cancel: threading.Event | None = None,
 ) -> DiagnosisResult:
     """Find, name and add the effects the model lacks (see the module docstring); `progress` is called at
-    every stage, `cancel` (set from another thread) stops the diagnosis with InterruptedError."""
+    every stage, `cancel` (set from another thread) stops the diagnosis with InterruptedError.
+
+    Constants the vehicle file does not state (stiffnesses, ϑ) are first identified with the paper's model
+    (estimator.identify, Maxwell tyre) and then held fixed like stated ones."""
+    if vehicle.unknown:
+        if progress is not None:
+            progress(DiagnoseProgress(0, "identifying the constants the vehicle file does not state"))
+        found = identify(recording, vehicle, IdentifyOptions(points=options.points, output_error=False))
+        vehicle = found.model.vehicle
     return _Doctor(recording, vehicle, options, progress, cancel).run()

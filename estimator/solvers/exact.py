@@ -58,12 +58,13 @@ def dual_lower_bound(system: LinearResiduals, theta: np.ndarray) -> float:
 def _weighted_least_squares(a: np.ndarray, c: np.ndarray, weights: np.ndarray) -> np.ndarray:
     """argmin Σ w·(a z + c)²: normal equations by Cholesky (columns are pre-scaled, so they are well
     conditioned); falls back to an SVD least-squares solve if the normal matrix is not positive definite."""
-    aw = a * weights[:, None]
+    root = np.sqrt(weights)
+    weighted = a * root[:, None]  # the normal matrix as BᵀB of one array: numpy uses the symmetric product
     try:
-        return scipy.linalg.cho_solve(scipy.linalg.cho_factor(a.T @ aw), -(aw.T @ c))
+        normal = weighted.T @ weighted
+        return scipy.linalg.cho_solve(scipy.linalg.cho_factor(normal), -(weighted.T @ (c * root)))
     except np.linalg.LinAlgError:
-        root = np.sqrt(weights)
-        return np.linalg.lstsq(a * root[:, None], -c * root, rcond=None)[0]
+        return np.linalg.lstsq(weighted, -c * root, rcond=None)[0]
 
 
 def solve_exact(

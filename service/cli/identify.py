@@ -17,7 +17,7 @@ from estimator.identify import IdentificationResult, IdentifyOptions, Solver, id
 from estimator.solvers.differential_evolution import DEProgress, DESettings
 from estimator.tanh_fit import MIN_POINTS as MIN_TANH_POINTS
 from estimator.tanh_fit import fit_tanh
-from estimator.vehicle import TyreModel
+from estimator.vehicle import TyreModel, VehicleConstant, VehicleParameters
 from service.cli.errors import CliError
 from service.jobs.bounds import check_physical_bounds
 from service.plots import save_curve_plot
@@ -53,6 +53,7 @@ def summary(result: IdentificationResult) -> str:
         f"sprung mass {m.sprung_mass_kg:.1f} kg, unsprung mass {m.unsprung_mass_kg:.1f} kg per wheel"
         + (f", roll inertia {m.roll_inertia_kg_m2:.1f} kg·m²" if m.roll_inertia_kg_m2 is not None else ""),
         f"tyre damping C_d {m.tyre_damping_Ns_per_m:.0f} N·s/m",
+        *_constants_lines(result),
         f"objective GF {result.objective:.6g} "
         f"(certified within {100 * result.certified_gap:.3g}% of the optimum)",
     ]
@@ -89,16 +90,67 @@ def summary(result: IdentificationResult) -> str:
     return "\n".join(lines)
 
 
-def options_from_args(args: argparse.Namespace) -> IdentifyOptions:
+def _constants_lines(result: IdentificationResult) -> list[str]:
+    """The vehicle constants used, each marked identified or stated."""
+    v, found = result.model.vehicle, result.identified
+
+    def origin(constant: VehicleConstant) -> str:
+        return "identified" if constant in found else "stated"
+
+    stiffness = (
+        f"spring {v.spring_stiffness_N_per_m:.0f} N/m ({origin(VehicleConstant.SPRING)}), "
+        f"tyre {v.tyre_stiffness_N_per_m:.0f} N/m ({origin(VehicleConstant.TYRE)})"
+    )
+    if v.is_axle:
+        bar = f"{v.anti_roll_bar_stiffness_N_per_m:.0f} N/m ({origin(VehicleConstant.BAR)})"
+        stiffness += f", anti-roll bar {bar}"
+    lines = [f"stiffnesses: {stiffness}"]
+    if result.model.tyre_model is TyreModel.MAXWELL:
+        lines.append(
+            f"tyre viscoelastic coefficient ϑ {v.tyre_viscoelastic_coefficient:.4f} at 1 ms "
+            f"(relaxation time {v.maxwell_time_constant_s() * 1e3:.2f} ms, {origin(VehicleConstant.THETA)})"
+        )
+    return lines
+
+
+FREE_ALL = "all"
+
+
+def parse_free(text: str | None, vehicle: VehicleParameters, tyre: TyreModel) -> frozenset[VehicleConstant]:
+    """`--free spring,tyre,theta,bar` or `--free all` -> the constants to identify although stated. `all`
+    is every constant this model has: spring, tyre, theta (maxwell tyre), bar (axle)."""
+    if not text:
+        return frozenset()
+    names = [name.strip() for name in text.split(",") if name.strip()]
+    if FREE_ALL in names:
+        every = set(VehicleConstant)
+        if tyre is not TyreModel.MAXWELL:
+            every.discard(VehicleConstant.THETA)
+        if not vehicle.is_axle:
+            every.discard(VehicleConstant.BAR)
+        return frozenset(every)
+    choices = ", ".join([c.value for c in VehicleConstant] + [FREE_ALL])
+    free = set()
+    for name in names:
+        try:
+            free.add(VehicleConstant(name))
+        except ValueError:
+            raise CliError(f"--free: unknown constant {name!r} (choose from {choices})") from None
+    return frozenset(free)
+
+
+def options_from_args(args: argparse.Namespace, vehicle: VehicleParameters) -> IdentifyOptions:
     if args.points is not None and not MIN_TANH_POINTS <= args.points <= 60:
         raise CliError(f"--points must lie between {MIN_TANH_POINTS} (the tanh fit needs as many) and 60")
     de = DESettings(generations=args.generations, seed=args.seed)
+    tyre = TyreModel(args.tyre)
     return IdentifyOptions(
-        tyre=TyreModel(args.tyre),
+        tyre=tyre,
         points=args.points,
         solver=Solver(args.solver),
         de=de,
         refine_output_error=args.refine,
+        free=parse_free(args.free, vehicle, tyre),
     )
 
 
@@ -108,9 +160,11 @@ def run_identify(args: argparse.Namespace) -> int:
     for warning in check_bandwidth(recording).warnings:  # refuses (ValueError, one line) when hopeless
         print(f"shockbench identify: warning: {warning}", file=sys.stderr)
     check_physical_bounds(recording, vehicle)  # the service's submit check (ValueError, one line)
-    options = options_from_args(args)
+    options = options_from_args(args, vehicle)
     progress = _ProgressLine() if options.solver is Solver.DE and not args.json else None
     result = identify(recording, vehicle, options, progress=progress)
+    for warning in result.warnings:
+        print(f"shockbench identify: warning: {warning}", file=sys.stderr)
     plot = (
         Path(args.plot)
         if args.plot
@@ -197,7 +251,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "identify",
         help="identify the damper curve(s) from a recording",
-        description="Identify the damper force-velocity curve, masses and tyre damping.",
+        description="Identify the damper force-velocity curve, masses and tyre damping, and the "
+        "stiffnesses and tyre ϑ the vehicle file does not state.",
     )
     p.add_argument("recording", help="recording CSV")
     p.add_argument("--vehicle", required=True, help="vehicle file (TOML)")
@@ -207,6 +262,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--generations", type=int, default=3000, help="DE generations (default 3000)")
     p.add_argument("--seed", type=int, default=0, help="DE seed (default 0)")
     p.add_argument("--refine", action="store_true", help="refine the curve by DE on the output-error gap")
+    p.add_argument(
+        "--free",
+        default=None,
+        metavar="NAMES",
+        help="identify these vehicle constants although the vehicle file states them: a comma list of "
+        "spring, tyre, theta (maxwell tyre), bar (axle), or all (what the file omits is always identified)",
+    )
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument(
         "--plot", default=None, help="plot file (.png or .svg); default REC.curve.png without --json"

@@ -1,15 +1,22 @@
-"""Randomly drawn simulated vehicles (fixed seeds) with a real damper table that is not of the tanh form."""
+"""Randomly drawn simulated vehicles (fixed seeds) with a real damper table that is not of the tanh form, and
+what an identification got wrong about them."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import cache
 
 import numpy as np
 
 from drivers.exciter.sweep import SweepSettings
 from estimator.dynamics import ForceCurve
-from estimator.vehicle import ModelKind, VehicleParameters
+from estimator.identify import IdentificationResult
+from estimator.vehicle import (
+    REFERENCE_SAMPLE_TIME_S,
+    ModelKind,
+    VehicleParameters,
+    coefficient_from_relaxation_time,
+)
 from simulators.dampers import suv_rear_table
 from simulators.vehicle_sim import (
     SimulatedVehicle,
@@ -96,3 +103,69 @@ def curve_error_percent(identified: ForceCurve, truth: ForceCurve, velocity_m_s:
     grid = np.linspace(lo, hi, 400)
     true = truth.force(grid)
     return float(100 * np.sqrt(np.mean((identified.force(grid) - true) ** 2)) / np.max(np.abs(true)))
+
+
+def mass_only(known: VehicleParameters) -> VehicleParameters:
+    """The vehicle file with only the mass (and an axle's track and bar): the rest is to be identified."""
+    return replace(
+        known, spring_stiffness_N_per_m=None, tyre_stiffness_N_per_m=None, tyre_viscoelastic_coefficient=None
+    )
+
+
+def random_wide_quarter_car(seed: int) -> SimulatedVehicle:
+    """A quarter car drawn over a wider range than random_quarter_car, for identification from the mass
+    alone: mass, sprung share, spring, tyre stiffness, tyre damping and relaxation time, and the real
+    SUV damper table scaled."""
+    rng = np.random.default_rng(seed)
+    mass = rng.uniform(250, 600)
+    known = VehicleParameters(
+        ModelKind.QUARTER_CAR,
+        mass,
+        rng.uniform(15e3, 60e3),
+        rng.uniform(150e3, 350e3),
+        coefficient_from_relaxation_time(rng.uniform(0.015, 0.05), REFERENCE_SAMPLE_TIME_S),
+    )
+    return SimulatedVehicle(
+        known,
+        rng.uniform(0.82, 0.93) * mass,
+        (suv_rear_table(rng.uniform(0.5, 1.2)),),
+        tyre_damping_Ns_per_m=rng.uniform(600, 2000),
+    )
+
+
+@cache
+def wide_quarter_car_case(seed: int, sample_time_s: float = 0.001) -> Case:
+    vehicle = random_wide_quarter_car(seed)
+    settings = SimulationSettings(
+        sweep=SweepSettings(duration_s=SWEEP_S), seed=seed, sample_time_s=sample_time_s
+    )
+    rate = f"{1 / sample_time_s:.0f} Hz"
+    return Case(f"quarter car seed {seed} at {rate}", vehicle, simulate(vehicle, settings))
+
+
+@cache
+def axle_case_at(seed: int, sample_time_s: float) -> Case:
+    vehicle = random_axle(seed)
+    settings = SimulationSettings(
+        sweep=SweepSettings(duration_s=SWEEP_S), seed=seed, sample_time_s=sample_time_s
+    )
+    return Case(f"axle seed {seed} at {1 / sample_time_s:.0f} Hz", vehicle, simulate(vehicle, settings))
+
+
+def identification_errors(case: Case, result: IdentificationResult) -> dict[str, float]:
+    """|error| in % of what the identification found: each curve (of its peak force, curve_error_percent),
+    sprung and unsprung mass, spring and tyre stiffness, the tyre's relaxation time."""
+    truth, found = case.vehicle, result.model
+    errors = {
+        f"curve {c.corner}": curve_error_percent(c.curve, t, v)
+        for c, t, v in zip(result.curves, case.truths, result.system.velocity_m_s, strict=True)
+    }
+    pairs = {
+        "sprung mass": (found.sprung_mass_kg, truth.sprung_mass_kg),
+        "unsprung mass": (found.unsprung_mass_kg, truth.unsprung_mass_kg),
+        "spring": (found.vehicle.spring_stiffness_N_per_m, truth.known.spring_stiffness_N_per_m),
+        "tyre": (found.vehicle.tyre_stiffness_N_per_m, truth.known.tyre_stiffness_N_per_m),
+        "relaxation time": (found.vehicle.tyre_relaxation_time_s, truth.known.tyre_relaxation_time_s),
+    }
+    errors |= {name: 100 * abs(a / b - 1) for name, (a, b) in pairs.items()}
+    return errors
