@@ -3,14 +3,15 @@ in the shape of `shockbench identify --json` and `shockbench diagnose --json`.
 
 The worker stores a result as JSON (service.jobs.context.finite_json: a number that is not finite is
 stored as null), so every figure the estimator may fail to compute (a phase shift the sweep never reaches,
-a model that diverged) is `float | None` here. The models describe the stored JSON exactly: reading one
-back and dumping it gives the same keys and values (tests/service/test_api_contract_results.py checks it
-on real results), so typing the API did not change what clients receive.
+a model that diverged) is `float | None` here. The models describe the stored JSON: reading one back and
+dumping it gives the same keys and values (tests/service/test_api_contract.py checks it on real results,
+and that every key is typed), so typing the API did not change what clients receive. A key the estimator
+adds before it is typed here passes through unchanged (`extra="allow"`), never silently dropped.
 """
 
 from __future__ import annotations
 
-from pydantic import BaseModel, Field
+from pydantic import BaseModel, ConfigDict, Field
 
 from estimator.identify import Solver
 from estimator.vehicle import TyreModel
@@ -19,10 +20,16 @@ MaybeNumber = float | None
 """A figure that is null when the estimator could not compute a finite value."""
 
 
+class ResultPart(BaseModel):
+    """A part of a stored result: keys not typed here pass through unchanged."""
+
+    model_config = ConfigDict(extra="allow")
+
+
 # ---- identify ----------------------------------------------------------------------------------------------
 
 
-class TanhParameters(BaseModel):
+class TanhParameters(ResultPart):
     """F(v) = c_s·v + kappa·(tanh(mu·v + beta) − tanh(beta)), F in N, v in m/s."""
 
     c_s: float = Field(description="linear damping (N·s/m)")
@@ -31,7 +38,7 @@ class TanhParameters(BaseModel):
     beta: float = Field(description="tanh asymmetry (dimensionless)")
 
 
-class CurveOut(BaseModel):
+class CurveOut(ResultPart):
     """One identified damper curve: its points, and the tanh model fitted to them."""
 
     corner: str = Field(description="single (quarter car), or left / right (axle)")
@@ -42,12 +49,19 @@ class CurveOut(BaseModel):
     outliers: list[int] = Field(description="0-based indices of the points the robust fit set aside")
 
 
-class MassesOut(BaseModel):
+class MassesOut(ResultPart):
     sprung: float = Field(description="sprung mass (kg)")
     unsprung: float = Field(description="unsprung mass per wheel (kg)")
 
 
-class InspectionOut(BaseModel):
+class StiffnessOut(ResultPart):
+    spring: MaybeNumber = Field(description="spring rate at the wheel (N/m)")
+    tyre: MaybeNumber = Field(description="tyre stiffness (N/m)")
+    anti_roll_bar: MaybeNumber = Field(None, description="axle: anti-roll bar rate at the wheel (N/m)")
+    identified: list[str] = Field(default_factory=list, description="those found from the recording")
+
+
+class InspectionOut(ResultPart):
     """The inspection figures of one corner."""
 
     eusama_percent: MaybeNumber = Field(description="EUSAMA road holding: least contact force / static (%)")
@@ -56,14 +70,14 @@ class InspectionOut(BaseModel):
     equivalent_damping_Ns_per_m: MaybeNumber = Field(description="linear damping of equal energy (N·s/m)")
 
 
-class ImbalanceOut(BaseModel):
+class ImbalanceOut(ResultPart):
     eusama_difference_points: MaybeNumber = Field(description="|left − right| EUSAMA (percentage points)")
     damping_difference_percent: MaybeNumber = Field(
         description="left/right equivalent damping difference (%)"
     )
 
 
-class AxleInspectionOut(BaseModel):
+class AxleInspectionOut(ResultPart):
     """The inspection figures of an axle: each side, and how much they differ."""
 
     left: InspectionOut
@@ -71,17 +85,23 @@ class AxleInspectionOut(BaseModel):
     imbalance: ImbalanceOut | None
 
 
-class FiltersOut(BaseModel):
+class FiltersOut(ResultPart):
     kinematics_cutoff_Hz: MaybeNumber = Field(description="low-pass of the derived velocities (Hz)")
     equation_cutoff_Hz: MaybeNumber = Field(description="low-pass of the equations (Hz)")
     noise_floor_m: MaybeNumber = Field(description="estimated sensor noise (m rms)")
 
 
-class IdentifyResult(BaseModel):
+class IdentifyResult(ResultPart):
     """The result of an identification (`shockbench identify --json`)."""
 
     curves: list[CurveOut] = Field(description="one curve (quarter car) or left and right (axle)")
     masses_kg: MassesOut
+    stiffness_N_per_m: StiffnessOut | None = Field(
+        None, description="the stiffnesses the model used: the vehicle file's, or identified (listed)"
+    )
+    tyre_viscoelastic_coefficient: MaybeNumber = Field(None, description="tyre ϑ (Maxwell tyre)")
+    tyre_relaxation_time_s: MaybeNumber = Field(None, description="tyre relaxation time (Maxwell tyre, s)")
+    tyre_viscoelastic_identified: bool | None = Field(None, description="ϑ was found from the recording")
     tyre_damping_Ns_per_m: MaybeNumber = Field(description="identified tyre damping (N·s/m)")
     tyre_model: TyreModel
     objective: MaybeNumber = Field(description="the paper's objective GF at the solution")
@@ -97,6 +117,7 @@ class IdentifyResult(BaseModel):
     filters: FiltersOut
     roll_inertia_kg_m2: MaybeNumber = Field(None, description="axle: identified roll inertia (kg·m²)")
     refined_gap_m: MaybeNumber = Field(None, description="output-error gap after refinement (option refine)")
+    warnings: list[str] = Field(default_factory=list, description="what the identification warns about")
 
 
 # ---- diagnose ----------------------------------------------------------------------------------------------
@@ -105,7 +126,7 @@ ParameterValue = float | str
 """A fitted parameter of an effect: a number, or a word (e.g. the channel it applies to)."""
 
 
-class DiagnosisStepOut(BaseModel):
+class DiagnosisStepOut(ResultPart):
     """One effect the doctor added to the model."""
 
     effect: str = Field(description="stable name of the effect, e.g. sensor_offset")
@@ -115,7 +136,7 @@ class DiagnosisStepOut(BaseModel):
     evidence: str = Field(description="why, in words")
 
 
-class CandidateOut(BaseModel):
+class CandidateOut(ResultPart):
     """How one candidate effect fared in one round."""
 
     effect: str
@@ -132,7 +153,7 @@ class CandidateOut(BaseModel):
     verdict: str = Field(description="named, or why not")
 
 
-class DiagnoseResult(BaseModel):
+class DiagnoseResult(ResultPart):
     """The result of a diagnosis (`shockbench diagnose --json`)."""
 
     gap_before_m: MaybeNumber = Field(description="output-error gap of the starting model (m)")

@@ -11,7 +11,7 @@ from datetime import datetime
 from typing import Annotated, Any, Literal
 
 from fastapi import Query
-from pydantic import BaseModel, Field
+from pydantic import BaseModel, Field, create_model
 
 from daq.sweep.model import SweepProgress
 from drivers.exciter.sweep import SweepLaw
@@ -57,6 +57,27 @@ class JobLinks(BaseModel):
     )
 
 
+def options_echo(options_model: type[BaseModel], name: str) -> type[BaseModel]:
+    """The options of a job as the API echoes them: the fields, types and defaults of `options_model`
+    without its bounds. A job keeps the options it was submitted with; bounds tightened since must not
+    make an older job unreadable (they are checked at submit, not when reading)."""
+    fields: dict[str, Any] = {
+        field_name: (
+            field.annotation,
+            Field(field.default, description=field.description)
+            if field.default_factory is None
+            else Field(default_factory=field.default_factory, description=field.description),
+        )
+        for field_name, field in options_model.model_fields.items()
+    }
+    model: type[BaseModel] = create_model(name, __doc__="The options of the job (as submitted).", **fields)
+    return model
+
+
+IdentifyOptionsOut = options_echo(IdentifyJobOptions, "IdentifyOptionsOut")
+DiagnoseOptionsOut = options_echo(DiagnoseJobOptions, "DiagnoseOptionsOut")
+
+
 class JobOutBase(BaseModel):
     """What every job carries; `kind` says which options and result (IdentifyJobOut, DiagnoseJobOut)."""
 
@@ -80,7 +101,7 @@ class IdentifyJobOut(JobOutBase):
     """An identification job (POST /jobs, or POST /sweeps/{id}/jobs)."""
 
     kind: Literal["identify"] = Field(description="identify")
-    options: IdentifyJobOptions
+    options: IdentifyOptionsOut  # type: ignore[valid-type]
     result: IdentifyResult | None = Field(
         None,
         description="once succeeded (and in GET /jobs/{id} only): the shape of `shockbench identify --json`",
@@ -91,7 +112,7 @@ class DiagnoseJobOut(JobOutBase):
     """A diagnosis job, the model doctor (POST /diagnoses)."""
 
     kind: Literal["diagnose"] = Field(description="diagnose")
-    options: DiagnoseJobOptions
+    options: DiagnoseOptionsOut  # type: ignore[valid-type]
     result: DiagnoseResult | None = Field(
         None,
         description="once succeeded (and in GET /jobs/{id} only): the shape of `shockbench diagnose --json`",
@@ -214,14 +235,15 @@ class BenchOut(BaseModel):
 
 
 class SweepSettingsOut(BaseModel):
-    """A sweep's settings as submitted (POST /sweeps without the vehicle file)."""
+    """A sweep's settings as submitted (POST /sweeps without the vehicle file). A setting the record
+    does not hold (a sweep stored by other means) is null."""
 
-    start_Hz: float = Field(description="sweep start (Hz)")
-    stop_Hz: float = Field(description="sweep end (Hz)")
-    amplitude_m: float = Field(description="plate amplitude, zero to peak (m)")
-    duration_s: float = Field(description="the sweep itself, without settling (s)")
-    law: SweepLaw = Field(description="linear or logarithmic")
-    settle_s: float = Field(description="recorded after the sweep (s)")
+    start_Hz: float | None = Field(None, description="sweep start (Hz)")
+    stop_Hz: float | None = Field(None, description="sweep end (Hz)")
+    amplitude_m: float | None = Field(None, description="plate amplitude, zero to peak (m)")
+    duration_s: float | None = Field(None, description="the sweep itself, without settling (s)")
+    law: SweepLaw | None = Field(None, description="linear or logarithmic")
+    settle_s: float | None = Field(None, description="recorded after the sweep (s)")
 
 
 # ---- the service ---------------------------------------------------------------------------------------

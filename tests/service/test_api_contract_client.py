@@ -144,7 +144,7 @@ def test_a_generated_client_runs_jobs_and_sweeps(
 
     plot = jobs["get_job_plot_png"].sync(job.id, client=client)
     assert plot.payload.read().startswith(b"\x89PNG\r\n\x1a\n")
-    events = jobs["job_events"].sync(job.id, client=client)
+    events = jobs["job_events"].sync_detailed(job.id, client=client).content.decode()  # the stream as text
     assert events.startswith("id: 1\nevent: state\n") and "event: succeeded\n" in events
 
     started = sweeps["start_sweep"].sync_detailed(

@@ -20,7 +20,7 @@ from service.api.auth import Admin, Viewer
 from service.api.contract import created
 from service.api.errors import ApiError, responses
 from service.api.routes.bench import require_bench
-from service.api.schemas import API_PREFIX, PageLimit, PageOffset, SweepSettingsOut
+from service.api.schemas import API_PREFIX, IdentifyOptionsOut, PageLimit, PageOffset, SweepSettingsOut
 from service.api.settings import ServiceSettings
 from service.api.sweep_launch import SweepIn, check_sweep
 from service.bench_control import BenchController
@@ -64,7 +64,7 @@ class ScheduleOut(BaseModel):
     status: ScheduleStatus = Field(description="waiting, running, done, failed or cancelled")
     run_at: datetime | None = Field(None, description="when it is due; null: when the bench is free")
     sweep_settings: SweepSettingsOut = Field(description="the sweep as submitted (without the vehicle file)")
-    job_options: IdentifyJobOptions = Field(description="options of the identification job")
+    job_options: IdentifyOptionsOut = Field(description="options of the identification job")  # type: ignore[valid-type]
     sweep_id: int | None = Field(None, description="its sweep, once started")
     job_id: int | None = Field(None, description="its identification job, once the sweep completed")
     reason: str | None = Field(None, description="why it failed or was cancelled")
@@ -83,7 +83,7 @@ class ScheduleOut(BaseModel):
             status=record.status,
             run_at=record.run_at,
             sweep_settings=SweepSettingsOut.model_validate(record.sweep_settings),
-            job_options=IdentifyJobOptions.model_validate(record.job_options),
+            job_options=IdentifyOptionsOut.model_validate(record.job_options),
             sweep_id=record.sweep_id,
             job_id=record.job_id,
             reason=record.reason,
