@@ -1,1 +1,1 @@
-"""Plate exciter drivers: one interface, Modbus and CAN back ends."""
+"""Plate exciter drivers: one interface; Modbus, CAN (own frame set) and CiA 402 (CANopen) back ends."""
