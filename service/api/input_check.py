@@ -12,8 +12,10 @@ helper process that died (killed, out of memory) is replaced on the next check.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import multiprocessing
+import os
 import threading
 from concurrent.futures import Future, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
@@ -55,6 +57,15 @@ def inspect_inputs(
     return None
 
 
+CHECKER_NICE = 5
+"""Added to the helper's nice value, as to the worker's: the event loop keeps priority over parsing."""
+
+
+def _lower_priority() -> None:
+    with contextlib.suppress(OSError):
+        os.nice(CHECKER_NICE)
+
+
 def _warm_up() -> None:
     """Load the readers and the checks in the helper now, not in the first upload."""
     import service.api.intake
@@ -83,7 +94,9 @@ class InputChecker:
 
     def _ensure_pool(self) -> ProcessPoolExecutor:
         if self._pool is None:
-            self._pool = ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("spawn"))
+            self._pool = ProcessPoolExecutor(
+                max_workers=1, mp_context=multiprocessing.get_context("spawn"), initializer=_lower_priority
+            )
         return self._pool
 
     def _submit(self, *args: Any) -> Future[Refusal | None]:
