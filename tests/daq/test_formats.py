@@ -129,3 +129,24 @@ def test_vehicle_round_trip(tmp_path: Path) -> None:
 def test_bad_vehicle_files_name_the_key(text: str, message: str) -> None:
     with pytest.raises(VehicleFileError, match=message):
         parse_vehicle(text)
+
+
+THETA_LINE = "tyre_viscoelastic_coefficient = 0.97"
+
+
+def test_vehicle_file_with_only_the_mass_and_the_relaxation_time_key(tmp_path: Path) -> None:
+    """Stiffnesses and ϑ are optional (identified when absent); ϑ may be given as the Δt-free relaxation
+    time τ = C_d/K_d instead, ϑ = τ/(τ + 1 ms), but not both."""
+    alone = parse_vehicle('[vehicle]\nmodel = "quarter-car"\nmass_kg = 420.0\n')
+    assert alone.spring_stiffness_N_per_m is None and alone.tyre_stiffness_N_per_m is None
+    assert alone.tyre_viscoelastic_coefficient is None
+    path = tmp_path / "alone.toml"
+    write_vehicle(path, alone)
+    assert read_vehicle(path) == alone
+    by_time = parse_vehicle(GOOD_VEHICLE.replace(THETA_LINE, "tyre_relaxation_time_s = 0.032"))
+    assert by_time.tyre_viscoelastic_coefficient == pytest.approx(0.032 / 0.033, rel=1e-12)
+    assert by_time.tyre_relaxation_time_s == pytest.approx(0.032, rel=1e-12)
+    with pytest.raises(VehicleFileError, match="not both"):
+        parse_vehicle(GOOD_VEHICLE + "tyre_relaxation_time_s = 0.032\n")
+    with pytest.raises(VehicleFileError, match="tyre_relaxation_time_s must be > 0"):
+        parse_vehicle(GOOD_VEHICLE.replace(THETA_LINE, "tyre_relaxation_time_s = 0"))

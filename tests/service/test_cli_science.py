@@ -49,6 +49,38 @@ def test_identify_json_has_the_documented_keys(quarter_car_files: tuple[Path, Pa
     assert set(out["inspection"]) >= {"eusama_percent", "phase_shift_min_deg", "damping_ratio"}
 
 
+def test_identify_from_a_mass_only_vehicle_file_and_free_constants(
+    quarter_car_files: tuple[Path, Path], tmp_path: Path
+) -> None:
+    """A vehicle file with only the mass: the stiffnesses and ϑ come from the recording and the JSON says
+    which were identified; --free re-identifies stated values; an unknown name is a one-line error."""
+    vehicle, recording = quarter_car_files
+    truth = default_quarter_car().known
+    alone = tmp_path / "alone.toml"
+    alone.write_text(f'[vehicle]\nmodel = "quarter-car"\nmass_kg = {truth.mass_kg}\n')
+    done = run("identify", str(recording), "--vehicle", str(alone), "--json")
+    assert done.returncode == 0, done.stderr
+    out = json.loads(done.stdout)
+    stiffness = out["stiffness_N_per_m"]
+    assert stiffness["identified"] == ["spring", "tyre"] and out["tyre_viscoelastic_identified"] is True
+    assert abs(stiffness["spring"] / truth.spring_stiffness_N_per_m - 1) < 0.05
+    assert abs(stiffness["tyre"] / truth.tyre_stiffness_N_per_m - 1) < 0.05
+    assert abs(out["tyre_viscoelastic_coefficient"] - truth.tyre_viscoelastic_coefficient) < 0.01
+    stated = json.loads(run("identify", str(recording), "--vehicle", str(vehicle), "--json").stdout)
+    assert stated["stiffness_N_per_m"] == {
+        "spring": truth.spring_stiffness_N_per_m,
+        "tyre": truth.tyre_stiffness_N_per_m,
+        "identified": [],
+    }
+    freed = run("identify", str(recording), "--vehicle", str(vehicle), "--free", "spring,tyre", "--json")
+    assert json.loads(freed.stdout)["stiffness_N_per_m"]["identified"] == ["spring", "tyre"]
+    summary = run("identify", str(recording), "--vehicle", str(alone), "--plot", str(tmp_path / "c.png"))
+    assert "spring" in summary.stdout and "(identified)" in summary.stdout
+    bad = run("identify", str(recording), "--vehicle", str(vehicle), "--free", "springs")
+    assert bad.returncode == 2 and "unknown constant 'springs'" in bad.stderr
+    assert len(bad.stderr.strip().splitlines()) == 1
+
+
 def test_identify_readable_summary_writes_a_png(quarter_car_files: tuple[Path, Path], tmp_path: Path) -> None:
     vehicle, recording = quarter_car_files
     plot = tmp_path / "curve.png"
