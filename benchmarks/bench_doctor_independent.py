@@ -12,7 +12,9 @@ per case, a confusion matrix (hidden class × what the doctor said), the hit rat
 against the doctor's own expected gap, and the wall time per doctor run.
 
 What counts as a hit: clean → nothing named and not unexplained; one effect → exactly that effect named and
-not unexplained; pair → exactly both named and not unexplained; outside → unexplained.
+not unexplained; pair → exactly both named and not unexplained; outside → unexplained. A light corner with a
+soft damper can hop off the plate in any class: where the tyre is off the plate in at least 0.5% of the
+samples, tyre_liftoff counts as present too (marked "+ lift-off" in the case table).
 """
 
 from __future__ import annotations
@@ -31,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from simulators.independent.cases import CLASSES, draw_case, simulate_case
+from simulators.independent.cases import CLASSES, MIN_AIRBORNE_FRACTION, draw_case, simulate_case
 from simulators.independent.files import write_recording
 
 
@@ -59,10 +61,20 @@ class Outcome:
         return "+".join(sorted(self.named)) if self.named else "nothing"
 
     @property
+    def incidental_liftoff(self) -> bool:
+        """The tyre left the plate although the class did not ask for it (a light, softly damped corner)."""
+        return self.airborne_fraction >= MIN_AIRBORNE_FRACTION and "tyre_liftoff" not in self.hidden
+
+    @property
+    def present(self) -> tuple[str, ...]:
+        """What the recording holds: the hidden effects, plus tyre_liftoff where the tyre left the plate."""
+        return (*self.hidden, "tyre_liftoff") if self.incidental_liftoff else self.hidden
+
+    @property
     def hit(self) -> bool:
-        if self.hidden == ("outside",):
+        if "outside" in self.hidden:
             return self.unexplained
-        return not self.unexplained and sorted(self.named) == sorted(self.hidden)
+        return not self.unexplained and sorted(self.named) == sorted(self.present)
 
 
 def run_case(label: str, seed: int, folder: str, sweep_s: float) -> Outcome:
@@ -119,7 +131,8 @@ def print_report(outcomes: list[Outcome]) -> None:
         gaps = f"{_micro(o.gap_before_m)} / {_micro(o.gap_after_m)} / {_micro(o.expected_gap_m)}"
         mark = "" if o.hit else " ✗"
         print(
-            f"| {o.label} | {o.seed} | {o.description} | {o.said}{mark} | {gaps} | "
+            f"| {o.label} | {o.seed} | {o.description}{' + lift-off' if o.incidental_liftoff else ''} | "
+            f"{o.said}{mark} | {gaps} | "
             f"{100 * o.airborne_fraction:.1f}% | {o.doctor_s:.0f} |"
         )
     said_columns = ["nothing", "unexplained"]
