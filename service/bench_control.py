@@ -33,6 +33,7 @@ SERVICE_STOPPED = "service stopped"
 """The reason a sweep cut short by the service's own stop (Ctrl-C, SIGTERM) is recorded with; such a sweep
 is failed, not aborted (nobody asked for it to end)."""
 STARTUP_STOP_TIMEOUT_S = 5.0
+STARTUP_STOP_ATTEMPTS = 3
 
 SweepDone = Callable[[str, SweepOutcome | None, str], None]
 """Called in the sweep's thread when it ends: (sweep id, outcome or None, error message if it never began)."""
@@ -82,16 +83,19 @@ class BenchController:
         else, because a service that crashed (SIGKILL, power cut on the host) may have left the plate
         running, and only the drive's watchdog would otherwise stop it. Returns what happened, in words;
         never raises (an unreachable drive is logged, and the bench's endpoints then say so themselves)."""
-        try:
-            asyncio.run(asyncio.wait_for(self._direct_stop(), timeout_s))
-        except Exception as exc:
-            message = f"could not command the drive {self.config.exciter.name!r} to stop at start-up: " + (
-                str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-            )
-            log.error("%s", message)
+        error = ""
+        for attempt in range(1, STARTUP_STOP_ATTEMPTS + 1):  # a second STOP does no harm; a lost one does
+            try:
+                asyncio.run(asyncio.wait_for(self._direct_stop(), timeout_s))
+            except Exception as exc:
+                error = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+                log.warning("stop command at start-up, attempt %d: %s", attempt, error)
+                continue
+            message = f"drive {self.config.exciter.name!r} commanded to stop at start-up"
+            log.info("%s", message)
             return message
-        message = f"drive {self.config.exciter.name!r} commanded to stop at start-up"
-        log.info("%s", message)
+        message = f"could not command the drive {self.config.exciter.name!r} to stop at start-up: {error}"
+        log.error("%s", message)
         return message
 
     async def _direct_stop(self) -> None:
@@ -101,11 +105,18 @@ class BenchController:
         finally:
             await exciter.close()
 
+    def service_stopping(self) -> None:
+        """The service begins to stop (a signal; any thread): a running sweep ends now with a controlled
+        stop, recorded as failed, "service stopped" (not after open connections have drained), and no new
+        sweep starts."""
+        with self._lock:
+            self._service_stopping = True
+            self._abort.set()
+
     def close(self) -> None:
         """The service stops: abort a running sweep (controlled stop, recording kept, the sweep recorded as
         failed, "service stopped"), wait for it, stop simulated devices."""
-        self._service_stopping = True
-        self._abort.set()
+        self.service_stopping()
         thread = self._thread
         if thread is not None:
             thread.join(timeout=30)
@@ -147,6 +158,11 @@ class BenchController:
         return found
 
     @property
+    def stopping(self) -> bool:
+        """The service is stopping: no sweep starts any more."""
+        return self._service_stopping
+
+    @property
     def busy(self) -> bool:
         with self._lock:
             return self._thread is not None
@@ -162,6 +178,8 @@ class BenchController:
         with self._lock:
             if self._thread is not None:
                 raise BenchBusyError(f"bench {self.config.name!r} is running sweep {self._sweep_id}")
+            if self._service_stopping:
+                raise SweepError("the service is stopping")
             check_request(self.config, request, out_path)
             self._abort.clear()
             self._emergency.clear()

@@ -146,7 +146,7 @@ class InspectionScheduler:
         return job
 
     def _start_next(self) -> None:
-        if self.bench.busy:
+        if self.bench.busy or self.bench.stopping:  # a stopping service starts no test (it stays waiting)
             return
         test = self.tests.claim_next(self.bench.config.name, self.clock())
         if test is None:

@@ -38,10 +38,14 @@ def url_of(sock: socket.socket) -> str:
 
 
 def begin_shutdown(app: FastAPI) -> None:
-    """Thread-safe: end the app's event streams (each gets a `closing` event)."""
+    """Thread-safe: end the app's event streams (each gets a `closing` event) and a running sweep (the
+    plate stops now, not after the open connections have drained; the sweep is failed, "service
+    stopped")."""
     services = getattr(app.state, "services", None)
     if services is not None:
         services.manager.close_streams_threadsafe()
+        if services.bench is not None:
+            services.bench.service_stopping()
 
 
 class ServiceServer(uvicorn.Server):

@@ -20,13 +20,16 @@ import h5py
 import httpx
 import pytest
 
+from daq.bench_config import write_bench_config
 from daq.formats.vehicle_file import format_vehicle
+from drivers.exciter.codes import CommandCode
 from service.access import KeyRing, Role
 from service.api import ServiceSettings, create_app
 from service.api.app import FINGERPRINT_SECRET_FILE
 from service.api.testing import LiveServer, SimulatedInputs, wait_until
 from service.api.testing import wait_for_status as wait_for
 from service.cli.main import main as cli_main
+from simulators.devices.sim_bench import SimulatedBench, vehicle_preset
 from simulators.vehicle_sim import default_quarter_car
 
 OPERATOR = "operator-key-0123456789"
@@ -396,3 +399,28 @@ def test_viewers_see_keyed_key_ids_not_hashes_of_the_key(
     secret = (data_dir(server) / FINGERPRINT_SECRET_FILE).read_bytes()
     assert seen == hmac.new(secret, OPERATOR.encode(), hashlib.sha256).hexdigest()[:12]
     assert (data_dir(server) / FINGERPRINT_SECRET_FILE).stat().st_mode & 0o077 == 0
+
+
+def test_sweeps_and_schedules_the_bench_cannot_record_fast_enough_are_refused(tmp_path: Path) -> None:
+    """Sweep and schedule paths: the top frequency is the sweep's own, the rate the bench's slowest
+    streaming amplifier (here 20 Hz): refused at submit, before anything moves."""
+    slow = SimulatedBench(vehicle_preset("quarter-car"), realtime=True, laser_sample_period_s=0.05)
+    config = write_bench_config(slow.start(), tmp_path / "bench.toml")
+    try:
+        settings = ServiceSettings(
+            data_dir=tmp_path / "data",
+            keys=KeyRing({OPERATOR: Role.OPERATOR, ADMIN: Role.ADMIN}),
+            bench_config=config,
+        )
+        with LiveServer(create_app(settings)) as live, httpx.Client(base_url=live.url, timeout=60) as c:
+            body = {"duration_s": 2, "stop_Hz": 20, "vehicle_toml": VEHICLE_TOML}
+            sweep = c.post("/api/v1/sweeps", json=body, headers=AUTH)
+            assert_refused(sweep, "stop_Hz", "the bench records at 20 Hz", "at most 4 Hz")
+            admin = {"Authorization": f"Bearer {ADMIN}"}
+            test = c.post("/api/v1/schedules", json={**body, "job": {}}, headers=admin)
+            assert_refused(test, "stop_Hz", "the bench records at 20 Hz")
+            # a sweep it can carry (up to 4 Hz) is taken
+            assert c.post("/api/v1/sweeps", json={**body, "stop_Hz": 4}, headers=AUTH).status_code == 201
+            assert slow.drive.commands[0] is CommandCode.STOP  # the start-up stop came first
+    finally:
+        slow.close()
