@@ -154,7 +154,7 @@ def axle_case_at(seed: int, sample_time_s: float) -> Case:
 
 def identification_errors(case: Case, result: IdentificationResult) -> dict[str, float]:
     """|error| in % of what the identification found: each curve (of its peak force, curve_error_percent),
-    sprung and unsprung mass, spring and tyre stiffness, the tyre's relaxation time."""
+    sprung and unsprung mass, spring and tyre stiffness, the tyre's relaxation time (when identified)."""
     truth, found = case.vehicle, result.model
     errors = {
         f"curve {c.corner}": curve_error_percent(c.curve, t, v)
@@ -167,5 +167,6 @@ def identification_errors(case: Case, result: IdentificationResult) -> dict[str,
         "tyre": (found.vehicle.tyre_stiffness_N_per_m, truth.known.tyre_stiffness_N_per_m),
         "relaxation time": (found.vehicle.tyre_relaxation_time_s, truth.known.tyre_relaxation_time_s),
     }
-    errors |= {name: 100 * abs(a / b - 1) for name, (a, b) in pairs.items()}
+    # a tyre model without ϑ identifies no relaxation time
+    errors |= {name: 100 * abs(a / b - 1) for name, (a, b) in pairs.items() if a is not None}
     return errors
