@@ -424,3 +424,19 @@ def test_sweeps_and_schedules_the_bench_cannot_record_fast_enough_are_refused(tm
             assert slow.drive.commands[0] is CommandCode.STOP  # the start-up stop came first
     finally:
         slow.close()
+
+
+@pytest.mark.parametrize(
+    ("option", "message"),
+    [
+        (["--max-streams-per-key", "0"], "--max-streams-per-key must be at least 1"),
+        (["--body-timeout-s", "0"], "--body-timeout-s must lie in (0, 3600]"),
+    ],
+)
+def test_serve_refuses_limits_that_make_no_sense(
+    option: list[str], message: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from service.cli.serve import main as serve_main
+
+    assert serve_main(["--data", str(tmp_path), *option]) == 2
+    assert capsys.readouterr().err.strip() == f"shockbench serve: error: {message}"
