@@ -24,7 +24,6 @@ from daq.bench_config import BenchConfig
 from daq.sweep.model import SweepOutcome, SweepProgress, SweepRequest
 from daq.sweep.pacing import Pacing, RealtimePacing, SimulatedPacing
 from daq.sweep.run import SweepError, check_request, run_sweep
-from drivers.exciter.urls import open_exciter
 from simulators.devices.sim_bench import SimulatedBench, vehicle_preset
 
 log = logging.getLogger("shockbench.bench")
@@ -99,7 +98,7 @@ class BenchController:
         return message
 
     async def _direct_stop(self) -> None:
-        exciter = await open_exciter(self.config.exciter.url, envelope=self.config.safety_envelope())
+        exciter = await self.config.exciter.open(envelope=self.config.safety_envelope())
         try:
             await exciter.stop()
         finally:
@@ -249,7 +248,7 @@ class BenchController:
         return "emergency stop sent to the drive"
 
     async def _direct_emergency_stop(self) -> None:
-        exciter = await open_exciter(self.config.exciter.url, envelope=self.config.safety_envelope())
+        exciter = await self.config.exciter.open(envelope=self.config.safety_envelope())
         try:
             await exciter.emergency_stop()
         finally:
