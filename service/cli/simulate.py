@@ -68,8 +68,15 @@ def add_simulation_options(p: argparse.ArgumentParser) -> None:
     )
 
 
+SIMULATION_KEYS = ("spring_stiffness_N_per_m", "tyre_stiffness_N_per_m", "tyre_viscoelastic_coefficient")
+"""Vehicle-file keys that are optional for identify but the simulator's truth."""
+
+
 def simulated_vehicle_from_args(args: argparse.Namespace) -> SimulatedVehicle:
     known = read_vehicle(args.vehicle)
+    missing = [key for key in SIMULATION_KEYS if getattr(known, key) is None]
+    if missing:  # identify finds them from a recording; a simulation needs them as its truth
+        raise CliError(f"{args.vehicle}: the simulator needs '{missing[0]}' (identify can do without it)")
     if not 0.3 < args.sprung_fraction < 1.0:
         raise CliError("--sprung-fraction must lie between 0.3 and 1")
     dampers = (damper_from_option(args.damper),)

@@ -157,3 +157,11 @@ def test_recording_and_vehicle_that_do_not_match(
     assert done.returncode == 2
     assert "vehicle file is for a axle model" in done.stderr or "axle" in done.stderr
     assert "Traceback" not in done.stderr
+
+
+def test_simulate_needs_the_constants_identify_can_do_without(tmp_path: Path) -> None:
+    alone = tmp_path / "alone.toml"
+    alone.write_text('[vehicle]\nmodel = "quarter-car"\nmass_kg = 400.0\n')
+    done = run("simulate", "--vehicle", str(alone), "--out", str(tmp_path / "x.csv"))
+    assert done.returncode == 2 and "the simulator needs 'spring_stiffness_N_per_m'" in done.stderr
+    assert len(done.stderr.strip().splitlines()) == 1 and not (tmp_path / "x.csv").exists()
