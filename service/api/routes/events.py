@@ -39,7 +39,7 @@ def sse(event: str, data: dict, event_id: int) -> str:
     "/jobs/{job_id}/events",
     response_class=StreamingResponse,
     operation_id="job_events",
-    responses=event_stream() | responses(401, 403, 404, 422),
+    responses=event_stream() | responses(401, 403, 404, 422, 429),
 )
 async def job_events(
     request: Request, job_id: Annotated[int, Path(ge=1, le=2**62)], principal: Viewer
