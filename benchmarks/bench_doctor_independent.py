@@ -55,9 +55,9 @@ class Outcome:
 
     @property
     def said(self) -> str:
-        """The doctor's answer in one word: unexplained, nothing, or the effects named (joined by +)."""
+        """The doctor's answer: unexplained (and what it named first), nothing, or the effects named."""
         if self.unexplained:
-            return "unexplained"
+            return "unexplained" + (f" (after {', '.join(self.named)})" if self.named else "")
         return "+".join(sorted(self.named)) if self.named else "nothing"
 
     @property
@@ -69,6 +69,11 @@ class Outcome:
     def present(self) -> tuple[str, ...]:
         """What the recording holds: the hidden effects, plus tyre_liftoff where the tyre left the plate."""
         return (*self.hidden, "tyre_liftoff") if self.incidental_liftoff else self.hidden
+
+    @property
+    def named_right(self) -> bool:
+        """Exactly the effects present were named (the final verdict aside)."""
+        return "outside" not in self.hidden and sorted(self.named) == sorted(self.present)
 
     @property
     def hit(self) -> bool:
@@ -141,24 +146,34 @@ def print_report(outcomes: list[Outcome]) -> None:
             if name not in said_columns:
                 said_columns.append(name)
     print("\n## Confusion matrix (rows: hidden class; columns: what the doctor said)\n")
-    print("A run counts once in `unexplained` if the doctor said so, else once per effect it named, else in")
-    print("`nothing`.\n")
-    print("| hidden \\ said | " + " | ".join(said_columns) + " | hits |")
-    print("|---|" + "---:|" * (len(said_columns) + 1))
+    print("Each effect the doctor named counts in its column, `unexplained` when it ended so (after")
+    print("naming or not), `nothing` when it named nothing and was content. `named right`: exactly the")
+    print("effects present were named, whatever the final verdict; `hits`: named right and not")
+    print("unexplained (outside: unexplained).\n")
+    print("| hidden \\ said | " + " | ".join(said_columns) + " | named right | hits |")
+    print("|---|" + "---:|" * (len(said_columns) + 2))
     for label in dict.fromkeys(o.label for o in outcomes):
         rows = [o for o in outcomes if o.label == label]
         counts: Counter[str] = Counter()
         for o in rows:
+            counts.update(o.named)
             if o.unexplained:
                 counts["unexplained"] += 1
             elif not o.named:
                 counts["nothing"] += 1
-            else:
-                counts.update(o.named)
         cells = [str(counts[c]) if counts[c] else "·" for c in said_columns]
-        print(f"| {label} | " + " | ".join(cells) + f" | {sum(o.hit for o in rows)}/{len(rows)} |")
+        right = sum(o.named_right for o in rows)
+        print(
+            f"| {label} | "
+            + " | ".join(cells)
+            + f" | {right}/{len(rows)} | {sum(o.hit for o in rows)}/{len(rows)} |"
+        )
     hits = sum(o.hit for o in outcomes)
     print(f"\nhit rate: {hits}/{len(outcomes)} = {100 * hits / len(outcomes):.0f}%")
+    effects = [o for o in outcomes if o.label not in ("clean", "outside")]
+    if effects:
+        right = sum(o.named_right for o in effects)
+        print(f"effects named right (verdict aside): {right}/{len(effects)} of the cases with effects")
     groups: dict[str, list[Outcome]] = defaultdict(list)
     for o in outcomes:
         kind = o.label if o.label in ("clean", "pair", "outside") else "single effect"
