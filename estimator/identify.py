@@ -35,6 +35,7 @@ from estimator.relaxation import RELAXATION_TIME_BOUNDS_S, fit_relaxation_time
 from estimator.solvers.differential_evolution import DEProgress, DESettings, DifferentialEvolution
 from estimator.solvers.exact import solve_exact
 from estimator.tanh_fit import TanhFit, fit_tanh
+from estimator.uncertainty import Intervals, identification_intervals
 from estimator.vehicle import (
     REFERENCE_SAMPLE_TIME_S,
     TyreModel,
@@ -88,6 +89,8 @@ class IdentifyOptions:
     refine_output_error: bool = False
     free: frozenset[VehicleConstant] = frozenset()
     """Constants to identify although the vehicle file states them (those it does not state always are)."""
+    intervals: bool = True
+    """95% confidence intervals (estimator.uncertainty): one more convex solve on a refined grid."""
 
 
 @dataclass(frozen=True)
@@ -114,6 +117,40 @@ class IdentificationResult:
     identified: frozenset[VehicleConstant] = frozenset()
     """The vehicle constants found from the recording (the rest are the vehicle file's)."""
     warnings: list[str] = field(default_factory=list)
+    intervals: Intervals | None = None
+    """95% confidence intervals of θ (estimator.uncertainty), None when not asked for."""
+
+    def curve_band(self, index: int) -> tuple[np.ndarray, np.ndarray] | None:
+        """(low, high) force at the grid points of curve `index`, None without intervals."""
+        if self.intervals is None:
+            return None
+        where = self.system.curve_slices[index]
+        return self.intervals.low[where], self.intervals.high[where]
+
+    def intervals_json(self) -> dict[str, object]:
+        """The `*_interval` keys of the JSON ([low, high] pairs), empty without intervals. The unsprung
+        mass is M − M_s (axle: (M − M_s)/2), so its interval is the sprung one's mirrored."""
+        if self.intervals is None:
+            return {}
+        sprung = self.intervals.interval("sprung_mass_kg")
+        assert sprung is not None
+        vehicle = self.model.vehicle
+        share = 2.0 if vehicle.is_axle else 1.0
+        unsprung = [(vehicle.mass_kg - sprung[1]) / share, (vehicle.mass_kg - sprung[0]) / share]
+        out: dict[str, object] = {
+            "masses_kg_interval": {"sprung": list(sprung), "unsprung": unsprung},
+            "stiffness_N_per_m_interval": {
+                key: list(interval)
+                for key, name in STIFFNESS_JSON_KEYS.items()
+                if (interval := self.intervals.interval(name)) is not None
+            },
+        }
+        damping = self.intervals.interval(TYRE_DAMPING)
+        out["tyre_damping_Ns_per_m_interval"] = list(damping) if damping is not None else None
+        inertia = self.intervals.interval("roll_inertia_kg_m2")
+        if inertia is not None:
+            out["roll_inertia_kg_m2_interval"] = list(inertia)
+        return out
 
     def to_json(self) -> dict[str, object]:
         """The stable JSON shape of `shockbench identify --json`."""
@@ -124,18 +161,20 @@ class IdentificationResult:
         else:
             inspection = {side: ins.as_dict() for side, ins in self.inspection.items()}
             inspection["imbalance"] = self.imbalance
+        curves: list[dict[str, object]] = []
+        for index, c in enumerate(self.curves):
+            entry: dict[str, object] = {
+                "corner": c.corner,
+                "velocity_m_s": c.curve.velocity_m_s.tolist(),
+                "force_N": c.curve.force_N.tolist(),
+            }
+            band = self.curve_band(index)
+            if band is not None:
+                entry["force_N_low"], entry["force_N_high"] = band[0].tolist(), band[1].tolist()
+            entry |= {"tanh": c.tanh.curve.as_dict(), "tanh_rms_N": c.tanh.rms_N, "outliers": c.tanh.outliers}
+            curves.append(entry)
         out: dict[str, object] = {
-            "curves": [
-                {
-                    "corner": c.corner,
-                    "velocity_m_s": c.curve.velocity_m_s.tolist(),
-                    "force_N": c.curve.force_N.tolist(),
-                    "tanh": c.tanh.curve.as_dict(),
-                    "tanh_rms_N": c.tanh.rms_N,
-                    "outliers": c.tanh.outliers,
-                }
-                for c in self.curves
-            ],
+            "curves": curves,
             "masses_kg": {"sprung": m.sprung_mass_kg, "unsprung": m.unsprung_mass_kg},
             "stiffness_N_per_m": self.stiffness_json(),
             "tyre_viscoelastic_coefficient": m.vehicle.tyre_viscoelastic_coefficient,
@@ -159,6 +198,7 @@ class IdentificationResult:
             out["roll_inertia_kg_m2"] = m.roll_inertia_kg_m2
         if self.refined_gap_m is not None:
             out["refined_gap_m"] = self.refined_gap_m
+        out |= self.intervals_json()
         out["warnings"] = list(self.warnings)
         return out
 
@@ -171,6 +211,14 @@ class IdentificationResult:
         found = self.identified & set(STIFFNESS_NAMES)
         out["identified"] = [c.value for c in VehicleConstant if c in found]
         return out
+
+
+STIFFNESS_JSON_KEYS = {
+    "spring": "spring_stiffness_N_per_m",
+    "tyre": "tyre_stiffness_N_per_m",
+    "anti_roll_bar": "anti_roll_bar_stiffness_N_per_m",
+}
+"""The stiffness_N_per_m(_interval) key of each stiffness unknown."""
 
 
 def de_bounds(system: LinearResiduals, vehicle: VehicleParameters) -> np.ndarray:
@@ -368,6 +416,17 @@ def identify(
         PiecewiseLinearCurve(g, theta[s]) for g, s in zip(system.grids_m_s, system.curve_slices, strict=True)
     )
     resolved = _resolved(start, system, theta, relaxation_time)
+    intervals = None
+    if options.intervals:
+
+        def rebuild(grids: list[np.ndarray]) -> LinearResiduals:
+            return build(
+                recording, resolved, options.tyre, None, options.nsample, system.filters, grids, unknown
+            )
+
+        intervals = identification_intervals(
+            system, theta, recording.sample_time_s, search_theta, rebuild
+        )
     model = IdentifiedModel(
         vehicle=resolved,
         tyre_model=options.tyre,
@@ -400,4 +459,5 @@ def identify(
         refined_gap,
         unknown,
         warnings,
+        intervals,
     )

@@ -19,13 +19,17 @@ COLOURS = {"single": "tab:blue", "left": "tab:blue", "right": "tab:red"}
 
 
 def curve_figure(result: IdentificationResult, truth: dict[str, ForceCurve] | None = None) -> plt.Figure:
-    """Identified points, their tanh fit, and (for simulated data) the true curve, per corner."""
+    """Identified points with their 95% confidence band, their tanh fit, and (for simulated data) the true
+    curve, per corner."""
     fig, ax = plt.subplots(figsize=(7.5, 5.0), dpi=110)
-    for c in result.curves:
+    for index, c in enumerate(result.curves):
         colour = COLOURS.get(c.corner, "tab:green")
         label = "damper" if c.corner == "single" else f"{c.corner} damper"
         v = c.curve.velocity_m_s
         dense = np.linspace(v[0], v[-1], 300)
+        band = result.curve_band(index)
+        if band is not None:
+            ax.fill_between(v, band[0], band[1], color=colour, alpha=0.2, lw=0, label=f"{label}: 95% band")
         ax.plot(v, c.curve.force_N, "o", color=colour, label=f"{label}: identified points")
         ax.plot(
             dense,

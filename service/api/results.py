@@ -44,6 +44,8 @@ class CurveOut(ResultPart):
     corner: str = Field(description="single (quarter car), or left / right (axle)")
     velocity_m_s: list[float] = Field(description="damper velocity of each point (m/s), ascending")
     force_N: list[float] = Field(description="damper force at each point (N)")
+    force_N_low: list[float] | None = Field(None, description="95% confidence band, lower edge (N)")
+    force_N_high: list[float] | None = Field(None, description="95% confidence band, upper edge (N)")
     tanh: TanhParameters
     tanh_rms_N: MaybeNumber = Field(description="rms of the tanh fit over the points (N)")
     outliers: list[int] = Field(description="0-based indices of the points the robust fit set aside")
@@ -59,6 +61,23 @@ class StiffnessOut(ResultPart):
     tyre: MaybeNumber = Field(description="tyre stiffness (N/m)")
     anti_roll_bar: MaybeNumber = Field(None, description="axle: anti-roll bar rate at the wheel (N/m)")
     identified: list[str] = Field(default_factory=list, description="those found from the recording")
+
+
+Interval = list[float]
+"""A 95% confidence interval [low, high] (estimator.uncertainty)."""
+
+
+class MassesIntervalOut(ResultPart):
+    sprung: Interval = Field(description="sprung mass, 95% interval (kg)")
+    unsprung: Interval = Field(description="unsprung mass per wheel, 95% interval (kg)")
+
+
+class StiffnessIntervalOut(ResultPart):
+    """95% intervals of the identified stiffnesses only (N/m)."""
+
+    spring: Interval | None = None
+    tyre: Interval | None = None
+    anti_roll_bar: Interval | None = None
 
 
 class InspectionOut(ResultPart):
@@ -117,6 +136,14 @@ class IdentifyResult(ResultPart):
     filters: FiltersOut
     roll_inertia_kg_m2: MaybeNumber = Field(None, description="axle: identified roll inertia (kg·m²)")
     refined_gap_m: MaybeNumber = Field(None, description="output-error gap after refinement (option refine)")
+    masses_kg_interval: MassesIntervalOut | None = Field(None, description="95% intervals of the masses")
+    stiffness_N_per_m_interval: StiffnessIntervalOut | None = Field(
+        None, description="95% intervals of the identified stiffnesses"
+    )
+    tyre_damping_Ns_per_m_interval: Interval | None = Field(
+        None, description="95% interval of the tyre damping (N·s/m); null for the spring tyre model"
+    )
+    roll_inertia_kg_m2_interval: Interval | None = Field(None, description="axle: 95% interval (kg·m²)")
     warnings: list[str] = Field(default_factory=list, description="what the identification warns about")
 
 

@@ -53,6 +53,7 @@ def summary(result: IdentificationResult) -> str:
         f"sprung mass {m.sprung_mass_kg:.1f} kg, unsprung mass {m.unsprung_mass_kg:.1f} kg per wheel"
         + (f", roll inertia {m.roll_inertia_kg_m2:.1f} kg·m²" if m.roll_inertia_kg_m2 is not None else ""),
         f"tyre damping C_d {m.tyre_damping_Ns_per_m:.0f} N·s/m",
+        *_interval_lines(result),
         *_constants_lines(result),
         f"objective GF {result.objective:.6g} "
         f"(certified within {100 * result.certified_gap:.3g}% of the optimum)",
@@ -66,16 +67,22 @@ def summary(result: IdentificationResult) -> str:
         lines.append(f"output-error gap {result.gap_m * 1e6:.1f} µm RMS (model driven by the measured plate)")
     if result.refined_gap_m is not None:
         lines.append(f"after DE refinement on the output error: {result.refined_gap_m * 1e6:.1f} µm RMS")
-    for c in result.curves:
+    for index, c in enumerate(result.curves):
         t = c.tanh.curve
         lines.append(
             f"\n{c.corner} damper: tanh fit c_s={t.c_s:.1f} N·s/m κ={t.kappa:.1f} N μ={t.mu:.3f} s/m "
             f"β={t.beta:.3f} (RMS {c.tanh.rms_N:.1f} N"
             + (f", outlier points {c.tanh.outliers})" if c.tanh.outliers else ")")
         )
-        lines.append("  velocity m/s   force N")
-        for v, f in zip(c.curve.velocity_m_s, c.curve.force_N, strict=True):
-            lines.append(f"  {v:+12.4f} {f:+9.1f}")
+        band = result.curve_band(index)
+        if band is None:
+            lines.append("  velocity m/s   force N")
+            for v, f in zip(c.curve.velocity_m_s, c.curve.force_N, strict=True):
+                lines.append(f"  {v:+12.4f} {f:+9.1f}")
+            continue
+        lines.append("  velocity m/s   force N   95% interval N")
+        for v, f, low, high in zip(c.curve.velocity_m_s, c.curve.force_N, *band, strict=True):
+            lines.append(f"  {v:+12.4f} {f:+9.1f}   [{low:+9.1f}, {high:+9.1f}]")
     lines.append("\ninspection figures (for comparison with today's lanes):")
     for corner, ins in result.inspection.items():
         lines.append(
@@ -88,6 +95,23 @@ def summary(result: IdentificationResult) -> str:
             f"damping {result.imbalance['damping_difference_percent']:.1f}%"
         )
     return "\n".join(lines)
+
+
+def _interval_lines(result: IdentificationResult) -> list[str]:
+    """The 95% intervals of the masses, tyre damping and identified stiffnesses (none without intervals)."""
+    found = result.intervals_json()
+    if not found:
+        return []
+    masses = found["masses_kg_interval"]
+    assert isinstance(masses, dict)
+    parts = [f"sprung mass {masses['sprung'][0]:.1f}-{masses['sprung'][1]:.1f} kg"]
+    damping = found["tyre_damping_Ns_per_m_interval"]
+    if isinstance(damping, list):
+        parts.append(f"C_d {damping[0]:.0f}-{damping[1]:.0f} N·s/m")
+    stiffness = found["stiffness_N_per_m_interval"]
+    assert isinstance(stiffness, dict)
+    parts += [f"{name} {low:.0f}-{high:.0f} N/m" for name, (low, high) in stiffness.items()]
+    return ["95% intervals: " + ", ".join(parts)]
 
 
 def _constants_lines(result: IdentificationResult) -> list[str]:
