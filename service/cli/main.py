@@ -11,10 +11,10 @@ import argparse
 import sys
 from collections.abc import Sequence
 
-from service.cli import devices, diagnose, export, identify, serve, simulate, sweep
+from service.cli import devices, diagnose, export, identify, serve, simulate, sweep, validate
 from service.cli.errors import EXIT_BAD_INPUT, CliError
 
-MODULES = (simulate, identify, diagnose, devices, sweep, export, serve)
+MODULES = (simulate, identify, diagnose, validate, devices, sweep, export, serve)
 
 
 def build_parser() -> argparse.ArgumentParser:

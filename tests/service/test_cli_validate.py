@@ -1,0 +1,147 @@
+"""`shockbench validate`: a model identified on one recording of a vehicle (seed 1) explains another
+recording of the same vehicle (seed 2, a longer sweep, even at half the sample rate) to a small share of its
+motion, and a vehicle with another damper clearly worse; bad model files are one line, exit 2."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from daq.formats.recording_csv import read_recording_csv, write_recording_csv
+from daq.formats.vehicle_file import read_vehicle, write_vehicle
+from estimator.identify import identify
+from estimator.recording import Recording
+from service.cli.main import main
+from simulators.vehicle_sim import default_axle, default_quarter_car
+
+SAME_VEHICLE_MAX_RATIO = 0.05
+"""gap_ratio of a model on another sweep of its own vehicle (measured: 0.015 quarter car at 1 ms)."""
+OTHER_DAMPER_MIN_RATIO = 0.3
+"""gap_ratio on the same vehicle with the paper's tanh damper instead of the valve damper (measured: 0.68)."""
+
+
+def cli_json(capsys: pytest.CaptureFixture[str], *args: str) -> dict[str, object]:
+    code = main(list(args))
+    captured = capsys.readouterr()
+    assert code == 0, captured.err
+    return json.loads(captured.out)
+
+
+def simulate(folder: Path, name: str, vehicle: Path, seconds: str, seed: str, *extra: str) -> Path:
+    out = folder / f"{name}.csv"
+    assert main(["simulate", "--vehicle", str(vehicle), "--out", str(out), "--seconds", seconds,
+                 "--seed", seed, *extra]) == 0  # fmt: skip
+    return out
+
+
+def halve_rate(path: Path) -> Path:
+    """The recording at 2 ms: every other sample."""
+    rec = read_recording_csv(path)
+    slower = Recording(rec.time_s[::2], {k: v[::2] for k, v in rec.channels.items()}, dict(rec.metadata))
+    out = path.with_name(path.stem + "-2ms.csv")
+    write_recording_csv(out, slower)
+    return out
+
+
+@pytest.fixture(scope="module")
+def quarter_car(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    folder = tmp_path_factory.mktemp("validate")
+    vehicle = folder / "vehicle.toml"
+    write_vehicle(vehicle, default_quarter_car().known)
+    simulate(folder, "a", vehicle, "10", "1")
+    simulate(folder, "b", vehicle, "12", "2")
+    simulate(folder, "other", vehicle, "12", "2", "--damper", "paper-tanh")
+    return folder
+
+
+@pytest.fixture(scope="module")
+def model_a(quarter_car: Path) -> Path:
+    """What identify --json prints for recording A (seed 1), saved as the model file."""
+    result = identify(read_recording_csv(quarter_car / "a.csv"), read_vehicle(quarter_car / "vehicle.toml"))
+    path = quarter_car / "a.json"
+    path.write_text(json.dumps(result.to_json()))
+    return path
+
+
+def test_same_vehicle_small_gap_other_damper_large(
+    quarter_car: Path, model_a: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    model = model_a
+    same = cli_json(capsys, "validate", str(quarter_car / "b.csv"), "--model", str(model), "--json")
+    at_2ms = halve_rate(quarter_car / "b.csv")
+    slower = cli_json(capsys, "validate", str(at_2ms), "--model", str(model), "--json")
+    other = cli_json(capsys, "validate", str(quarter_car / "other.csv"), "--model", str(model), "--json")
+    with capsys.disabled():
+        print(f"gap_ratio same vehicle {same['gap_ratio']:.4f}, at 2 ms {slower['gap_ratio']:.4f}, "
+              f"other damper {other['gap_ratio']:.4f}")  # fmt: skip
+    for result in (same, slower, other):
+        assert set(result) == {"gap_m", "response_rms_m", "gap_ratio", "gap_diverged"}
+        assert result["gap_ratio"] == pytest.approx(result["gap_m"] / result["response_rms_m"])
+    assert same["gap_ratio"] < SAME_VEHICLE_MAX_RATIO
+    assert slower["gap_ratio"] < SAME_VEHICLE_MAX_RATIO
+    assert other["gap_ratio"] > OTHER_DAMPER_MIN_RATIO
+    assert other["gap_ratio"] > 10 * same["gap_ratio"]
+    # the readable form says the same
+    assert main(["validate", str(quarter_car / "b.csv"), "--model", str(model)]) == 0
+    assert f"gap ratio {100 * same['gap_ratio']:.2f}%" in capsys.readouterr().out
+
+
+def test_axle_cross_validation(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """An axle model needs its track (identify's JSON lacks it): --track-m gives it."""
+    truth = default_axle().known
+    vehicle = tmp_path / "axle.toml"
+    write_vehicle(vehicle, truth)
+    a = simulate(tmp_path, "a", vehicle, "10", "1")
+    b = simulate(tmp_path, "b", vehicle, "12", "2")
+    other = simulate(tmp_path, "other", vehicle, "12", "2", "--damper", "paper-tanh")
+    capsys.readouterr()  # what simulate printed
+    model = tmp_path / "axle.json"
+    model.write_text(json.dumps(cli_json(capsys, "identify", str(a), "--vehicle", str(vehicle), "--json")))
+    track = str(truth.track_m)
+    same = cli_json(capsys, "validate", str(b), "--model", str(model), "--track-m", track, "--json")
+    worse = cli_json(capsys, "validate", str(other), "--model", str(model), "--track-m", track, "--json")
+    with capsys.disabled():
+        print(f"axle gap_ratio same {same['gap_ratio']:.4f}, other left damper {worse['gap_ratio']:.4f}")
+    assert same["gap_ratio"] < SAME_VEHICLE_MAX_RATIO
+    assert worse["gap_ratio"] > 5 * same["gap_ratio"]
+    assert main(["validate", str(b), "--model", str(model), "--json"]) == 2
+    assert "needs 'track_m'" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    ("change", "message"),
+    [
+        (lambda m: m.pop("masses_kg"), "missing key 'masses_kg'"),
+        (lambda m: m["stiffness_N_per_m"].pop("tyre"), "missing key 'stiffness_N_per_m.tyre'"),
+        (lambda m: m["curves"][0].update(force_N=[1.0]), "curves[0].force_N"),
+        (lambda m: m.update(tyre_model="rubber"), "'tyre_model' must be one of"),
+        (
+            lambda m: m.update(curves=[m["curves"][0]] * 2, roll_inertia_kg_m2=280.0, track_m=1.5)
+            or m["stiffness_N_per_m"].update(anti_roll_bar=0.0),
+            "the model is for an axle but the recording has quarter-car channels",
+        ),
+    ],
+)
+def test_bad_model_is_one_line_exit_2(
+    quarter_car: Path, model_a: Path, capsys: pytest.CaptureFixture[str], change, message: str, tmp_path: Path
+) -> None:
+    model = json.loads(model_a.read_text())
+    change(model)
+    path = tmp_path / "bad.json"
+    path.write_text(json.dumps(model))
+    assert main(["validate", str(quarter_car / "b.csv"), "--model", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("shockbench validate: error: ") and message in err
+    assert err.count("\n") == 1
+
+
+def test_unreadable_model_file(quarter_car: Path, capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    for content, message in ((b"{not json", "not JSON"), (b"[1, 2]", "expected a JSON object")):
+        path = tmp_path / "bad.json"
+        path.write_bytes(content)
+        assert main(["validate", str(quarter_car / "b.csv"), "--model", str(path)]) == 2
+        assert message in capsys.readouterr().err
+    assert main(["validate", str(quarter_car / "b.csv"), "--model", str(tmp_path / "none.json")]) == 2
+    assert "no such file" in capsys.readouterr().err
