@@ -2,8 +2,9 @@
 generated from (openapi-python-client, tests/service/test_api_contract_client.py) and tested against
 (schemathesis, tests/service/test_api_schema.py):
 
-- the upload bodies of POST /jobs and /diagnoses as one flat multipart object: the files `recording`
-  (CSV) and `vehicle` (TOML) as `type: string, format: binary` beside the options (`upload_model`);
+- the upload bodies of POST /jobs, /diagnoses and /validations as one flat multipart object: the files
+  `recording` (CSV) and `vehicle` (TOML; a validation: `model`, JSON) as `type: string, format: binary`
+  beside the options (`upload_model`);
 - `Location` on every 201 (`created`), the media type and binary body of every download (`download`);
 - the job event stream's event names and the schema of each event's data (`event_stream`, and the
   payload models added to the components by `contract_openapi`);
@@ -28,33 +29,36 @@ RECORDING_DESCRIPTION = (
     "recording CSV, UTF-8: a header t,x_s,x_t,x_r (quarter car) or the axle columns, one row per sample "
     "at a uniform rate, optional '# key: value' metadata lines (see README, Interchange formats)"
 )
-VEHICLE_DESCRIPTION = "vehicle file, TOML (UTF-8): one [vehicle] table; its model must match the recording"
 
 CsvFile = Annotated[
     UploadFile, WithJsonSchema({"type": "string", "format": "binary", "contentMediaType": "text/csv"})
 ]
 """An uploaded CSV file (multipart part with a file name)."""
-TomlFile = Annotated[
-    UploadFile, WithJsonSchema({"type": "string", "format": "binary", "contentMediaType": "application/toml"})
-]
-"""An uploaded TOML file."""
 
-UPLOAD_ENCODING = {
-    "recording": {"contentType": "text/csv"},
-    "vehicle": {"contentType": "application/toml"},
-}
+def upload_encoding(spec: JobKindSpec) -> dict[str, dict[str, str]]:
+    """The multipart encoding of a kind's upload: the media type of each file part."""
+    return {
+        "recording": {"contentType": "text/csv"},
+        spec.companion.field: {"contentType": spec.companion.media_type},
+    }
 
 
 def upload_model(spec: JobKindSpec) -> type[BaseModel]:
-    """The multipart body of a kind's submit endpoint: `recording` and `vehicle` beside the kind's options,
-    one flat object. Unknown fields are refused (422 naming the field), hence additionalProperties false."""
+    """The multipart body of a kind's submit endpoint: `recording` and the kind's other file (`vehicle`, or
+    `model`) beside the kind's options, one flat object. Unknown fields are refused (422 naming the field),
+    hence additionalProperties false."""
     name = "".join(part.capitalize() for part in spec.name.split("_")) + "Upload"
+    companion = spec.companion
+    other_file = Annotated[
+        UploadFile,
+        WithJsonSchema({"type": "string", "format": "binary", "contentMediaType": companion.media_type}),
+    ]
     model: type[BaseModel] = create_model(
         name,
         __base__=spec.options_model,
-        __doc__=f"{spec.summary}: the recording, its vehicle file and the options.",
+        __doc__=f"{spec.summary}: the recording, its {companion.field} file and the options.",
         recording=(CsvFile, Field(description=RECORDING_DESCRIPTION)),
-        vehicle=(TomlFile, Field(description=VEHICLE_DESCRIPTION)),
+        **{companion.field: (other_file, Field(description=companion.description))},  # type: ignore[call-overload]
     )
     model.model_config = ConfigDict(model.model_config, json_schema_extra=_multipart_form_schema)
     model.model_rebuild(force=True)

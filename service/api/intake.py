@@ -15,7 +15,7 @@ import secrets
 import shutil
 import tempfile
 from pathlib import Path
-from typing import BinaryIO
+from typing import Any, BinaryIO
 
 from pydantic import BaseModel
 
@@ -27,16 +27,17 @@ from service.access import Principal
 from service.api.errors import ApiError
 from service.api.settings import ServiceSettings
 from service.jobs.context import InputError
+from service.jobs.inputs import VEHICLE_FILE
 from service.jobs.kinds import JobKindSpec
 from service.store.jobs import JobFiles, JobRecord, JobStore
 
 RECORDING_FILE = "recording.csv"
-VEHICLE_FILE = "vehicle.toml"
 
 
 def _read_inputs(
-    recording_path: Path, recording_name: str, vehicle_path: Path, vehicle_name: str
-) -> tuple[Recording, VehicleParameters]:
+    spec: JobKindSpec, recording_path: Path, recording_name: str, vehicle_path: Path, vehicle_name: str
+) -> tuple[Recording, Any]:
+    """The recording and the kind's companion file (the vehicle file, or a validation's model) as read."""
     try:
         recording = read_recording_csv(recording_path)
     except (ValueError, csv.Error) as exc:  # RecordingFormatError, bad text encoding, NUL bytes ...
@@ -44,11 +45,17 @@ def _read_inputs(
         if isinstance(exc, UnicodeDecodeError):
             message = f"{recording_name}: not a text file (UTF-8 expected)"
         raise ApiError(422, message, field="recording") from None
+    field = spec.companion.field
     try:
         text = vehicle_path.read_text(encoding="utf-8")
     except UnicodeDecodeError:
-        raise ApiError(422, f"{vehicle_name}: not a text file (UTF-8 expected)", field="vehicle") from None
-    return recording, parse_vehicle_field(text, vehicle_name, "vehicle")
+        raise ApiError(422, f"{vehicle_name}: not a text file (UTF-8 expected)", field=field) from None
+    if spec.companion is VEHICLE_FILE:
+        return recording, parse_vehicle_field(text, vehicle_name, field)
+    try:
+        return recording, spec.companion.read(text, vehicle_name)
+    except ValueError as exc:
+        raise ApiError(422, str(exc).strip().splitlines()[0], field=field) from None
 
 
 def parse_vehicle_field(text: str, source: str, field: str) -> VehicleParameters:
@@ -62,7 +69,7 @@ def parse_vehicle_field(text: str, source: str, field: str) -> VehicleParameters
         raise ApiError(422, f"{source}: not valid TOML (nested too deeply)", field=field) from None
 
 
-def _check(spec: JobKindSpec, options: BaseModel, recording: Recording, vehicle: VehicleParameters) -> None:
+def _check(spec: JobKindSpec, options: BaseModel, recording: Recording, vehicle: Any) -> None:
     try:
         spec.check(options, recording, vehicle)
     except InputError as exc:
@@ -79,7 +86,7 @@ def check_files(
 ) -> None:
     """Read both files and run the kind's checks (ApiError 422 naming the field). Runs in the input
     checker's process (service.api.input_check), never in the service's."""
-    _check(spec, options, *_read_inputs(recording_path, recording_name, vehicle_path, vehicle_name))
+    _check(spec, options, *_read_inputs(spec, recording_path, recording_name, vehicle_path, vehicle_name))
 
 
 def _check_elsewhere(
@@ -108,18 +115,18 @@ def accept_upload(
     settings.uploads_dir.mkdir(parents=True, exist_ok=True)
     staging = Path(tempfile.mkdtemp(prefix="upload-", dir=settings.uploads_dir))
     try:
-        recording_path, vehicle_path = staging / RECORDING_FILE, staging / VEHICLE_FILE
+        recording_path, vehicle_path = staging / RECORDING_FILE, staging / spec.companion.file_name
         for (_, source), target in ((recording, recording_path), (vehicle, vehicle_path)):
             with target.open("wb") as out:
                 shutil.copyfileobj(source, out, 1 << 20)
-        names = (recording[0] or "recording", vehicle[0] or "vehicle")
+        names = (recording[0] or "recording", vehicle[0] or spec.companion.field)
         _check_elsewhere(spec, options, (recording_path, names[0]), (vehicle_path, names[1]))
 
         def place(job_id: int) -> JobFiles:
             folder = _job_folder(settings, job_id)
             settings.jobs_dir.mkdir(parents=True, exist_ok=True)
             staging.rename(folder)
-            return JobFiles(folder / RECORDING_FILE, folder / VEHICLE_FILE, folder)
+            return JobFiles(folder / RECORDING_FILE, folder / spec.companion.file_name, folder)
 
         return store.create(
             spec.name,

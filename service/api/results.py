@@ -194,3 +194,16 @@ class DiagnoseResult(ResultPart):
     residual_ratio: MaybeNumber
     noise_floor_m: MaybeNumber
     candidates: list[list[CandidateOut]] = Field(description="every candidate's score, per round")
+
+
+# ---- validate ----------------------------------------------------------------------------------------------
+
+
+class ValidateResult(ResultPart):
+    """The result of a validation (`shockbench validate --json`): the model driven by this recording's
+    plate against its measured body and wheel motion."""
+
+    gap_m: MaybeNumber = Field(description="RMS of simulated minus measured body and wheel motion (m)")
+    response_rms_m: MaybeNumber = Field(description="RMS of the measured body and wheel motion (m)")
+    gap_ratio: MaybeNumber = Field(description="gap_m / response_rms_m; null when the model diverged")
+    gap_diverged: bool = Field(description="the model diverged when simulated from this plate motion")

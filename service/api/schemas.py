@@ -1,7 +1,8 @@
 """The API's response models (pydantic), and their construction from the store's records.
 
 Every body a client receives is typed here, so that the OpenAPI schema is a contract clients can be
-generated from: a job is `IdentifyJobOut` or `DiagnoseJobOut`, told apart by `kind`, each with its typed
+generated from: a job is `IdentifyJobOut`, `DiagnoseJobOut` or `ValidateJobOut`, told apart by `kind`, each
+with its typed
 options and result (service.api.results); the bench and a sweep's settings are typed too.
 """
 
@@ -15,10 +16,11 @@ from pydantic import BaseModel, Field, create_model
 
 from daq.sweep.model import SweepProgress
 from drivers.exciter.sweep import SweepLaw
-from service.api.results import DiagnoseResult, IdentifyResult
+from service.api.results import DiagnoseResult, IdentifyResult, ValidateResult
 from service.jobs.diagnose_job import DiagnoseJobOptions
 from service.jobs.identify_job import IdentifyJobOptions
 from service.jobs.messages import Progress
+from service.jobs.validate_job import ValidateJobOptions
 from service.store.jobs import JobRecord
 from service.store.models import JobKind, JobStatus
 
@@ -76,6 +78,7 @@ def options_echo(options_model: type[BaseModel], name: str) -> type[BaseModel]:
 
 IdentifyOptionsOut = options_echo(IdentifyJobOptions, "IdentifyOptionsOut")
 DiagnoseOptionsOut = options_echo(DiagnoseJobOptions, "DiagnoseOptionsOut")
+ValidateOptionsOut = options_echo(ValidateJobOptions, "ValidateOptionsOut")
 
 
 class JobOutBase(BaseModel):
@@ -119,19 +122,32 @@ class DiagnoseJobOut(JobOutBase):
     )
 
 
-JobOut = Annotated[IdentifyJobOut | DiagnoseJobOut, Field(discriminator="kind")]
+class ValidateJobOut(JobOutBase):
+    """A validation job: an identified model against another recording (POST /validations)."""
+
+    kind: Literal["validate"] = Field(description="validate")
+    options: ValidateOptionsOut  # type: ignore[valid-type]
+    result: ValidateResult | None = Field(
+        None,
+        description="once succeeded (and in GET /jobs/{id} only): the shape of `shockbench validate --json`",
+    )
+
+
+AnyJobOut = IdentifyJobOut | DiagnoseJobOut | ValidateJobOut
+JobOut = Annotated[AnyJobOut, Field(discriminator="kind")]
 """A job of any kind, told apart by `kind`."""
 
-JOB_MODELS: dict[str, type[IdentifyJobOut] | type[DiagnoseJobOut]] = {
+JOB_MODELS: dict[str, type[AnyJobOut]] = {
     JobKind.IDENTIFY.value: IdentifyJobOut,
     JobKind.DIAGNOSE.value: DiagnoseJobOut,
+    JobKind.VALIDATE.value: ValidateJobOut,
 }
 """The response model of each job kind (service.jobs.kinds.KINDS); a new kind adds its model here."""
 
 
 def job_view(
     record: JobRecord, live: Progress | None = None, *, with_result: bool = True
-) -> IdentifyJobOut | DiagnoseJobOut:
+) -> AnyJobOut:
     """The job as the API shows it: live progress while it runs, the result once it succeeded."""
     base = f"{API_PREFIX}/jobs/{record.id}"
     return JOB_MODELS[record.kind].model_validate(
@@ -184,15 +200,18 @@ class ClosingEvent(BaseModel):
     reason: str
 
 
+ANY_JOB_SCHEMA = "IdentifyJobOut | DiagnoseJobOut | ValidateJobOut"
+"""The schemas an event that carries the job may hold."""
+
 JOB_EVENTS: dict[str, tuple[str, str]] = {
     "state": (
-        "IdentifyJobOut | DiagnoseJobOut",
+        ANY_JOB_SCHEMA,
         "the job as GET /jobs/{id} returns it: first, and when it starts",
     ),
     "progress": ("ProgressEvent", "while it runs: stage, DE generation, best objective, ETA"),
-    "succeeded": ("IdentifyJobOut | DiagnoseJobOut", "last: the job with its result"),
-    "failed": ("IdentifyJobOut | DiagnoseJobOut", "last: the job with the reason in `error`"),
-    "cancelled": ("IdentifyJobOut | DiagnoseJobOut", "last: the job, cancelled"),
+    "succeeded": (ANY_JOB_SCHEMA, "last: the job with its result"),
+    "failed": (ANY_JOB_SCHEMA, "last: the job with the reason in `error`"),
+    "cancelled": (ANY_JOB_SCHEMA, "last: the job, cancelled"),
     "closing": ("ClosingEvent", "last, when the service stops first"),
 }
 """Event name -> (schema of its JSON data, when it comes)."""
@@ -258,7 +277,7 @@ class WorkerOut(BaseModel):
 
 class CurrentJobOut(BaseModel):
     id: int
-    kind: str = Field(description="identify or diagnose")
+    kind: str = Field(description="identify, diagnose or validate")
     progress: ProgressOut | None
 
 

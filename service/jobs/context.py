@@ -108,6 +108,9 @@ class JobContext:
     output_dir: Path
     cancel: threading.Event
     progress: ProgressReporter
+    companion: Any = None
+    """What the kind's file beside the recording was read into (service.jobs.inputs): the vehicle
+    parameters, or a validation's identified model."""
 
 
 @dataclass

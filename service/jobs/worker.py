@@ -100,7 +100,6 @@ def run_job(
     """Run one job and send exactly one outcome message. Errors become JobFailed with a one-line reason;
     only unexpected ones leave a traceback, on the worker's stderr (the service log), never in the reason."""
     from daq.formats.recording_csv import read_recording_csv
-    from daq.formats.vehicle_file import read_vehicle
     from service.jobs.context import JobContext, ProgressReporter
     from service.jobs.kinds import kind_spec
 
@@ -112,15 +111,19 @@ def run_job(
         module, _, function = spec.runner.partition(":")
         runner = getattr(importlib.import_module(module), function)
         recording = read_recording_csv(job.recording_path)
-        vehicle = read_vehicle(job.vehicle_path)
+        companion_path = Path(job.vehicle_path)
+        companion = spec.companion.read(companion_path.read_text(encoding="utf-8"), companion_path.name)
+        vehicle = spec.companion.vehicle_of(companion)
         # the submit checks again (bounds, bandwidth, model): a job queued before a check existed, or
         # whose files changed on disk, fails here in words instead of deep in the estimator
-        spec.check(spec.options_model.model_validate(job.options), recording, vehicle)
+        spec.check(spec.options_model.model_validate(job.options), recording, companion)
         output_dir = Path(job.output_dir)
         output_dir.mkdir(parents=True, exist_ok=True)
         if cancel.is_set():
             raise InterruptedError("cancelled before it started")
-        context = JobContext(job.job_id, recording, vehicle, dict(job.options), output_dir, cancel, reporter)
+        context = JobContext(
+            job.job_id, recording, vehicle, dict(job.options), output_dir, cancel, reporter, companion
+        )
         outcome = runner(context)
         reporter.stage("done")
     except InterruptedError:

@@ -41,6 +41,7 @@ class UTCDateTime(TypeDecorator[datetime]):
 class JobKind(StrEnum):
     IDENTIFY = "identify"
     DIAGNOSE = "diagnose"
+    VALIDATE = "validate"
 
 
 class JobStatus(StrEnum):

@@ -21,16 +21,18 @@ from pydantic import BaseModel
 from drivers.exciter.sweep import SweepSettings
 from estimator.doctor.result import CandidateScore, DiagnosisResult, DiagnosisStep
 from estimator.identify import IdentifyOptions, identify
+from estimator.validation import ValidationResult
 from service.access import KeyRing, Role
 from service.api import ServiceSettings, create_app
-from service.api.results import DiagnoseResult, IdentifyResult
+from service.api.results import DiagnoseResult, IdentifyResult, ValidateResult
 from service.api.testing import SimulatedInputs
 from service.jobs.context import finite_json
 from service.jobs.identify_job import IdentifyJobOptions
 from simulators.vehicle_sim import SimulationSettings, default_axle, simulate
 
 OPERATION_IDS = {
-    "get_status", "submit_identify", "submit_diagnose", "list_jobs", "get_job", "cancel_job", "job_events",
+    "get_status", "submit_identify", "submit_diagnose", "list_jobs",
+    "submit_validate", "get_job", "cancel_job", "job_events",
     "get_job_plot_png", "get_job_plot_svg", "get_job_file", "get_bench", "list_devices", "emergency_stop",
     "start_sweep", "list_sweeps", "get_sweep", "abort_sweep", "get_sweep_recording_csv",
     "submit_sweep_identify", "schedule_test", "list_scheduled_tests", "get_scheduled_test",
@@ -89,21 +91,23 @@ def test_operation_ids_are_short_names() -> None:
 
 
 def test_upload_bodies_are_one_flat_multipart_object_with_binary_files() -> None:
-    for path, options_fields in (
-        ("/api/v1/jobs", IdentifyJobOptions.model_fields),
-        ("/api/v1/diagnoses", None),
+    for path, options_fields, other, media in (
+        ("/api/v1/jobs", IdentifyJobOptions.model_fields, "vehicle", "application/toml"),
+        ("/api/v1/diagnoses", None, "vehicle", "application/toml"),
+        ("/api/v1/validations", None, "model", "application/json"),
     ):
         body = document()["paths"][path]["post"]["requestBody"]["content"]["multipart/form-data"]
         schema = resolve(body["schema"])
         assert "allOf" not in schema and schema["additionalProperties"] is False
-        assert schema["required"] == ["recording", "vehicle"]
+        assert schema["required"] == ["recording", other]
         files = schema["properties"]
         assert (
             files["recording"]["format"] == "binary" and files["recording"]["contentMediaType"] == "text/csv"
         )
-        assert files["vehicle"]["format"] == "binary"
-        assert files["vehicle"]["contentMediaType"] == "application/toml"
+        assert files[other]["format"] == "binary"
+        assert files[other]["contentMediaType"] == media
         assert body["encoding"]["recording"]["contentType"] == "text/csv"
+        assert body["encoding"][other]["contentType"] == media
         if options_fields is not None:
             assert set(options_fields) <= set(files)
             points = files["points"]  # nullable in the model, but a form field is sent or left out
@@ -147,7 +151,7 @@ def test_answers_are_typed_and_jobs_told_apart_by_kind() -> None:
     job = document()["paths"]["/api/v1/jobs/{job_id}"]["get"]["responses"]["200"]["content"]
     union = job["application/json"]["schema"]
     assert union["discriminator"]["propertyName"] == "kind"
-    assert set(union["discriminator"]["mapping"]) == {"identify", "diagnose"}
+    assert set(union["discriminator"]["mapping"]) == {"identify", "diagnose", "validate"}
     options = resolve(schemas["IdentifyJobOut"]["properties"]["options"])
     assert set(options["properties"]) == set(IdentifyJobOptions.model_fields)
     assert schemas["SweepOut"]["properties"]["settings"] == {
@@ -165,7 +169,7 @@ def test_every_201_declares_location_and_every_download_its_media_type() -> None
             location = operation["responses"]["201"]["headers"]["Location"]
             assert location["required"] is True and location["schema"]["type"] == "string", (method, path)
             created += 1
-    assert created == 5  # jobs, diagnoses, sweeps, sweep jobs, schedules
+    assert created == 6  # jobs, diagnoses, validations, sweeps, sweep jobs, schedules
     for path, media_type in DOWNLOADS:
         content = document()["paths"][path]["get"]["responses"]["200"]["content"]
         assert content[media_type]["schema"] == {"type": "string", "format": "binary"}
@@ -184,7 +188,7 @@ def test_the_event_stream_lists_its_events_and_their_data() -> None:
     assert set(schemas["ProgressEvent"]["properties"]) >= {"job_id", "stage", "generation", "eta_s"}
     assert resolve(events["closing"]["contentSchema"]) is schemas["ClosingEvent"]
     final = events["succeeded"]["contentSchema"]["oneOf"]
-    assert {resolve(ref)["title"] for ref in final} == {"IdentifyJobOut", "DiagnoseJobOut"}
+    assert {resolve(ref)["title"] for ref in final} == {"IdentifyJobOut", "DiagnoseJobOut", "ValidateJobOut"}
 
 
 def test_a_405_states_its_allow_header() -> None:
@@ -283,3 +287,11 @@ def test_diagnose_results_read_into_the_typed_model_unchanged() -> None:
     typed = DiagnoseResult.model_validate(raw)
     assert same_json(raw, typed) == []
     assert typed.gap_after_m is None and typed.steps[0].gap_after_m is None
+
+
+def test_validate_results_read_into_the_typed_model_unchanged() -> None:
+    for result in (ValidationResult(4e-5, 2.7e-3), ValidationResult(float("inf"), 2.7e-3)):
+        raw = finite_json(result.to_json())
+        typed = ValidateResult.model_validate(raw)
+        assert same_json(raw, typed) == []
+        assert (typed.gap_m is None) == (typed.gap_ratio is None) == typed.gap_diverged

@@ -14,7 +14,7 @@ from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import FileResponse
 
 from service.api.auth import Operator, Viewer
-from service.api.contract import UPLOAD_ENCODING, created, download, upload_model
+from service.api.contract import created, download, upload_encoding, upload_model
 from service.api.errors import ApiError, responses
 from service.api.intake import accept_upload
 from service.api.schemas import API_PREFIX, JOB_MODELS, JobList, JobOut, PageLimit, PageOffset, job_view
@@ -71,7 +71,8 @@ def _submit_endpoint(spec: JobKindSpec, router: APIRouter) -> None:
         options = options_model.model_validate(
             {name: getattr(upload, name) for name in options_model.model_fields}
         )
-        recording, vehicle = upload.recording, upload.vehicle  # type: ignore[attr-defined]
+        recording = upload.recording  # type: ignore[attr-defined]
+        vehicle = getattr(upload, spec.companion.field)  # the vehicle file, or a validation's model
         services = request.app.state.services
         record = await run_in_threadpool(
             accept_upload,
@@ -89,7 +90,8 @@ def _submit_endpoint(spec: JobKindSpec, router: APIRouter) -> None:
         return out
 
     submit.__doc__ = (
-        f"{spec.summary}. Multipart upload: the recording CSV, its vehicle file and the options. The input "
+        f"{spec.summary}. Multipart upload: the recording CSV, its {spec.companion.field} file and the "
+        "options. The input "
         "is checked now (422 naming the field); the job is queued and runs in the worker process. "
         "Answers 201 with Location: the job, to poll or to follow at its events link."
     )
@@ -103,7 +105,9 @@ def _submit_endpoint(spec: JobKindSpec, router: APIRouter) -> None:
         operation_id=f"submit_{spec.name}",
         summary=f"Submit a {spec.name} job",
         responses=created(f"{spec.name} job") | responses(400, 401, 403, 413, 422),
-        openapi_extra={"requestBody": {"content": {"multipart/form-data": {"encoding": UPLOAD_ENCODING}}}},
+        openapi_extra={
+            "requestBody": {"content": {"multipart/form-data": {"encoding": upload_encoding(spec)}}}
+        },
     )
 
 

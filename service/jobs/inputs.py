@@ -1,0 +1,72 @@
+"""The file a job kind takes beside its recording: the vehicle file (identify, diagnose) or an identified
+model (validate). One description per kind of file: its form field, the name it is kept under in the job's
+folder, its media type, and how it is read (the same reader at submit and in the worker).
+
+A reader takes the file's text and a name to quote, and raises ValueError (one line, naming the problem)."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+from daq.formats.vehicle_file import parse_vehicle
+from estimator.vehicle import VehicleParameters
+
+
+@dataclass(frozen=True)
+class CompanionFile:
+    field: str
+    """Form field of the upload, and the `field` a 422 about it names."""
+    file_name: str
+    """Name in the job's folder."""
+    media_type: str
+    description: str
+    read: Callable[[str, str], Any]
+    """(text, name to quote) -> what the kind's check and runner take."""
+    vehicle_of: Callable[[Any], VehicleParameters]
+    """The vehicle the job runs on (JobContext.vehicle)."""
+
+
+def _read_vehicle(text: str, source: str) -> VehicleParameters:
+    try:
+        return parse_vehicle(text, source=source)
+    except RecursionError:
+        raise ValueError(f"{source}: not valid TOML (nested too deeply)") from None
+
+
+def _read_model(text: str, source: str) -> Any:
+    """An identified model from the JSON identify (or diagnose's `model`) prints."""
+    from estimator.model_io import model_from_json
+
+    try:
+        data = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"{source}: not JSON ({exc.msg} at line {exc.lineno})") from None
+    except RecursionError:
+        raise ValueError(f"{source}: not valid JSON (nested too deeply)") from None
+    if not isinstance(data, dict):
+        raise ValueError(f"{source}: expected a JSON object (the output of identify --json)")
+    track = data.get("track_m") if isinstance(data.get("track_m"), int | float) else None
+    return model_from_json(data, track_m=track)
+
+
+VEHICLE_FILE = CompanionFile(
+    field="vehicle",
+    file_name="vehicle.toml",
+    media_type="application/toml",
+    description="vehicle file, TOML (UTF-8): one [vehicle] table; its model must match the recording",
+    read=_read_vehicle,
+    vehicle_of=lambda vehicle: vehicle,
+)
+
+MODEL_FILE = CompanionFile(
+    field="model",
+    file_name="model.json",
+    media_type="application/json",
+    description="identified model, JSON (UTF-8): the output of `shockbench identify --json` (or the `model` "
+    "of `diagnose --json`); an axle model also needs track_m; its kind must match the recording",
+    read=_read_model,
+    vehicle_of=lambda model: model.vehicle,
+)
