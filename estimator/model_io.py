@@ -1,5 +1,5 @@
-"""An identified model from its JSON form (the output of `shockbench identify --json`, or the `model` that
-`shockbench diagnose --json` prints) back into the objects the output-error simulation runs
+"""An identified model from its JSON form (the output of `shockbench identify --json`, or an object holding
+those keys under `model`) back into the objects the output-error simulation runs
 (estimator.output_error.IdentifiedModel). Pure: a dict in, a model out, no file I/O.
 
 The tyre's Maxwell element is rebuilt from its relaxation time τ (`tyre_relaxation_time_s`), which does not
@@ -69,10 +69,10 @@ def _curve(data: Any, index: int) -> PiecewiseLinearCurve:
 
 
 def model_from_json(result: Mapping[str, Any], track_m: float | None = None) -> IdentifiedModel:
-    """The model of an identify result (or of diagnose's `model`): one curve = quarter car, two (left, right)
-    = axle. Raises ModelFormatError naming the missing or bad key."""
+    """The model of an identify result (or of its keys under `model`): one curve = quarter car, two (left,
+    right) = axle. Raises ModelFormatError naming the missing or bad key."""
     if isinstance(result, Mapping) and "curves" not in result and isinstance(result.get("model"), Mapping):
-        result = result["model"]  # the whole `diagnose --json` output
+        result = result["model"]  # a wrapper holding the model's keys under `model`
     curves_json = _get(result, "curves")
     if not isinstance(curves_json, list) or len(curves_json) not in (1, 2):
         raise ModelFormatError("model: 'curves' must hold one curve (quarter car) or two (axle: left, right)")

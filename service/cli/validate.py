@@ -17,7 +17,7 @@ from service.cli.errors import CliError
 
 
 def read_model_json(path: Path) -> dict[str, Any]:
-    """The JSON object of a model file (identify --json or diagnose --json output); CliError in one line."""
+    """The JSON object of a model file (identify --json output); CliError in one line."""
     if not path.is_file():
         raise CliError(f"{path}: no such file")
     try:
@@ -55,12 +55,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "validate",
         help="cross-validate an identified model on another recording of the same vehicle",
-        description="Simulate the model of RESULT.json (identify --json, or diagnose --json's model) driven "
+        description="Simulate the model of RESULT.json (the output of identify --json) driven "
         "by the recording's plate motion and compare with its measured body and wheel motion: gap_m, "
         "response_rms_m and gap_ratio = gap / response.",
     )
     p.add_argument("recording", help="recording CSV (any sample rate and length)")
-    p.add_argument("--model", required=True, help="JSON from identify --json or diagnose --json")
+    p.add_argument("--model", required=True, help="JSON from identify --json")
     p.add_argument(
         "--track-m",
         type=float,

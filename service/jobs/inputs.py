@@ -37,7 +37,7 @@ def _read_vehicle(text: str, source: str) -> VehicleParameters:
 
 
 def _read_model(text: str, source: str) -> Any:
-    """An identified model from the JSON identify (or diagnose's `model`) prints."""
+    """An identified model from the JSON identify --json prints."""
     from estimator.model_io import model_from_json
 
     try:
@@ -65,8 +65,8 @@ MODEL_FILE = CompanionFile(
     field="model",
     file_name="model.json",
     media_type="application/json",
-    description="identified model, JSON (UTF-8): the output of `shockbench identify --json` (or the `model` "
-    "of `diagnose --json`); an axle model also needs track_m; its kind must match the recording",
+    description="identified model, JSON (UTF-8): the output of `shockbench identify --json`; an axle model "
+    "also needs track_m; its kind must match the recording",
     read=_read_model,
     vehicle_of=lambda model: model.vehicle,
 )
