@@ -12,6 +12,7 @@ of each."""
 
 from __future__ import annotations
 
+import json
 import tempfile
 from collections import Counter
 from collections.abc import Iterator
@@ -33,6 +34,7 @@ from schemathesis.specs.openapi.checks import (
     status_code_conformance,
 )
 
+from daq.formats.recording_csv import read_recording_csv
 from service.access import KeyRing, Role
 from service.api import ServiceSettings, create_app
 from service.api.testing import LiveServer, simulated_inputs
@@ -49,6 +51,8 @@ CHECKS = [
 MAX_EXAMPLES = 20
 """Per operation and mode; with the coverage phase about 1500 requests in all, about a minute."""
 UPLOAD_PATHS = {"/api/v1/jobs", "/api/v1/diagnoses"}
+VALIDATIONS = "/api/v1/validations"
+"""Takes the recording and an identified model (JSON) instead of a vehicle file."""
 ID_PARAMETERS = ("job_id", "sweep_id", "test_id")
 VALID_SWEEPS = [
     {"start_Hz": 0.5, "stop_Hz": 20.0, "amplitude_m": 0.004, "duration_s": 1.0, "settle_s": 0.2},
@@ -68,6 +72,20 @@ def valid_inputs() -> tuple[bytes, str]:
     with tempfile.TemporaryDirectory() as folder:
         files = simulated_inputs(Path(folder), seconds=6.0, seed=1)
         return files.recording.read_bytes(), files.vehicle.read_text()
+
+
+@cache
+def valid_model() -> bytes:
+    """The model identify --json gives for the valid recording (for the validations' uploads)."""
+    from daq.formats.vehicle_file import parse_vehicle
+    from estimator.identify import identify
+
+    recording, vehicle = valid_inputs()
+    with tempfile.TemporaryDirectory() as folder:
+        path = Path(folder) / "rec.csv"
+        path.write_bytes(recording)
+        result = identify(read_recording_csv(path), parse_vehicle(vehicle))
+    return json.dumps(result.to_json()).encode()
 
 
 @pytest.fixture(scope="module")
@@ -102,6 +120,8 @@ def flatmap_body(context: schemathesis.HookContext, body: Any) -> st.SearchStrat
     if operation.path in UPLOAD_PATHS:
         seeded = {**body, "recording": recording, "vehicle": vehicle.encode()}
         return st.sampled_from([seeded, body])
+    if operation.path == VALIDATIONS:
+        return st.sampled_from([{**body, "recording": recording, "model": valid_model()}, body])
     if "vehicle_toml" in body or operation.path in ("/api/v1/sweeps", "/api/v1/schedules"):
         options = {"job": {}} if operation.path == "/api/v1/schedules" else {}
         seeded = [{**body, **options, **sweep, "vehicle_toml": vehicle} for sweep in VALID_SWEEPS]
@@ -143,6 +163,6 @@ def test_the_generated_requests_created_jobs_sweeps_and_tests(live: LiveServer) 
         }
     print(f"\nschemathesis: {statuses.total()} requests, by status {dict(sorted(statuses.items()))}")
     print(f"created (201) by path {dict(created)}; in the store {totals}")
-    assert created["/api/v1/jobs"] > 0 and created["/api/v1/diagnoses"] > 0
+    assert created["/api/v1/jobs"] > 0 and created["/api/v1/diagnoses"] > 0 and created[VALIDATIONS] > 0
     assert created["/api/v1/sweeps"] > 0 and created["/api/v1/schedules"] > 0
-    assert totals["jobs"] >= created["/api/v1/jobs"] + created["/api/v1/diagnoses"]
+    assert totals["jobs"] >= created["/api/v1/jobs"] + created["/api/v1/diagnoses"] + created[VALIDATIONS]
