@@ -32,6 +32,7 @@ from estimator.inspection import CornerInspection, corner_inspection, imbalance
 from estimator.output_error import IdentifiedModel, refine_on_output_error, simulate_identified
 from estimator.recording import Recording
 from estimator.relaxation import RELAXATION_TIME_BOUNDS_S, fit_relaxation_time
+from estimator.signals import FilterChoice
 from estimator.solvers.differential_evolution import DEProgress, DESettings, DifferentialEvolution
 from estimator.solvers.exact import solve_exact
 from estimator.tanh_fit import TanhFit, fit_tanh
@@ -419,13 +420,16 @@ def identify(
     intervals = None
     if options.intervals:
 
-        def rebuild(grids: list[np.ndarray]) -> LinearResiduals:
-            return build(
-                recording, resolved, options.tyre, None, options.nsample, system.filters, grids, unknown
-            )
+        def rebuild(grids: list[np.ndarray], filters: FilterChoice) -> LinearResiduals:
+            return build(recording, resolved, options.tyre, None, options.nsample, filters, grids, unknown)
+
+        def refit(other: LinearResiduals) -> np.ndarray:
+            if search_theta:
+                return fit_relaxation_time(other).solution.theta
+            return solve_exact(other, certify=False).theta
 
         intervals = identification_intervals(
-            system, theta, recording.sample_time_s, search_theta, rebuild
+            system, theta, recording.sample_time_s, search_theta, rebuild, refit
         )
     model = IdentifiedModel(
         vehicle=resolved,

@@ -21,7 +21,14 @@ dozen times as much (see BENCHMARKS.md, "Confidence bands").
 linearised problem: its column is C_d·∂g/∂log τ (central difference of the tyre column), so the bands of
 the others carry the uncertainty of ϑ as well; τ's own interval is not reported.
 
-What the bands do not cover: bias. The damper curve is piecewise linear between its grid points, and the
+Bias allowances. At 5 µm noise the noise-driven widths are small (masses ~0.01%, stiffnesses ~0.1-0.3%)
+and two systematic errors of the method are of the same size or larger; each gets an allowance from a
+second identification (a Richardson-style estimate, combined in quadrature with the noise width):
+the curve's representation bias (representation_bias, below), and the bias of the velocities' low-pass
+(filter_bias): the same identification with the kinematics cutoff lowered to KINEMATICS_CUTOFF_RATIO of it.
+The two extra solves cost more than the sandwich itself (BENCHMARKS.md).
+
+The curve's representation bias: The damper curve is piecewise linear between its grid points, and the
 true curve is not: the identified point at a grid velocity is (roughly) the best piecewise-linear fit of the
 curve around it, not the curve's value there. Near a sharp knee (e.g. at 0 m/s) that representation bias
 can exceed the noise-driven width. The tests and the coverage benchmark compare the band at each grid point
@@ -31,11 +38,12 @@ with the true force at that velocity, so this bias counts against the coverage t
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from estimator.equations import TYRE_DAMPING, LinearResiduals, maxwell_regressor
+from estimator.signals import FilterChoice
 from estimator.solvers.exact import solve_exact
 from estimator.vehicle import coefficient_from_relaxation_time, relaxation_time_from_coefficient
 
@@ -50,6 +58,12 @@ RICHARDSON_FACTOR = 2.0
 """Representation bias allowance = this × |coarse − refined|: by Richardson's argument a grid error that
 falls as h^k is (coarse − refined)·2^k/(2^k − 1); k = 1 (a kink between grid points, the worst case of a
 piecewise-linear curve) gives 2, k = 2 (a smooth bend) 4/3."""
+KINEMATICS_CUTOFF_RATIO = 0.8
+KINEMATICS_RICHARDSON = 1.0 / (KINEMATICS_CUTOFF_RATIO**-2 - 1.0)
+"""Kinematics filter bias allowance = this × |θ − θ at KINEMATICS_CUTOFF_RATIO × the cutoff|: the
+velocities in the damper and tyre terms come from a low-pass, whose bias falls about as cutoff⁻² (on the
+simulated sweeps: lowering it by 0.8 moved the stiffnesses by 0.55 of their error, 0.8⁻² − 1 = 0.56), so the
+bias at the chosen cutoff is the difference / (0.8⁻² − 1) ≈ 1.8 × it (Richardson)."""
 LOG_TAU_STEP = 1e-3
 """Central-difference step on log τ for the tyre column's derivative."""
 
@@ -177,16 +191,35 @@ def representation_bias(
     return bias
 
 
+def filter_bias(
+    theta: np.ndarray, smoother: LinearResiduals, refit: Callable[[LinearResiduals], np.ndarray]
+) -> np.ndarray:
+    """|θ − θ_smoother|·KINEMATICS_RICHARDSON by unknown: θ_smoother is the same identification with the
+    kinematics low-pass at KINEMATICS_CUTOFF_RATIO of its cutoff (`smoother`, same grids and samples),
+    `refit` the solver (with the ϑ search when ϑ is identified)."""
+    other = refit(smoother)
+    return KINEMATICS_RICHARDSON * np.abs(np.asarray(theta) - other)
+
+
 def identification_intervals(
     system: LinearResiduals,
     theta: np.ndarray,
     sample_time_s: float,
     relaxation_time_identified: bool,
-    rebuild: Callable[[list[np.ndarray]], LinearResiduals] | None,
+    rebuild: Callable[[list[np.ndarray], FilterChoice], LinearResiduals] | None,
+    refit: Callable[[LinearResiduals], np.ndarray] | None = None,
 ) -> Intervals:
-    """The intervals `identify` reports: the sandwich (confidence_intervals), widened by the representation
-    bias allowance when `rebuild` (grids -> the same system on those grids) is given."""
+    """The intervals `identify` reports: the sandwich (confidence_intervals), widened by the bias
+    allowances when `rebuild` ((grids, filters) -> the same system on those) is given: the representation
+    bias of the grid, and, with `refit` (system -> its solution θ), the kinematics filter's bias; the two
+    combine with the noise width in quadrature."""
     intervals = confidence_intervals(system, theta, sample_time_s, relaxation_time_identified)
     if rebuild is None:
         return intervals
-    return intervals.with_bias(representation_bias(system, theta, rebuild(refined_grids(system))))
+    bias = representation_bias(system, theta, rebuild(refined_grids(system), system.filters))
+    if refit is not None:
+        smoother = replace(
+            system.filters, kinematics_cutoff_Hz=system.filters.kinematics_cutoff_Hz * KINEMATICS_CUTOFF_RATIO
+        )
+        bias = np.hypot(bias, filter_bias(theta, rebuild(system.grids_m_s, smoother), refit))
+    return intervals.with_bias(bias)
