@@ -2,9 +2,15 @@
 
 from __future__ import annotations
 
+import os
 from collections import defaultdict
 
-import pytest
+# One BLAS thread, as the command line sets it (service/cli/__init__.py says why): tests that run a
+# service worker or simulated devices beside the estimator would otherwise oversubscribe the 2 cores.
+for _variable in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_variable, "1")
+
+import pytest  # noqa: E402
 
 HIT_RATES: dict[str, list[tuple[str, bool]]] = defaultdict(list)
 
