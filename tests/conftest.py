@@ -2,15 +2,14 @@
 
 from __future__ import annotations
 
-import os
 from collections import defaultdict
 
-# One BLAS thread, as the command line sets it (service/cli/__init__.py says why): tests that run a
-# service worker or simulated devices beside the estimator would otherwise oversubscribe the 2 cores.
-for _variable in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_variable, "1")
+import pytest
 
-import pytest  # noqa: E402
+# One BLAS thread, as every `shockbench` process has it: importing the CLI package sets it before numpy is
+# first imported (service/cli/__init__.py says why); tests that run a service worker or simulated devices
+# beside the estimator would otherwise oversubscribe the 2 cores.
+import service.cli  # noqa: F401
 
 HIT_RATES: dict[str, list[tuple[str, bool]]] = defaultdict(list)
 
