@@ -299,7 +299,9 @@ def test_an_echoing_line_needs_echo_suppression(bench: PlateOnlyBench, transport
             with pytest.raises(errors.MalformedFrameError):
                 driver.read_model()
             assert driver.read_position_m() == pytest.approx(1e-3)
-            assert driver.port.counters.discarded_frames == 1
+            # the echo of the position request is always discarded; the device's own (late) 0503 reply is
+            # either flushed before the next request goes out or read and discarded, as the pty's timing falls
+            assert driver.port.counters.discarded_frames in (1, 2)
 
 
 def test_a_1000_sample_ring_streams_in_requests_of_25(bench: PlateOnlyBench, transport: str) -> None:
