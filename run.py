@@ -32,9 +32,10 @@ def ensure_environment() -> None:
     digest = hashlib.sha256((ROOT / "pyproject.toml").read_bytes()).hexdigest()
     if _python().exists() and STAMP.exists() and STAMP.read_text() == digest:
         return
-    if not _python().exists():
+    if not STAMP.exists():
+        # no finished install on record: an interrupted creation leaves a .venv without pip, so start afresh
         print("creating virtual environment in .venv", flush=True)
-        venv.EnvBuilder(with_pip=True).create(VENV)
+        venv.EnvBuilder(with_pip=True, clear=True).create(VENV)
     print("installing shockbench and its dependencies into .venv", flush=True)
     subprocess.run([str(_python()), "-m", "pip", "install", "-q", "--upgrade", "pip"], check=True)
     subprocess.run([str(_python()), "-m", "pip", "install", "-q", "-e", f"{ROOT}[test]"], check=True)
