@@ -29,6 +29,7 @@ from estimator.equations import (
     tyre_regressor,
 )
 from estimator.inspection import CornerInspection, corner_inspection, imbalance
+from estimator.newton_refit import newton_refit
 from estimator.output_error import IdentifiedModel, refine_on_output_error, simulate_identified
 from estimator.recording import Recording
 from estimator.relaxation import RELAXATION_TIME_BOUNDS_S, fit_relaxation_time
@@ -197,6 +198,8 @@ class IdentificationResult:
         }
         if m.roll_inertia_kg_m2 is not None:
             out["roll_inertia_kg_m2"] = m.roll_inertia_kg_m2
+        if m.vehicle.is_axle:
+            out["track_m"] = m.vehicle.track_m  # what `validate` needs to rebuild the axle's roll
         if self.refined_gap_m is not None:
             out["refined_gap_m"] = self.refined_gap_m
         out |= self.intervals_json()
@@ -423,10 +426,8 @@ def identify(
         def rebuild(grids: list[np.ndarray], filters: FilterChoice) -> LinearResiduals:
             return build(recording, resolved, options.tyre, None, options.nsample, filters, grids, unknown)
 
-        def refit(other: LinearResiduals) -> np.ndarray:
-            if search_theta:
-                return fit_relaxation_time(other).solution.theta
-            return solve_exact(other, certify=False).theta
+        def refit(other: LinearResiduals, near: np.ndarray) -> np.ndarray:
+            return newton_refit(other, near, relaxation_time_identified=search_theta).theta
 
         intervals = identification_intervals(
             system, theta, recording.sample_time_s, search_theta, rebuild, refit
