@@ -17,8 +17,9 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from estimator.damper import CurveBatch, PiecewiseLinearCurve
-from estimator.dynamics import AxlePhysics, CornerPhysics, QuarterCarPhysics, integrate_rk4
+from estimator.dynamics import AxlePhysics, CornerPhysics, QuarterCarPhysics
 from estimator.recording import Recording
+from estimator.simulation_kernel import integrate_compiled
 from estimator.signals import Kinematics
 from estimator.solvers.differential_evolution import DEProgress, DESettings, DifferentialEvolution
 from estimator.vehicle import TyreModel, VehicleParameters
@@ -134,7 +135,7 @@ def simulate_identified(
     if batch is not None:
         state0 = np.repeat(state0[:, None], batch, axis=1)
     with np.errstate(over="ignore", invalid="ignore"):  # an unstable model is reported as a diverged gap
-        states = integrate_rk4(physics.derivatives, state0, recording.sample_time_s, plate, rate)
+        states = integrate_compiled(physics, state0, recording.sample_time_s, plate, rate)
     outputs = physics.outputs(np.moveaxis(states, 0, 1))
     measured = {name: recording.channels[name] for name in outputs}
     with np.errstate(over="ignore", invalid="ignore"):

@@ -18,9 +18,10 @@ import numpy as np
 from estimator.damper import CurveBatch
 from estimator.doctor.catalog import EffectName
 from estimator.doctor.model import FittedModel
-from estimator.dynamics import AxlePhysics, CornerPhysics, QuarterCarPhysics, integrate_rk4
+from estimator.dynamics import AxlePhysics, CornerPhysics, QuarterCarPhysics
 from estimator.output_error import DIVERGED_GAP_M
 from estimator.recording import Recording
+from estimator.simulation_kernel import integrate_compiled
 from estimator.vehicle import TyreModel
 
 
@@ -140,7 +141,7 @@ def simulate_models(
             + np.array([m.value("anti_roll_bar_N_per_m") for m in models]),
         )
     with np.errstate(over="ignore", invalid="ignore"):  # an unstable model is reported as a diverged gap
-        states = integrate_rk4(physics.derivatives, state0, dt, plate, rate)
+        states = integrate_compiled(physics, state0, dt, plate, rate)
         outputs = physics.outputs(np.moveaxis(states, 0, 1))
     predicted: dict[str, np.ndarray] = {}
     residual: dict[str, np.ndarray] = {}

@@ -1,0 +1,255 @@
+"""The compiled output-error simulation (estimator.simulation_kernel) against the Python reference integrator
+(estimator.dynamics.integrate_rk4): random models with fixed seeds, quarter car and axle, every effect the
+doctor simulates, populations of several columns, one diverging model; the trajectories agree to 1e-9
+relative (to each trajectory's amplitude up to that step).
+
+The kernel compiles once per machine (numba's on-disk cache); the cases are short (1.5 s at 1 kHz) so that
+the Python reference stays cheap.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from estimator.damper import CurveBatch, PiecewiseLinearCurve
+from estimator.dynamics import AxlePhysics, CornerPhysics, QuarterCarPhysics, integrate_rk4
+from estimator.simulation_kernel import integrate_compiled
+from estimator.vehicle import TyreModel
+
+SAMPLE_TIME_S = 0.001
+DURATION_S = 1.5
+RELATIVE_TOLERANCE = 1e-9
+GRAVITY_M_S2 = 9.81
+
+
+def assert_same_trajectories(reference: np.ndarray, compiled: np.ndarray) -> None:
+    """Equal to RELATIVE_TOLERANCE of each state variable's (per column) largest magnitude so far, at every
+    step where the reference is finite; the steps where the state is not finite are the same in both."""
+    assert compiled.shape == reference.shape
+    finite = np.isfinite(reference)
+    scale = np.maximum(np.maximum.accumulate(np.where(finite, np.abs(reference), 0.0), axis=0), 1e-12)
+    with np.errstate(invalid="ignore"):  # inf - inf where both diverged; those steps are compared below
+        relative = np.where(finite, np.abs(compiled - reference) / scale, 0.0)
+    print(f"largest relative difference {np.max(relative):.3g}")
+    assert np.max(relative) <= RELATIVE_TOLERANCE, f"largest relative difference {np.max(relative):.3g}"
+    assert np.array_equal(np.all(finite, axis=1), np.all(np.isfinite(compiled), axis=1))
+
+
+def _plate(rng: np.random.Generator, columns: int | None) -> tuple[np.ndarray, np.ndarray]:
+    """A 3-18 Hz chirp of 4-8 mm amplitude (per column when `columns` is given), and its rate."""
+    t = np.arange(round(DURATION_S / SAMPLE_TIME_S) + 1) * SAMPLE_TIME_S
+    shape = (columns, 1) if columns else ()
+    amplitude = rng.uniform(0.004, 0.008, shape)
+    start, end = rng.uniform(2.0, 4.0, shape), rng.uniform(14.0, 18.0, shape)
+    phase = 2 * np.pi * (start * t + 0.5 * (end - start) / DURATION_S * t**2)
+    frequency = start + (end - start) / DURATION_S * t
+    return amplitude * np.sin(phase), amplitude * 2 * np.pi * frequency * np.cos(phase)
+
+
+def _curve_forces(rng: np.random.Generator, grid: np.ndarray, columns: int) -> np.ndarray:
+    """Dissipative, asymmetric curves: force = c·v with c 800-3000 N·s/m in extension, less in compression."""
+    extension = rng.uniform(800.0, 3000.0, columns)
+    compression = extension * rng.uniform(0.3, 0.8, columns)
+    slope = np.where(grid[:, None] > 0, extension, compression)
+    return slope * grid[:, None] * (1.0 + 0.1 * rng.standard_normal((grid.size, columns)))
+
+
+def _grid(rng: np.random.Generator) -> np.ndarray:
+    return np.sort(np.concatenate([[0.0], rng.uniform(-1.0, 1.0, rng.integers(6, 20))]))
+
+
+def _corner(
+    rng: np.random.Generator, columns: int, static_load_N: np.ndarray, tyre_model: TyreModel, effects: bool
+) -> CornerPhysics:
+    grid = _grid(rng)
+    present = (rng.random(columns) < 0.6) if effects else np.zeros(columns, dtype=bool)
+
+    def some(low: float, high: float) -> np.ndarray:
+        return np.where(rng.random(columns) < 0.6, rng.uniform(low, high, columns), 0.0) * effects
+
+    return CornerPhysics(
+        damper=CurveBatch(grid, _curve_forces(rng, grid, columns)),
+        spring_stiffness_N_per_m=rng.uniform(15e3, 40e3, columns),
+        tyre_stiffness_N_per_m=rng.uniform(150e3, 300e3, columns),
+        tyre_model=tyre_model,
+        tyre_damping_Ns_per_m=rng.uniform(100.0, 600.0, columns),
+        maxwell_time_constant_s=float(rng.uniform(0.01, 0.05)),
+        coulomb_friction_N=some(20.0, 150.0),
+        cubic_spring_N_per_m3=some(1e6, 3e7),
+        tyre_liftoff=present,
+        static_wheel_load_N=static_load_N,
+        tyre_dashpot_Ns_per_m=some(50.0, 400.0),
+    )
+
+
+def _quarter_car(seed: int, columns: int, tyre_model: TyreModel, effects: bool) -> QuarterCarPhysics:
+    rng = np.random.default_rng(seed)
+    sprung, unsprung = rng.uniform(150.0, 500.0, columns), rng.uniform(25.0, 60.0, columns)
+    # a lightly loaded wheel (a fraction of the quarter's weight) lifts off within the short chirp
+    load = rng.uniform(0.2, 1.0, columns) * (sprung + unsprung) * GRAVITY_M_S2
+    corner = _corner(rng, columns, load, tyre_model, effects)
+    return QuarterCarPhysics(corner, sprung, unsprung)
+
+
+def _axle(seed: int, columns: int) -> AxlePhysics:
+    rng = np.random.default_rng(seed)
+    sprung, unsprung = rng.uniform(500.0, 1000.0, columns), rng.uniform(30.0, 60.0, columns)
+    load = rng.uniform(0.2, 1.0, columns) * (0.5 * sprung + unsprung) * GRAVITY_M_S2  # lightly loaded
+    return AxlePhysics(
+        _corner(rng, columns, load, TyreModel.MAXWELL, effects=True),
+        _corner(rng, columns, load, TyreModel.MAXWELL, effects=True),
+        sprung,
+        unsprung,
+        rng.uniform(150.0, 400.0, columns),
+        float(rng.uniform(1.3, 1.6)),
+        rng.uniform(0.0, 20e3, columns),
+    )
+
+
+def _both(physics, initial_state, plate_m, rate_m_s) -> tuple[np.ndarray, np.ndarray]:
+    with np.errstate(over="ignore", invalid="ignore"):
+        reference = integrate_rk4(physics.derivatives, initial_state, SAMPLE_TIME_S, plate_m, rate_m_s)
+    return reference, integrate_compiled(physics, initial_state, SAMPLE_TIME_S, plate_m, rate_m_s)
+
+
+def _lifted_off(physics, states: np.ndarray, plate_m: np.ndarray, rate_m_s: np.ndarray) -> np.ndarray:
+    """Per column: whether some corner's contact force reached zero (lift-off clipped it)."""
+    state = np.moveaxis(states, 0, 1)
+    corners = [physics.corner] if isinstance(physics, QuarterCarPhysics) else [physics.left, physics.right]
+    forces = physics.contact_forces_N(state, plate_m, rate_m_s)
+    lifted = np.zeros(state.shape[-1], dtype=bool)
+    for corner, force in zip(corners, forces.values(), strict=True):
+        lifted |= np.any(force <= -corner.static_wheel_load_N + 1e-9, axis=0) & np.asarray(
+            corner.tyre_liftoff
+        )
+    return lifted
+
+
+@pytest.mark.parametrize("seed", [11, 12])
+def test_quarter_car_population_with_every_effect(seed: int) -> None:
+    """Six columns, each its own plate (as the doctor drives them), friction, cubic spring, lift-off and
+    tyre dashpot present in some columns and absent in others."""
+    columns = 6
+    physics = _quarter_car(seed, columns, TyreModel.MAXWELL, effects=True)
+    rng = np.random.default_rng(seed + 100)
+    plate, rate = _plate(rng, columns)
+    state0 = np.vstack([rng.normal(0, 1e-3, (4, columns)), np.zeros((1, columns))])
+    reference, compiled = _both(physics, state0, plate, rate)
+    assert np.all(np.isfinite(reference))
+    assert_same_trajectories(reference, compiled)
+    corner = physics.corner
+    # every effect is exercised somewhere in the population, and lift-off really clipped the force
+    assert np.any(corner.coulomb_friction_N) and np.any(corner.coulomb_friction_N == 0)
+    assert np.any(corner.cubic_spring_N_per_m3) and np.any(corner.tyre_dashpot_Ns_per_m)
+    lifted = _lifted_off(physics, reference, plate.T, rate.T)
+    print(f"seed {seed}: lift-off in {lifted.sum()} of {int(np.sum(corner.tyre_liftoff))} lift-off columns")
+    assert lifted.any()
+
+
+def test_axle_population_with_anti_roll_bar_and_every_effect() -> None:
+    """Five axle models: own curves left and right (different grids), anti-roll bar, roll inertia, and the
+    effects per corner and column; the plate is stacked (left, right) per column."""
+    columns = 5
+    physics = _axle(21, columns)
+    rng = np.random.default_rng(121)
+    left, left_rate = _plate(rng, columns)
+    right, right_rate = _plate(rng, columns)
+    plate, rate = np.stack([left, right]), np.stack([left_rate, right_rate])
+    state0 = np.vstack([rng.normal(0, 1e-3, (8, columns)), np.zeros((2, columns))])
+    reference, compiled = _both(physics, state0, plate, rate)
+    assert np.all(np.isfinite(reference))
+    assert_same_trajectories(reference, compiled)
+    # the roll degree of freedom is excited (left and right plates differ), so the bar acts; wheels lift off
+    assert np.max(np.abs(reference[:, 2, :])) > 1e-4
+    lifted = _lifted_off(physics, reference, plate[:, :, :].transpose(0, 2, 1), rate.transpose(0, 2, 1))
+    print(f"axle: lift-off in {lifted.sum()} of {columns} columns")
+    assert lifted.any()
+
+
+@pytest.mark.parametrize("tyre_model", [TyreModel.MAXWELL, TyreModel.KELVIN_VOIGT, TyreModel.SPRING])
+def test_one_identified_model_each_tyre_model(tyre_model: TyreModel) -> None:
+    """As estimator.output_error drives one identified model: one piecewise-linear curve, scalar
+    parameters, a 1-D state and one plate."""
+    rng = np.random.default_rng(31)
+    grid = _grid(rng)
+    curve = PiecewiseLinearCurve(grid, _curve_forces(rng, grid, 1)[:, 0])
+    corner = CornerPhysics(
+        damper=curve,
+        spring_stiffness_N_per_m=25e3,
+        tyre_stiffness_N_per_m=200e3,
+        tyre_model=tyre_model,
+        tyre_damping_Ns_per_m=350.0,
+        maxwell_time_constant_s=0.03,
+    )
+    physics = QuarterCarPhysics(corner, 320.0, 42.0)
+    plate, rate = _plate(rng, None)
+    reference, compiled = _both(physics, np.array([1e-3, 0.0, -5e-4, 0.01, 0.0]), plate, rate)
+    assert reference.shape == (plate.size, 5)
+    assert_same_trajectories(reference, compiled)
+
+
+def test_axle_one_model_shared_plate_and_population_of_curves() -> None:
+    """As the output-error refinement drives an axle: CurveBatch columns, one (left, right) plate for all."""
+    columns = 4
+    rng = np.random.default_rng(41)
+    corners = []
+    for _ in range(2):
+        grid = _grid(rng)
+        corners.append(
+            CornerPhysics(
+                damper=CurveBatch(grid, _curve_forces(rng, grid, columns)),
+                spring_stiffness_N_per_m=30e3,
+                tyre_stiffness_N_per_m=250e3,
+                tyre_model=TyreModel.MAXWELL,
+                tyre_damping_Ns_per_m=rng.uniform(200.0, 500.0, columns),
+                maxwell_time_constant_s=0.03,
+            )
+        )
+    physics = AxlePhysics(corners[0], corners[1], 700.0, 45.0, 250.0, 1.45, 8e3)
+    left, left_rate = _plate(rng, None)
+    right, right_rate = _plate(rng, None)
+    state0 = np.zeros((10, columns))
+    reference, compiled = _both(physics, state0, np.stack([left, right]), np.stack([left_rate, right_rate]))
+    assert_same_trajectories(reference, compiled)
+
+
+def test_a_diverging_model_in_a_population() -> None:
+    """A column with a strongly negative tyre dashpot (unstable) overflows; the others are unaffected and
+    agree with the reference, and the diverged column is not finite in both from the same step on."""
+    columns = 4
+    base = _quarter_car(51, columns, TyreModel.MAXWELL, effects=False)
+    dashpot = np.array([0.0, -60e3, 0.0, 0.0])
+    physics = QuarterCarPhysics(
+        CornerPhysics(
+            damper=base.corner.damper,
+            spring_stiffness_N_per_m=base.corner.spring_stiffness_N_per_m,
+            tyre_stiffness_N_per_m=base.corner.tyre_stiffness_N_per_m,
+            tyre_model=TyreModel.MAXWELL,
+            tyre_damping_Ns_per_m=base.corner.tyre_damping_Ns_per_m,
+            maxwell_time_constant_s=base.corner.maxwell_time_constant_s,
+            tyre_dashpot_Ns_per_m=dashpot,
+        ),
+        base.sprung_mass_kg,
+        base.unsprung_mass_kg,
+    )
+    plate, rate = _plate(np.random.default_rng(151), None)
+    reference, compiled = _both(physics, np.zeros((5, columns)), plate, rate)
+    finite_reference = np.all(np.isfinite(reference), axis=(0, 1))
+    assert finite_reference.tolist() == [True, False, True, True]
+    first_bad = int(np.flatnonzero(~np.all(np.isfinite(reference[:, :, 1]), axis=1))[0])
+    assert first_bad > 10  # it grew for a while before overflowing: the growth is compared too
+    assert np.all(np.isfinite(compiled[:first_bad, :, 1]))
+    assert np.all(np.isnan(compiled[first_bad + 1 :, :, 1]))
+    assert_same_trajectories(reference, compiled)
+
+
+def test_inputs_it_cannot_simulate_are_refused() -> None:
+    physics = _quarter_car(61, 3, TyreModel.MAXWELL, effects=False)
+    plate, rate = _plate(np.random.default_rng(161), None)
+    with pytest.raises(ValueError, match="initial state"):
+        integrate_compiled(physics, np.zeros((4, 3)), SAMPLE_TIME_S, plate, rate)
+    with pytest.raises(ValueError, match="columns"):
+        integrate_compiled(physics, np.zeros((5, 2)), SAMPLE_TIME_S, plate, rate)
+    with pytest.raises(ValueError, match="plate drive"):
+        integrate_compiled(physics, np.zeros((5, 3)), SAMPLE_TIME_S, np.zeros((2, 3, plate.size)), rate)
