@@ -6,6 +6,12 @@ gap_m: RMS of simulated minus measured over the body and wheel channels (as iden
 response_rms_m: RMS of the measured body and wheel motion about their means (the same channels, pooled);
 gap_ratio: gap_m / response_rms_m, how much of the motion the model gets wrong (0 = all of it right; the
 same vehicle with sensor noise a few µm stays near the noise, another damper leaves a larger share).
+
+A model with effects beyond identify's form (estimator.model_io.ModelWithEffects, the `model` of diagnose
+--json) is simulated with all of them: the force effects are in its physics; with channel effects the
+recording is first corrected (a delayed channel advanced, an offset subtracted: what the model says the
+true motion was), the model driven by the corrected plate, and its motion turned back into what the sensors
+would read before it is compared with the recording as measured (as the doctor computes its gap).
 """
 
 from __future__ import annotations
@@ -15,7 +21,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from estimator.output_error import IdentifiedModel, simulate_identified
+from estimator.doctor.model import ChannelCorrections
+from estimator.model_io import ModelWithEffects
+from estimator.output_error import DIVERGED_GAP_M, IdentifiedModel, simulate_identified
 from estimator.recording import Recording
 from estimator.signals import choose_filters, kinematics
 
@@ -25,19 +33,23 @@ class ValidationResult:
     gap_m: float
     """inf when the model diverges on this plate motion."""
     response_rms_m: float
+    effects: tuple[str, ...] = ()
+    """The effects beyond identify's form that were simulated (estimator.model_io.EFFECT_KEYS)."""
 
     @property
     def gap_ratio(self) -> float:
         return self.gap_m / self.response_rms_m if self.response_rms_m > 0 else math.inf
 
     def to_json(self) -> dict[str, object]:
-        """{gap_m, response_rms_m, gap_ratio, gap_diverged}; a diverged gap and its ratio are null."""
+        """{gap_m, response_rms_m, gap_ratio, gap_diverged, effects}; a diverged gap and its ratio are
+        null; effects: the model's effects beyond identify's form, all simulated ([] for identify's)."""
         finite = math.isfinite(self.gap_m)
         return {
             "gap_m": self.gap_m if finite else None,
             "response_rms_m": self.response_rms_m,
             "gap_ratio": self.gap_ratio if finite and math.isfinite(self.gap_ratio) else None,
             "gap_diverged": not finite,
+            "effects": list(self.effects),
         }
 
 
@@ -52,9 +64,24 @@ def check_model_fits(model: IdentifiedModel, recording: Recording) -> None:
 def validate(model: IdentifiedModel, recording: Recording) -> ValidationResult:
     """Simulate `model` from the recording's plate (its own sample time and length) and compare."""
     check_model_fits(model, recording)
+    effects = model.effects if isinstance(model, ModelWithEffects) else None
+    corrections = (
+        ChannelCorrections(dict(effects.channel_delay_s), dict(effects.sensor_offset_m))
+        if effects is not None
+        else ChannelCorrections()
+    )
     dt = recording.sample_time_s
+    driven = corrections.apply(recording)  # the true motion as the model's channel effects say
     cutoff = choose_filters(recording.channels, dt).kinematics_cutoff_Hz
-    kin = {name: kinematics(x, cutoff, dt) for name, x in recording.channels.items()}
-    simulated = simulate_identified(model, recording, kin)
-    motion = np.stack([x - np.mean(x) for x in simulated.measured.values()])
-    return ValidationResult(float(simulated.gap_m), float(np.sqrt(np.mean(motion**2))))
+    kin = {name: kinematics(x, cutoff, dt) for name, x in driven.channels.items()}
+    simulated = simulate_identified(model, driven, kin)
+    residuals = []
+    with np.errstate(over="ignore", invalid="ignore"):  # a diverging model is reported as such
+        for name, motion in simulated.simulated.items():
+            residuals.append(corrections.distort(name, motion, dt) - recording.channels[name])
+        gap = float(np.sqrt(np.mean(np.stack(residuals) ** 2)))
+    if not (math.isfinite(gap) and gap < DIVERGED_GAP_M):
+        gap = math.inf
+    measured = np.stack([recording.channels[n] - np.mean(recording.channels[n]) for n in simulated.simulated])
+    names = tuple(effects.names) if effects is not None else ()
+    return ValidationResult(gap, float(np.sqrt(np.mean(measured**2))), names)

@@ -5,10 +5,16 @@ candidates judged at every step, the residual analysis before and after, and the
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
+from estimator.doctor.catalog import EffectName
 from estimator.doctor.residuals import Localisation
+from estimator.vehicle import TyreModel
+
+if TYPE_CHECKING:
+    from estimator.doctor.model import FittedModel
 
 
 def _finite_or_none(value: float) -> float | None:
@@ -109,6 +115,8 @@ class DiagnosisResult:
     predicted_before: dict[str, np.ndarray] = field(repr=False)
     time_s: np.ndarray = field(repr=False)
     sweep_frequency_Hz: np.ndarray = field(repr=False)
+    final_model: FittedModel | None = field(default=None, repr=False)
+    """The model after the effects named (None when the diagnosis did not keep it)."""
 
     @property
     def effects_named(self) -> list[str]:
@@ -125,7 +133,8 @@ class DiagnosisResult:
     def to_json(self) -> dict[str, object]:
         """The stable JSON shape: gap_before_m, steps [{effect, gap_before_m, gap_after_m, parameters,
         evidence}], gap_after_m, unexplained; plus the starting and final effects, the expected gap, the
-        conclusion in words and every candidate's score per round."""
+        conclusion in words, every candidate's score per round and `model`: the final model in the form of
+        identify --json's (model_json), which `shockbench validate --model` takes."""
         return {
             "gap_before_m": _finite_or_none(self.gap_before_m),
             "steps": [s.to_json() for s in self.steps],
@@ -138,4 +147,74 @@ class DiagnosisResult:
             "residual_ratio": self.residual_ratio,
             "noise_floor_m": self.noise_floor_m,
             "candidates": [[c.to_json() for c in round_] for round_ in self.rounds],
+            "model": model_json(self.final_model) if self.final_model is not None else None,
         }
+
+
+def _rate_N_per_m(model: FittedModel, name: str) -> float:
+    """A rate as the model has it: the stated one plus the correction a stiffness effect fitted (the
+    FittedModel property of that name where it has one), else the vehicle's."""
+    value = getattr(model, name, None)
+    return float(value if value is not None else getattr(model.vehicle, name))
+
+
+def model_json(model: FittedModel) -> dict[str, object]:
+    """A fitted model of the doctor in the form of identify --json's result (curves, masses_kg,
+    stiffness_N_per_m, tyre_model, tyre damping, ϑ and τ, roll inertia and track for an axle) plus `effects`:
+    what that form has no key for (estimator.model_io's docstring), so that estimator.model_io rebuilds it
+    whole. The tyre: Maxwell when the model has tyre_viscoelastic (a dashpot beside it is an effect),
+    Kelvin-Voigt when it has only the dashpot, a spring otherwise."""
+    vehicle = model.vehicle
+    axle = vehicle.is_axle
+    corners = ["left", "right"] if axle else ["single"]
+    maxwell = model.structure.has(EffectName.TYRE_VISCOELASTIC)
+    dashpot = model.value("tyre_dashpot_Ns_per_m")
+    if maxwell:
+        tyre, damping = TyreModel.MAXWELL, model.maxwell_damping_Ns_per_m
+    elif dashpot:
+        tyre, damping, dashpot = TyreModel.KELVIN_VOIGT, dashpot, 0.0
+    else:
+        tyre, damping = TyreModel.SPRING, 0.0
+    effects: dict[str, object] = {}
+    for key, value in (
+        ("coulomb_friction_N", model.value("coulomb_friction_N")),
+        ("cubic_spring_N_per_m3", model.value("cubic_spring_N_per_m3")),
+        ("tyre_dashpot_Ns_per_m", dashpot),
+    ):
+        if value:
+            effects[key] = value
+    if model.structure.has(EffectName.TYRE_LIFTOFF):
+        effects["tyre_liftoff"] = True
+    corrections = model.corrections
+    if corrections.delay_s:
+        effects["channel_delay_s"] = dict(corrections.delay_s)
+    if corrections.offset_m:
+        effects["sensor_offset_m"] = dict(corrections.offset_m)
+    stiffness: dict[str, object] = {
+        "spring": _rate_N_per_m(model, "spring_stiffness_N_per_m"),
+        "tyre": _rate_N_per_m(model, "tyre_stiffness_N_per_m"),
+        # the rates the doctor found the stated ones contradict (effects spring_stiffness, tyre_stiffness)
+        "identified": [n for n in ("spring", "tyre") if f"{n}_stiffness" in model.structure.labels],
+    }
+    out: dict[str, object] = {
+        "curves": [
+            {"corner": corner, "velocity_m_s": curve.velocity_m_s.tolist(), "force_N": curve.force_N.tolist()}
+            for corner, curve in zip(corners, model.curves, strict=True)
+        ],
+        "masses_kg": {
+            "sprung": model.sprung_mass_kg,
+            "unsprung": (vehicle.mass_kg - model.sprung_mass_kg) / (2 if axle else 1),
+        },
+        "stiffness_N_per_m": stiffness,
+        "tyre_model": tyre.value,
+        "tyre_damping_Ns_per_m": float(damping),
+        "tyre_viscoelastic_coefficient": vehicle.tyre_viscoelastic_coefficient if maxwell else None,
+        "tyre_relaxation_time_s": vehicle.tyre_relaxation_time_s if maxwell else None,
+        "effects": effects,
+    }
+    if axle:
+        bar = vehicle.anti_roll_bar_stiffness_N_per_m + model.value("anti_roll_bar_N_per_m")
+        stiffness["anti_roll_bar"] = bar
+        out["roll_inertia_kg_m2"] = model.roll_inertia_kg_m2
+        out["track_m"] = vehicle.track_m
+    return out

@@ -135,6 +135,7 @@ class IdentifyResult(ResultPart):
     )
     filters: FiltersOut
     roll_inertia_kg_m2: MaybeNumber = Field(None, description="axle: identified roll inertia (kg·m²)")
+    track_m: MaybeNumber = Field(None, description="axle: the wheel track (m), which validate needs")
     refined_gap_m: MaybeNumber = Field(None, description="output-error gap after refinement (option refine)")
     masses_kg_interval: MassesIntervalOut | None = Field(None, description="95% intervals of the masses")
     stiffness_N_per_m_interval: StiffnessIntervalOut | None = Field(
@@ -180,6 +181,38 @@ class CandidateOut(ResultPart):
     verdict: str = Field(description="named, or why not")
 
 
+class ModelCurveOut(ResultPart):
+    corner: str = Field(description="single (quarter car), or left / right (axle)")
+    velocity_m_s: list[float] = Field(description="damper velocity of each point (m/s), ascending")
+    force_N: list[float] = Field(description="damper force at each point (N)")
+
+
+class ModelEffectsOut(ResultPart):
+    """The final model's effects that identify's form has no key for (absent: not in the model)."""
+
+    coulomb_friction_N: float | None = Field(None, description="strut friction at every corner (N)")
+    cubic_spring_N_per_m3: float | None = Field(None, description="progressive spring k3 (N/m³)")
+    tyre_dashpot_Ns_per_m: float | None = Field(None, description="tyre dashpot beside the Maxwell element")
+    tyre_liftoff: bool | None = Field(None, description="the tyre can leave the plate")
+    channel_delay_s: dict[str, float] | None = Field(None, description="channel -> how much it lags (s)")
+    sensor_offset_m: dict[str, float] | None = Field(None, description="channel -> its zero error (m)")
+
+
+class DiagnosisModelOut(ResultPart):
+    """The final model in the form of identify's result, plus its effects: what validate --model takes."""
+
+    curves: list[ModelCurveOut]
+    masses_kg: MassesOut
+    stiffness_N_per_m: StiffnessOut
+    tyre_model: TyreModel
+    tyre_damping_Ns_per_m: MaybeNumber = Field(description="C_d of the tyre model (N·s/m)")
+    tyre_viscoelastic_coefficient: MaybeNumber = Field(None, description="tyre ϑ (Maxwell tyre)")
+    tyre_relaxation_time_s: MaybeNumber = Field(None, description="tyre relaxation time (Maxwell tyre, s)")
+    effects: ModelEffectsOut
+    roll_inertia_kg_m2: MaybeNumber = Field(None, description="axle: roll inertia (kg·m²)")
+    track_m: MaybeNumber = Field(None, description="axle: wheel track (m)")
+
+
 class DiagnoseResult(ResultPart):
     """The result of a diagnosis (`shockbench diagnose --json`)."""
 
@@ -194,6 +227,9 @@ class DiagnoseResult(ResultPart):
     residual_ratio: MaybeNumber
     noise_floor_m: MaybeNumber
     candidates: list[list[CandidateOut]] = Field(description="every candidate's score, per round")
+    model: DiagnosisModelOut | None = Field(
+        None, description="the final model (identify's form plus its effects), for validate --model"
+    )
 
 
 # ---- validate ----------------------------------------------------------------------------------------------
@@ -207,3 +243,6 @@ class ValidateResult(ResultPart):
     response_rms_m: MaybeNumber = Field(description="RMS of the measured body and wheel motion (m)")
     gap_ratio: MaybeNumber = Field(description="gap_m / response_rms_m; null when the model diverged")
     gap_diverged: bool = Field(description="the model diverged when simulated from this plate motion")
+    effects: list[str] = Field(
+        default_factory=list, description="the model's effects beyond identify's form, all simulated"
+    )

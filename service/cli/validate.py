@@ -8,12 +8,12 @@ import argparse
 import json
 import math
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from daq.formats.recording_csv import read_recording_csv
-from estimator.model_io import model_from_json
-from estimator.validation import ValidationResult, validate
 from service.cli.errors import CliError
+
+if TYPE_CHECKING:
+    from estimator.validation import ValidationResult
 
 
 def read_model_json(path: Path) -> dict[str, Any]:
@@ -27,21 +27,27 @@ def read_model_json(path: Path) -> dict[str, Any]:
     except json.JSONDecodeError as exc:
         raise CliError(f"{path}: not JSON ({exc.msg} at line {exc.lineno})") from None
     if not isinstance(data, dict):
-        raise CliError(f"{path}: expected a JSON object (the output of identify --json)")
+        raise CliError(f"{path}: expected a JSON object (the output of identify --json or diagnose --json)")
     return data
 
 
 def summary(result: ValidationResult) -> str:
     gap = f"{result.gap_m * 1e6:.1f} µm RMS" if math.isfinite(result.gap_m) else "diverged"
     ratio = f"{100 * result.gap_ratio:.2f}%" if math.isfinite(result.gap_ratio) else "-"
+    effects = ", ".join(result.effects) or "none"
     return (
         f"gap {gap} (model driven by this recording's plate against its measured body and wheel)\n"
         f"measured body and wheel motion {result.response_rms_m * 1e6:.1f} µm RMS\n"
-        f"gap ratio {ratio} of the motion"
+        f"gap ratio {ratio} of the motion\n"
+        f"effects beyond identify's model, simulated: {effects}"
     )
 
 
 def run_validate(args: argparse.Namespace) -> int:
+    from daq.formats.recording_csv import read_recording_csv
+    from estimator.model_io import model_from_json
+    from estimator.validation import validate
+
     if args.track_m is not None and not args.track_m > 0:
         raise CliError("--track-m must be > 0")
     model = model_from_json(read_model_json(Path(args.model)), track_m=args.track_m)
@@ -55,17 +61,19 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "validate",
         help="cross-validate an identified model on another recording of the same vehicle",
-        description="Simulate the model of RESULT.json (the output of identify --json) driven "
-        "by the recording's plate motion and compare with its measured body and wheel motion: gap_m, "
-        "response_rms_m and gap_ratio = gap / response.",
+        description="Simulate the model of RESULT.json (the output of identify --json, or of diagnose "
+        "--json: its final model with every effect named) driven by the recording's plate motion and "
+        "compare with its measured body and wheel motion: gap_m, response_rms_m and gap_ratio = gap / "
+        "response.",
     )
     p.add_argument("recording", help="recording CSV (any sample rate and length)")
-    p.add_argument("--model", required=True, help="JSON from identify --json")
+    p.add_argument("--model", required=True, help="JSON from identify --json or diagnose --json")
     p.add_argument(
         "--track-m",
         type=float,
         default=None,
-        help="wheel track (m) of an axle model whose JSON does not state track_m",
+        help="wheel track (m) of an axle model: overrides the file's track_m (needed for files "
+        "written before identify stated it)",
     )
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(handler=run_validate)

@@ -37,7 +37,7 @@ def _read_vehicle(text: str, source: str) -> VehicleParameters:
 
 
 def _read_model(text: str, source: str) -> Any:
-    """An identified model from the JSON identify --json prints."""
+    """An identified model from the JSON identify --json (or diagnose --json) prints."""
     from estimator.model_io import model_from_json
 
     try:
@@ -47,9 +47,8 @@ def _read_model(text: str, source: str) -> Any:
     except RecursionError:
         raise ValueError(f"{source}: not valid JSON (nested too deeply)") from None
     if not isinstance(data, dict):
-        raise ValueError(f"{source}: expected a JSON object (the output of identify --json)")
-    track = data.get("track_m") if isinstance(data.get("track_m"), int | float) else None
-    return model_from_json(data, track_m=track)
+        raise ValueError(f"{source}: expected a JSON object (the output of identify or diagnose --json)")
+    return model_from_json(data)
 
 
 VEHICLE_FILE = CompanionFile(
@@ -65,8 +64,9 @@ MODEL_FILE = CompanionFile(
     field="model",
     file_name="model.json",
     media_type="application/json",
-    description="identified model, JSON (UTF-8): the output of `shockbench identify --json`; an axle model "
-    "also needs track_m; its kind must match the recording",
+    description="identified model, JSON (UTF-8): the output of `shockbench identify --json`, or of "
+    "`shockbench diagnose --json` (its `model`, effects included); an axle model states track_m; its kind "
+    "must match the recording",
     read=_read_model,
     vehicle_of=lambda model: model.vehicle,
 )

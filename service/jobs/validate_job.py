@@ -13,8 +13,8 @@ from service.jobs.context import InputError, JobContext, JobOutcome, finite_json
 
 
 class ValidateJobOptions(BaseModel):
-    """A validation takes no options: the model file says everything (an axle model states its track_m).
-    Unknown fields are refused by the submit endpoint."""
+    """A validation takes no options: the model file says everything (an axle model states its track_m, a
+    diagnosis's model its effects). Unknown fields are refused by the submit endpoint."""
 
 
 def check_validate_inputs(options: BaseModel, recording: Recording, model: Any) -> None:

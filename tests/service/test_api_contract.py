@@ -287,10 +287,26 @@ def test_diagnose_results_read_into_the_typed_model_unchanged() -> None:
     typed = DiagnoseResult.model_validate(raw)
     assert same_json(raw, typed) == []
     assert typed.gap_after_m is None and typed.steps[0].gap_after_m is None
+    # the final model (estimator.doctor.result.model_json's form), effects included
+    raw["model"] = {
+        "curves": [{"corner": "single", "velocity_m_s": [-1.0, 1.0], "force_N": [-900.0, 1500.0]}],
+        "masses_kg": {"sprung": 420.0, "unsprung": 45.0},
+        "stiffness_N_per_m": {"spring": 26000.0, "tyre": 210000.0, "identified": []},
+        "tyre_model": "maxwell",
+        "tyre_damping_Ns_per_m": 1100.0,
+        "tyre_viscoelastic_coefficient": 0.97,
+        "tyre_relaxation_time_s": 0.0323,
+        "effects": {"coulomb_friction_N": 95.0, "sensor_offset_m": {"x_r": 0.0005}},
+    }
+    assert same_json(raw, DiagnoseResult.model_validate(raw)) == []
 
 
 def test_validate_results_read_into_the_typed_model_unchanged() -> None:
-    for result in (ValidationResult(4e-5, 2.7e-3), ValidationResult(float("inf"), 2.7e-3)):
+    for result in (
+        ValidationResult(4e-5, 2.7e-3),
+        ValidationResult(float("inf"), 2.7e-3),
+        ValidationResult(4e-5, 2.7e-3, ("coulomb_friction_N", "channel_delay_s")),
+    ):
         raw = finite_json(result.to_json())
         typed = ValidateResult.model_validate(raw)
         assert same_json(raw, typed) == []

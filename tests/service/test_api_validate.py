@@ -68,7 +68,8 @@ def test_a_validation_job_gives_the_gap_on_another_recording(client: httpx.Clien
     done = wait_for_status(client, job["links"]["self"], "succeeded", "failed", "cancelled", timeout_s=600)
     assert done["status"] == "succeeded", done["error"]
     result = done["result"]
-    assert set(result) == {"gap_m", "response_rms_m", "gap_ratio", "gap_diverged"}
+    assert set(result) == {"gap_m", "response_rms_m", "gap_ratio", "gap_diverged", "effects"}
+    assert result["effects"] == []
     assert result["gap_ratio"] == pytest.approx(result["gap_m"] / result["response_rms_m"])
     assert result["gap_ratio"] < 0.05 and result["gap_diverged"] is False  # the same car: 0.015 by the CLI
 

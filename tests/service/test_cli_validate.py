@@ -77,7 +77,8 @@ def test_same_vehicle_small_gap_other_damper_large(
         print(f"gap_ratio same vehicle {same['gap_ratio']:.4f}, at 2 ms {slower['gap_ratio']:.4f}, "
               f"other damper {other['gap_ratio']:.4f}")  # fmt: skip
     for result in (same, slower, other):
-        assert set(result) == {"gap_m", "response_rms_m", "gap_ratio", "gap_diverged"}
+        assert set(result) == {"gap_m", "response_rms_m", "gap_ratio", "gap_diverged", "effects"}
+        assert result["effects"] == []  # identify's model has none beyond its form
         assert result["gap_ratio"] == pytest.approx(result["gap_m"] / result["response_rms_m"])
     assert same["gap_ratio"] < SAME_VEHICLE_MAX_RATIO
     assert slower["gap_ratio"] < SAME_VEHICLE_MAX_RATIO
@@ -89,7 +90,8 @@ def test_same_vehicle_small_gap_other_damper_large(
 
 
 def test_axle_cross_validation(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    """An axle model needs its track (identify's JSON lacks it): --track-m gives it."""
+    """identify's JSON states the axle's track: validate needs no --track-m; --track-m overrides it, and
+    gives the track to a result file written before identify stated it (without, one line, exit 2)."""
     truth = default_axle().known
     vehicle = tmp_path / "axle.toml"
     write_vehicle(vehicle, truth)
@@ -98,16 +100,28 @@ def test_axle_cross_validation(tmp_path: Path, capsys: pytest.CaptureFixture[str
     other = simulate(tmp_path, "other", vehicle, "12", "2", "--damper", "paper-tanh")
     capsys.readouterr()  # what simulate printed
     model = tmp_path / "axle.json"
-    model.write_text(json.dumps(cli_json(capsys, "identify", str(a), "--vehicle", str(vehicle), "--json")))
-    track = str(truth.track_m)
-    same = cli_json(capsys, "validate", str(b), "--model", str(model), "--track-m", track, "--json")
-    worse = cli_json(capsys, "validate", str(other), "--model", str(model), "--track-m", track, "--json")
+    result = cli_json(capsys, "identify", str(a), "--vehicle", str(vehicle), "--json")
+    assert result["track_m"] == truth.track_m
+    model.write_text(json.dumps(result))
+    same = cli_json(capsys, "validate", str(b), "--model", str(model), "--json")
+    worse = cli_json(capsys, "validate", str(other), "--model", str(model), "--json")
     with capsys.disabled():
         print(f"axle gap_ratio same {same['gap_ratio']:.4f}, other left damper {worse['gap_ratio']:.4f}")
     assert same["gap_ratio"] < SAME_VEHICLE_MAX_RATIO
     assert worse["gap_ratio"] > 5 * same["gap_ratio"]
-    assert main(["validate", str(b), "--model", str(model), "--json"]) == 2
-    assert "needs 'track_m'" in capsys.readouterr().err
+    # --track-m overrides the file's track: the same track gives the same gap, a wrong one another
+    track = str(truth.track_m)
+    assert cli_json(capsys, "validate", str(b), "--model", str(model), "--track-m", track, "--json") == same
+    wrong = cli_json(capsys, "validate", str(b), "--model", str(model), "--track-m", "0.5", "--json")
+    assert wrong["gap_m"] != same["gap_m"]
+    # an old result file without track_m: --track-m gives it, else one line naming the key
+    del result["track_m"]
+    old = tmp_path / "old.json"
+    old.write_text(json.dumps(result))
+    assert cli_json(capsys, "validate", str(b), "--model", str(old), "--track-m", track, "--json") == same
+    assert main(["validate", str(b), "--model", str(old), "--json"]) == 2
+    err = capsys.readouterr().err
+    assert "needs 'track_m'" in err and "--track-m" in err and err.count("\n") == 1
 
 
 @pytest.mark.parametrize(
@@ -122,6 +136,8 @@ def test_axle_cross_validation(tmp_path: Path, capsys: pytest.CaptureFixture[str
             or m["stiffness_N_per_m"].update(anti_roll_bar=0.0),
             "the model is for an axle but the recording has quarter-car channels",
         ),
+        (lambda m: m.update(effects={"wheel_wobble_N": 3.0}), "unknown effect 'effects.wheel_wobble_N'"),
+        (lambda m: m.update(effects={"sensor_offset_m": {"x_s_l": 1e-4}}), "names channel 'x_s_l'"),
     ],
 )
 def test_bad_model_is_one_line_exit_2(
