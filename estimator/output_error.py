@@ -1,11 +1,12 @@
 """Output error: simulate the identified model driven by the measured plate motion and compare the predicted
 x_s, x_t with the measured ones. The gap is the RMS over all measured body and wheel channels (metres).
 
-The model is integrated with fixed-step Runge-Kutta at the recording's sample time (estimator.dynamics),
-starting from the measured (low-passed) state at the first sample.
+The model is integrated with fixed-step Runge-Kutta at the recording's sample time (the equations of
+estimator.dynamics, compiled by estimator.simulation_kernel), starting from the measured (low-passed) state
+at the first sample.
 
 A DE refinement of the curve on that gap is offered: the population of candidate models is simulated at
-once (one column per candidate), so a generation costs one simulation of array operations.
+once (one column per candidate), so a generation costs one compiled simulation of all columns.
 """
 
 from __future__ import annotations
@@ -19,8 +20,8 @@ import numpy as np
 from estimator.damper import CurveBatch, PiecewiseLinearCurve
 from estimator.dynamics import AxlePhysics, CornerPhysics, QuarterCarPhysics
 from estimator.recording import Recording
-from estimator.simulation_kernel import integrate_compiled
 from estimator.signals import Kinematics
+from estimator.simulation_kernel import integrate_compiled
 from estimator.solvers.differential_evolution import DEProgress, DESettings, DifferentialEvolution
 from estimator.vehicle import TyreModel, VehicleParameters
 

@@ -2,9 +2,10 @@
 channel effects correct it) and its predicted sensor readings are compared with the measured ones.
 
 The models become the columns of one population (estimator.dynamics takes arrays of parameters), so one
-Runge-Kutta run at the sample time simulates them all, as estimator.output_error does for one model. Every
-model is written with the general tyre (a Maxwell element and a parallel dashpot, either of which may be
-zero), so that models of different structure share one set of equations.
+Runge-Kutta run at the sample time (estimator.simulation_kernel, compiled) simulates them all, as
+estimator.output_error does for one model. Every model is written with the general tyre (a Maxwell element
+and a parallel dashpot, either of which may be zero), so that models of different structure share one set
+of equations.
 
 The gap (m) is the RMS over every measured body and wheel channel of predicted minus measured reading.
 """
