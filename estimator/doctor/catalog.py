@@ -5,7 +5,11 @@ Two kinds of extension:
 
 - *force* effects add unknowns that enter the equations of motion linearly (a column each, see
   estimator.doctor.columns), so the paper's objective stays convex and the exact solver fits them with the
-  damper curve: tyre_damping, tyre_viscoelastic, coulomb_friction, progressive_spring, anti_roll_bar.
+  damper curve: tyre_damping, tyre_viscoelastic, coulomb_friction, progressive_spring, anti_roll_bar, and
+  the corrections of a stated stiffness that the data contradict, spring_stiffness (ΔK_s on the suspension
+  deflection) and tyre_stiffness (ΔK_t on the tyre deflection, zero where the tyre is off the plate). An
+  axle gets one correction for both springs and one for both tyres: the vehicle file states one value for
+  both sides, and a per-side spring correction would share its roll part with anti_roll_bar.
   tyre_liftoff has no unknown: where the tyre would pull on the plate the tyre force is replaced by the
   static wheel load (the contact force cannot go below zero).
 - *channel* effects correct one sensor channel before the equations are built: channel_delay (the channel
@@ -25,7 +29,7 @@ import numpy as np
 from estimator.doctor.columns import EquationSignals
 from estimator.dynamics import COULOMB_SMOOTHING_M_S
 from estimator.recording import Recording
-from estimator.vehicle import VehicleParameters
+from estimator.vehicle import VehicleConstant, VehicleParameters
 
 
 class EffectName(StrEnum):
@@ -37,6 +41,8 @@ class EffectName(StrEnum):
     ANTI_ROLL_BAR = "anti_roll_bar"
     CHANNEL_DELAY = "channel_delay"
     SENSOR_OFFSET = "sensor_offset"
+    SPRING_STIFFNESS = "spring_stiffness"
+    TYRE_STIFFNESS = "tyre_stiffness"
 
 
 @dataclass(frozen=True, order=True)
@@ -57,6 +63,37 @@ MIN_DELAY_S = 1e-4
 """A fitted delay below this (a tenth of a sample at 1 kHz) does not count as a delay."""
 MIN_AIRBORNE_FRACTION = 0.002
 """tyre_liftoff needs the tyre off the plate during at least this fraction of the recording."""
+FRICTION_BAND_M_S = 0.02
+"""With coulomb_friction the damper curve is one straight line over ±this suspension velocity (its grid gets
+knots at ±this and none between), whose slope is tied to the curve's slopes either side
+(estimator.doctor.model.friction_grids, friction_constraints): only the friction term can step at zero
+velocity. Without this the curve's interval across zero (0.01-0.04 m/s wide with the doctor's 30 points)
+turns steep and takes part of the step, and how much it takes changes over the sweep: on an independent
+recording with 131 N of friction the friction fitted on the two halves of the sweep was 316 N and 8 N. The
+band is narrower than a damper's low-speed knee (the SUV table's at 0.04 m/s, the valve models' bleed) and
+wider than the step of strut friction (a few mm/s) and the velocity estimate's noise."""
+MIN_FRICTION_SHARE = 0.025
+"""coulomb_friction needs a friction of at least this share of the peak damper force (half of the 5% the
+doctor must find), and SIGNIFICANCE_Z standard errors: with the band's knots the curve of a clean recording
+fits better too (a knee near zero is followed more closely), and a few newtons of friction are then not
+evidence of friction."""
+MIN_STIFFNESS_CHANGE = 0.08
+"""spring_stiffness and tyre_stiffness need the identified rate to differ from the stated one by at least
+this fraction. The noise-driven 95% band of a stiffness is a fraction of a per cent (estimator.uncertainty),
+but on recordings of a world that is not the estimator's own discretisation a complete model with the right
+rates can identify them off: within 1% on six clean recordings of the independent world, but up to 7% when
+another effect is missing and the rate stands in for part of it (the tyre rate of a recording with a wrong
+spring rate, the spring rate of one with friction). A vehicle file 8% off is within what a maker's tolerance
+and a tyre's pressure account for anyway."""
+SIGNIFICANCE_Z = 3.0
+"""spring_stiffness and tyre_stiffness need the change, coulomb_friction the force, to be at least this many
+standard errors (sandwich covariance with a block long-run variance, estimator.uncertainty): what the data
+cannot tell from zero is not named."""
+STIFFNESS_UNKNOWNS = {
+    VehicleConstant.SPRING: "spring_stiffness_change_N_per_m",
+    VehicleConstant.TYRE: "tyre_stiffness_change_N_per_m",
+}
+"""The unknown each stiffness correction adds to θ: ΔK, the identified rate minus the stated one (N/m)."""
 
 
 @dataclass(frozen=True)
@@ -72,8 +109,25 @@ class Effect:
     channel_kind: str | None = None
     """"delay" or "offset" for channel effects, None for force effects."""
 
-    def instances(self, vehicle: VehicleParameters, recording: Recording) -> list[EffectInstance]:
-        """The ways this effect can be added to a model of this vehicle and recording."""
+    @property
+    def stiffness(self) -> VehicleConstant | None:
+        """The vehicle constant a stiffness correction corrects (None for other effects)."""
+        return {
+            EffectName.SPRING_STIFFNESS: VehicleConstant.SPRING,
+            EffectName.TYRE_STIFFNESS: VehicleConstant.TYRE,
+        }.get(self.name)
+
+    def instances(
+        self,
+        vehicle: VehicleParameters,
+        recording: Recording,
+        identified: frozenset[VehicleConstant] = frozenset(),
+    ) -> list[EffectInstance]:
+        """The ways this effect can be added to a model of this vehicle and recording. identified: the
+        constants the vehicle file did not state (identified from this recording before the diagnosis): a
+        stiffness that was not stated cannot contradict the data."""
+        if self.stiffness is not None:
+            return [] if self.stiffness in identified else [EffectInstance(self.name)]
         if self.name is EffectName.ANTI_ROLL_BAR:
             known_bar = vehicle.anti_roll_bar_stiffness_N_per_m > 0
             return [EffectInstance(self.name)] if vehicle.is_axle and not known_bar else []
@@ -107,6 +161,13 @@ class Effect:
         if self.name is EffectName.ANTI_ROLL_BAR:
             roll = corners[0].deflection_m - corners[1].deflection_m
             return {"anti_roll_bar_N_per_m": signals.suspension_column([roll, -roll])}
+        if self.name is EffectName.SPRING_STIFFNESS:
+            # the deflection as the equations' own spring term has it (raw channels, equation low-pass)
+            series = [c.spring_deflection_m for c in corners]
+            return {STIFFNESS_UNKNOWNS[VehicleConstant.SPRING]: signals.suspension_column(series)}
+        if self.name is EffectName.TYRE_STIFFNESS:
+            series = [c.tyre_deflection_m * k for c, k in zip(corners, contact, strict=True)]
+            return {STIFFNESS_UNKNOWNS[VehicleConstant.TYRE]: signals.tyre_column(series)}
         return {}
 
     def offset_change(self, signals: EquationSignals, airborne: list[np.ndarray]) -> np.ndarray | None:
@@ -148,6 +209,15 @@ class Effect:
             }
         if self.name is EffectName.ANTI_ROLL_BAR:
             return {"anti_roll_bar_stiffness_N_per_m": values["anti_roll_bar_N_per_m"]}
+        if self.stiffness is not None:
+            key = self.stiffness.value
+            change = values[STIFFNESS_UNKNOWNS[self.stiffness]]
+            stated = context.stated_stiffness_N_per_m[self.stiffness]
+            return {
+                f"{key}_stiffness_N_per_m": stated + change,
+                f"stated_{key}_stiffness_N_per_m": stated,
+                "change_percent": 100.0 * change / stated,
+            }
         if self.name is EffectName.TYRE_LIFTOFF:
             return {
                 "static_wheel_load_N": context.static_wheel_load_N,
@@ -175,9 +245,21 @@ class Effect:
         if self.name is EffectName.COULOMB_FRICTION:
             value = values["coulomb_friction_N"]
             limit = context.static_wheel_load_N
-            return (
-                None if 0.0 < value < limit else f"fitted friction {value:.0f} N does not oppose the motion"
-            )
+            if not 0.0 < value < limit:
+                return f"fitted friction {value:.0f} N does not oppose the motion"
+            floor = MIN_FRICTION_SHARE * context.peak_damper_force_N
+            if value < floor:
+                return (
+                    f"fitted friction {value:.0f} N is less than {100 * MIN_FRICTION_SHARE:g}% of the peak "
+                    f"damper force ({floor:.0f} N)"
+                )
+            error = context.standard_error.get("coulomb_friction_N", 0.0)
+            if value < SIGNIFICANCE_Z * error:
+                return (
+                    f"fitted friction {value:.0f} N is within {SIGNIFICANCE_Z:g} standard errors "
+                    f"({error:.0f} N)"
+                )
+            return None
         if self.name is EffectName.PROGRESSIVE_SPRING:
             value = values["cubic_spring_N_per_m3"]
             return (
@@ -186,6 +268,8 @@ class Effect:
         if self.name is EffectName.ANTI_ROLL_BAR:
             value = values["anti_roll_bar_N_per_m"]
             return None if value > 0.0 else f"fitted bar stiffness {value:.0f} N/m is negative"
+        if self.stiffness is not None:
+            return _implausible_stiffness(self.stiffness, values, context)
         if self.name is EffectName.TYRE_LIFTOFF:
             if context.airborne_fraction < MIN_AIRBORNE_FRACTION:
                 return "the tyre never leaves the plate in the fitted model"
@@ -198,15 +282,42 @@ class Effect:
         return None
 
 
+def _implausible_stiffness(
+    constant: VehicleConstant, values: dict[str, float], context: FitContext
+) -> str | None:
+    """A corrected rate must be positive and differ from the stated one by more than the fit's confidence
+    allows (MIN_STIFFNESS_CHANGE, SIGNIFICANCE_Z standard errors)."""
+    change = values[STIFFNESS_UNKNOWNS[constant]]
+    stated = context.stated_stiffness_N_per_m[constant]
+    name = f"{constant.value} rate"
+    if stated + change <= 0.0:
+        return f"the identified {name} {stated + change:.0f} N/m is not positive"
+    if abs(change) < MIN_STIFFNESS_CHANGE * stated:
+        return (
+            f"the identified {name} differs from the stated {stated:.0f} N/m by only "
+            f"{100 * change / stated:+.1f}% (less than {100 * MIN_STIFFNESS_CHANGE:.0f}%)"
+        )
+    error = context.standard_error.get(STIFFNESS_UNKNOWNS[constant], 0.0)
+    if abs(change) < SIGNIFICANCE_Z * error:
+        return f"the change {change:+.0f} N/m is within {SIGNIFICANCE_Z:g} standard errors ({error:.0f} N/m)"
+    return None
+
+
 @dataclass(frozen=True)
 class FitContext:
-    """What reports and plausibility checks need to know about the fitted model besides its values."""
+    """What reports and plausibility checks need to know about the fitted model besides its values.
+    stated_stiffness_N_per_m: the vehicle file's rates; standard_error: of the stiffness corrections and the
+    friction in θ, by unknown name (only where the model has them); peak_damper_force_N: the largest force
+    of the fitted curve(s) over their grid."""
 
     spring_stiffness: float
     static_wheel_load_N: float
     maxwell_time_constant_s: float
     peak_deflection_m: float
     airborne_fraction: float
+    stated_stiffness_N_per_m: dict[VehicleConstant, float]
+    standard_error: dict[str, float]
+    peak_damper_force_N: float
 
 
 CATALOG: dict[EffectName, Effect] = {
@@ -262,6 +373,21 @@ CATALOG: dict[EffectName, Effect] = {
             "a constant residual in the wheel equation and a constant output-error offset",
             "a constant (the zero error of {channel})",
             channel_kind="offset",
+        ),
+        Effect(
+            EffectName.SPRING_STIFFNESS,
+            "the stated spring rate is wrong: the suspension spring is stiffer or softer than the vehicle "
+            "file says (one rate for both springs of an axle)",
+            "suspension residual in phase with the suspension deflection, the same at every deflection "
+            "(a bump stop's grows with its cube), largest around the body resonance",
+            "the suspension deflection",
+        ),
+        Effect(
+            EffectName.TYRE_STIFFNESS,
+            "the stated tyre rate is wrong: the tyre is stiffer or softer than the vehicle file says (one "
+            "rate for both tyres of an axle)",
+            "wheel-equation residual in phase with the tyre deflection, largest around the wheel hop",
+            "the tyre deflection",
         ),
     )
 }

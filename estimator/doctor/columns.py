@@ -34,6 +34,8 @@ class Corner:
     """Suspension deflection ζ = x_s − x_t."""
     velocity_m_s: np.ndarray
     """Suspension velocity v = ẋ_s − ẋ_t (extension positive)."""
+    spring_deflection_m: np.ndarray
+    """ζ as measured (raw channels, for the equations' spring term K_s·ζ)."""
     tyre_deflection_m: np.ndarray
     """Tyre deflection δ = x_t − x_r as measured (raw channels, for the equations' tyre spring term)."""
     tyre_deflection_smooth_m: np.ndarray
@@ -60,6 +62,7 @@ class EquationSignals:
                     suffix=suffix,
                     deflection_m=body.position_m - wheel.position_m,
                     velocity_m_s=body.velocity_m_s - wheel.velocity_m_s,
+                    spring_deflection_m=raw[f"x_s{suffix}"] - raw[f"x_t{suffix}"],
                     tyre_deflection_m=raw[f"x_t{suffix}"] - raw[f"x_r{suffix}"],
                     tyre_deflection_smooth_m=wheel.position_m - plate.position_m,
                     tyre_rate_m_s=wheel.velocity_m_s - plate.velocity_m_s,

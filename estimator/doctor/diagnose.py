@@ -60,7 +60,7 @@ from estimator.doctor.result import CandidateScore, DiagnosisResult, DiagnosisSt
 from estimator.doctor.simulation import BatchOutputError, simulate_models
 from estimator.identify import IdentifyOptions, identify
 from estimator.recording import Recording
-from estimator.vehicle import TyreModel, VehicleParameters
+from estimator.vehicle import TyreModel, VehicleConstant, VehicleParameters
 
 SCREEN_ITERATIONS = 1
 """Gauss-Newton steps a channel effect gets before the screen decides whether to pursue it."""
@@ -176,9 +176,12 @@ class _Doctor:
         options: DiagnoseOptions,
         progress: Callable[[DiagnoseProgress], object] | None,
         cancel: threading.Event | None,
+        identified: frozenset[VehicleConstant] = frozenset(),
     ) -> None:
         self.recording = recording
         self.vehicle = vehicle
+        self.identified = identified
+        """Constants the vehicle file did not state (identified first): no stiffness correction for them."""
         self.options = options
         self.progress = progress
         self.cancel = cancel
@@ -199,7 +202,7 @@ class _Doctor:
         return [
             instance
             for effect in CATALOG.values()
-            for instance in effect.instances(self.vehicle, self.recording)
+            for instance in effect.instances(self.vehicle, self.recording, self.identified)
             if instance not in present
         ]
 
@@ -516,9 +519,10 @@ def diagnose(
 
     Constants the vehicle file does not state (stiffnesses, ϑ) are first identified with the paper's model
     (estimator.identify, Maxwell tyre) and then held fixed like stated ones."""
+    identified = vehicle.unknown
     if vehicle.unknown:
         if progress is not None:
             progress(DiagnoseProgress(0, "identifying the constants the vehicle file does not state"))
         found = identify(recording, vehicle, IdentifyOptions(points=options.points, output_error=False))
         vehicle = found.model.vehicle
-    return _Doctor(recording, vehicle, options, progress, cancel).run()
+    return _Doctor(recording, vehicle, options, progress, cancel, identified).run()

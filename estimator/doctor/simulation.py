@@ -58,8 +58,9 @@ def _corner(models: list[FittedModel], side: int, sample_time_s: float) -> Corne
 
     return CornerPhysics(
         damper=CurveBatch(grid, forces),
-        spring_stiffness_N_per_m=vehicle.spring_stiffness_N_per_m,
-        tyre_stiffness_N_per_m=vehicle.tyre_stiffness_N_per_m,
+        # per model: the stated rates plus the corrections spring_stiffness and tyre_stiffness fitted
+        spring_stiffness_N_per_m=np.array([m.spring_stiffness_N_per_m for m in models]),
+        tyre_stiffness_N_per_m=np.array([m.tyre_stiffness_N_per_m for m in models]),
         tyre_model=TyreModel.MAXWELL,
         tyre_damping_Ns_per_m=np.array([m.maxwell_damping_Ns_per_m for m in models]),
         maxwell_time_constant_s=vehicle.maxwell_time_constant_s(sample_time_s),

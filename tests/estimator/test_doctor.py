@@ -35,7 +35,10 @@ from simulators.vehicle_sim import (
 )
 
 SWEEP_S = 8.0
-CATALOG_NAMES = [name.value for name in EffectName]
+CATALOG_NAMES = [
+    name.value for name in EffectName if name not in (EffectName.SPRING_STIFFNESS, EffectName.TYRE_STIFFNESS)
+]
+"""The effects drawn here; a wrong stated stiffness is drawn in test_doctor_effects.py."""
 HIDDEN_SEEDS = range(12)
 """The first eight draws cover the catalog once in a random order, the rest are drawn at random."""
 ORDER_SEED = 6
@@ -266,7 +269,9 @@ def _parameter_error(case: DoctorCase, result: DiagnosisResult) -> str:
 
 
 def test_the_catalog_has_the_issue_s_stable_names() -> None:
-    assert set(CATALOG_NAMES) == {
+    assert {name.value for name in EffectName} == {
+        "spring_stiffness",
+        "tyre_stiffness",
         "tyre_damping",
         "tyre_viscoelastic",
         "coulomb_friction",
