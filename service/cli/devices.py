@@ -23,15 +23,19 @@ import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import can
-
-from daq.bench_config import BenchConfig, load_bench_config, write_bench_config
-from daq.probe import DEFAULT_TIMEOUT_S, DeviceReport, all_ok, one_line, probe_bench
-from drivers.exciter.urls import CanTarget, parse_exciter_url
 from service.cli.errors import EXIT_FAILED, CliError
-from simulators.devices.sim_bench import VEHICLE_PRESETS, SimulatedBench, vehicle_preset
+
+# simulators.devices.sim_bench.VEHICLE_PRESETS' names and daq.probe.DEFAULT_TIMEOUT_S, named here so that
+# `shockbench --help` does not import the device stack (tests/service/test_cli_lazy_imports.py checks they
+# are the same)
+VEHICLE_PRESET_NAMES = ("quarter-car", "axle")
+PROBE_TIMEOUT_S = 0.5
+
+if TYPE_CHECKING:
+    from daq.bench_config import BenchConfig
+    from daq.probe import DeviceReport
 
 STOP_POLL_S = 0.2
 """How often sim-devices looks at its stop flag (signals set it; this bounds the reaction time)."""
@@ -53,7 +57,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     sim.add_argument(
         "--vehicle-preset",
-        choices=list(VEHICLE_PRESETS),
+        choices=list(VEHICLE_PRESET_NAMES),
         default="quarter-car",
         help="vehicle on the plate (default: quarter-car)",
     )
@@ -96,8 +100,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     probe.add_argument(
         "--timeout-s",
         type=float,
-        default=DEFAULT_TIMEOUT_S,
-        help=f"laser reply timeout per attempt, unless the URL sets one (default: {DEFAULT_TIMEOUT_S})",
+        default=PROBE_TIMEOUT_S,
+        help=f"laser reply timeout per attempt, unless the URL sets one (default: {PROBE_TIMEOUT_S})",
     )
     probe.set_defaults(handler=run_probe)
 
@@ -106,6 +110,12 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run_sim_devices(args: argparse.Namespace) -> int:
+    import can
+
+    from daq.bench_config import write_bench_config
+    from daq.probe import one_line
+    from simulators.devices.sim_bench import SimulatedBench, vehicle_preset
+
     can_interface, can_channel = _can_bus(args.can_url, args.exciter)
     if not args.config.parent.is_dir():
         raise CliError(f"directory {str(args.config.parent)!r} does not exist")
@@ -139,6 +149,8 @@ def run_sim_devices(args: argparse.Namespace) -> int:
 
 
 def _can_bus(url: str | None, exciter: str) -> tuple[str | None, str | None]:
+    from drivers.exciter.urls import CanTarget, parse_exciter_url
+
     if url is None:
         return None, None
     if exciter != "can":
@@ -185,6 +197,9 @@ def _print_served(config: BenchConfig, args: argparse.Namespace) -> None:
 
 
 def run_probe(args: argparse.Namespace) -> int:
+    from daq.bench_config import load_bench_config
+    from daq.probe import all_ok, probe_bench
+
     if not args.timeout_s > 0:
         raise CliError(f"--timeout-s must be > 0, got {args.timeout_s}")
     config = load_bench_config(args.config)

@@ -8,14 +8,14 @@ import json
 import math
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from daq.formats.recording_csv import read_recording_csv
-from daq.formats.vehicle_file import read_vehicle
-from estimator.doctor.diagnose import DiagnoseOptions, DiagnoseProgress, diagnose
-from estimator.doctor.result import DiagnosisResult
 from estimator.vehicle import TyreModel
 from service.cli.errors import CliError
-from service.doctor_report import write_report
+
+if TYPE_CHECKING:
+    from estimator.doctor.diagnose import DiagnoseProgress
+    from estimator.doctor.result import DiagnosisResult
 
 
 def _micro(value: float) -> str:
@@ -53,6 +53,11 @@ def _progress(p: DiagnoseProgress) -> None:
 
 
 def run_diagnose(args: argparse.Namespace) -> int:
+    from daq.formats.recording_csv import read_recording_csv
+    from daq.formats.vehicle_file import read_vehicle
+    from estimator.doctor.diagnose import DiagnoseOptions, diagnose
+    from service.doctor_report import write_report
+
     report = Path(args.report) if args.report else None
     if report is not None and report.exists() and not report.is_dir():
         raise CliError(f"--report {report}: exists and is not a folder")

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import argparse
 
-from daq.storage.hdf5_recording import export_csv
-
 
 def run_export(args: argparse.Namespace) -> int:
+    from daq.storage.hdf5_recording import export_csv
+
     recording = export_csv(args.path, args.out, allow_gaps=args.allow_gaps)
     n = recording.time_s.size
     print(

@@ -7,21 +7,20 @@ import csv
 import json
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import numpy as np
-
-from daq.formats.recording_csv import read_recording_csv, write_recording_csv
-from daq.formats.vehicle_file import read_vehicle, write_vehicle
-from estimator.bandwidth import check_bandwidth
-from estimator.identify import IdentificationResult, IdentifyOptions, Solver, identify
-from estimator.solvers.differential_evolution import DEProgress, DESettings
-from estimator.tanh_fit import MIN_POINTS as MIN_TANH_POINTS
-from estimator.tanh_fit import fit_tanh
 from estimator.vehicle import TyreModel, VehicleConstant, VehicleParameters
 from service.cli.errors import CliError
-from service.jobs.bounds import check_physical_bounds
-from service.plots import save_curve_plot
-from simulators.vehicle_sim import SimulationSettings, default_quarter_car, simulate, true_damper
+
+SOLVERS = ("exact", "de")
+"""estimator.identify.Solver's values, named here so that `shockbench --help` does not import the estimator
+(tests/service/test_cli_lazy_imports.py checks they are the same)."""
+
+if TYPE_CHECKING:
+    import numpy as np
+
+    from estimator.identify import IdentificationResult, IdentifyOptions
+    from estimator.solvers.differential_evolution import DEProgress
 
 
 class _ProgressLine:
@@ -47,6 +46,8 @@ class _ProgressLine:
 
 def summary(result: IdentificationResult) -> str:
     """Readable report of an identification."""
+    import numpy as np
+
     m = result.model
     lines = [
         f"model: {m.vehicle.model.value}, tyre: {m.tyre_model.value}, solver: {result.solver.value}",
@@ -164,6 +165,10 @@ def parse_free(text: str | None, vehicle: VehicleParameters, tyre: TyreModel) ->
 
 
 def options_from_args(args: argparse.Namespace, vehicle: VehicleParameters) -> IdentifyOptions:
+    from estimator.identify import IdentifyOptions, Solver
+    from estimator.solvers.differential_evolution import DESettings
+    from estimator.tanh_fit import MIN_POINTS as MIN_TANH_POINTS
+
     if args.points is not None and not MIN_TANH_POINTS <= args.points <= 60:
         raise CliError(f"--points must lie between {MIN_TANH_POINTS} (the tanh fit needs as many) and 60")
     de = DESettings(generations=args.generations, seed=args.seed)
@@ -179,6 +184,13 @@ def options_from_args(args: argparse.Namespace, vehicle: VehicleParameters) -> I
 
 
 def run_identify(args: argparse.Namespace) -> int:
+    from daq.formats.recording_csv import read_recording_csv
+    from daq.formats.vehicle_file import read_vehicle
+    from estimator.bandwidth import check_bandwidth
+    from estimator.identify import Solver, identify
+    from service.jobs.bounds import check_physical_bounds
+    from service.plots import save_curve_plot
+
     recording = read_recording_csv(args.recording)
     vehicle = read_vehicle(args.vehicle)
     for warning in check_bandwidth(recording).warnings:  # refuses (ValueError, one line) when hopeless
@@ -206,6 +218,8 @@ def run_identify(args: argparse.Namespace) -> int:
 
 
 def read_points_csv(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    import numpy as np
+
     if not path.is_file():
         raise CliError(f"{path}: no such file")
     with path.open(newline="") as handle:
@@ -228,6 +242,8 @@ def read_points_csv(path: Path) -> tuple[np.ndarray, np.ndarray]:
 
 
 def run_fit_tanh(args: argparse.Namespace) -> int:
+    from estimator.tanh_fit import fit_tanh
+
     velocity, force = read_points_csv(Path(args.points_csv))
     fit = fit_tanh(velocity, force)
     if args.json:
@@ -244,6 +260,14 @@ def run_fit_tanh(args: argparse.Namespace) -> int:
 
 def run_demo(args: argparse.Namespace) -> int:
     """The main job on the embedded default bench: simulate a sweep, identify, print, plot."""
+    import numpy as np
+
+    from daq.formats.recording_csv import write_recording_csv
+    from daq.formats.vehicle_file import write_vehicle
+    from estimator.identify import identify
+    from service.plots import save_curve_plot
+    from simulators.vehicle_sim import SimulationSettings, default_quarter_car, simulate, true_damper
+
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     vehicle = default_quarter_car()
@@ -282,7 +306,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--vehicle", required=True, help="vehicle file (TOML)")
     p.add_argument("--tyre", choices=[t.value for t in TyreModel], default="maxwell")
     p.add_argument("--points", type=int, default=None, help="curve points (default 20, axle 10 per side)")
-    p.add_argument("--solver", choices=[s.value for s in Solver], default="exact")
+    p.add_argument("--solver", choices=SOLVERS, default="exact")
     p.add_argument("--generations", type=int, default=3000, help="DE generations (default 3000)")
     p.add_argument("--seed", type=int, default=0, help="DE seed (default 0)")
     p.add_argument("--refine", action="store_true", help="refine the curve by DE on the output-error gap")

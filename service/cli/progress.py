@@ -4,9 +4,11 @@ log file, a plain line at each phase change and every tenth of the run, so logs 
 from __future__ import annotations
 
 import sys
-from typing import TextIO
+from typing import TYPE_CHECKING, TextIO
 
-from daq.sweep.model import SweepProgress
+if TYPE_CHECKING:
+    from daq.sweep.model import SweepProgress
+
 
 BAR_WIDTH = 30
 

@@ -4,20 +4,22 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from daq.formats.recording_csv import write_recording_csv
-from daq.formats.vehicle_file import read_vehicle
 from drivers.exciter.sweep import SweepSettings
 from estimator.vehicle import TyreModel
 from service.cli.errors import CliError
-from simulators.dampers import PAPER_TANH_MAXWELL, load_table, valve_damper
-from simulators.vehicle_sim import SensorModel, SimulatedVehicle, SimulationSettings, simulate
+
+if TYPE_CHECKING:
+    from simulators.vehicle_sim import SimulatedVehicle, SimulationSettings
 
 DAMPER_CHOICES = "valve (embedded valve-model damper), paper-tanh (the paper's Table 3), or a CSV table path"
 
 
 def damper_from_option(value: str):
     """--damper: 'valve', 'valve-weak', 'paper-tanh', or a velocity_m_s,force_N CSV file."""
+    from simulators.dampers import PAPER_TANH_MAXWELL, load_table, valve_damper
+
     if value == "valve":
         return valve_damper()
     if value == "valve-weak":
@@ -73,6 +75,9 @@ SIMULATION_KEYS = ("spring_stiffness_N_per_m", "tyre_stiffness_N_per_m", "tyre_v
 
 
 def simulated_vehicle_from_args(args: argparse.Namespace) -> SimulatedVehicle:
+    from daq.formats.vehicle_file import read_vehicle
+    from simulators.vehicle_sim import SimulatedVehicle
+
     known = read_vehicle(args.vehicle)
     missing = [key for key in SIMULATION_KEYS if getattr(known, key) is None]
     if missing:  # identify finds them from a recording; a simulation needs them as its truth
@@ -93,6 +98,8 @@ def simulated_vehicle_from_args(args: argparse.Namespace) -> SimulatedVehicle:
 
 
 def settings_from_args(args: argparse.Namespace) -> SimulationSettings:
+    from simulators.vehicle_sim import SensorModel, SimulationSettings
+
     if args.seconds <= 0 or args.seconds > 600:
         raise CliError("--seconds must lie in (0, 600]")
     sweep = SweepSettings(
@@ -107,6 +114,9 @@ def settings_from_args(args: argparse.Namespace) -> SimulationSettings:
 
 
 def run_simulate(args: argparse.Namespace) -> int:
+    from daq.formats.recording_csv import write_recording_csv
+    from simulators.vehicle_sim import simulate
+
     vehicle = simulated_vehicle_from_args(args)
     result = simulate(vehicle, settings_from_args(args))
     result.recording.metadata |= {

@@ -16,19 +16,20 @@ moved and nothing was written; 130 interrupted (the plate was stopped, the recor
 from __future__ import annotations
 
 import argparse
-import asyncio
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from daq.bench_config import load_bench_config
-from daq.formats.vehicle_file import read_vehicle
-from daq.sweep.model import DEFAULT_REST_S, DEFAULT_SETTLE_S, SweepOutcome, SweepRequest
-from daq.sweep.pacing import Pacing, RealtimePacing, SimulatedPacing
-from daq.sweep.run import SweepError, run_sweep
 from drivers.exciter.sweep import SweepLaw, SweepSettings
 from service.cli.errors import EXIT_FAILED, CliError
-from service.cli.progress import SweepProgressBar
-from simulators.devices.sim_bench import SimulatedBench, vehicle_preset
+
+SETTLE_S, REST_S = 2.0, 1.0
+"""daq.sweep.model's DEFAULT_SETTLE_S and DEFAULT_REST_S, named here so that `shockbench --help` does not
+import the acquisition stack (tests/service/test_cli_lazy_imports.py checks they are the same)."""
+
+if TYPE_CHECKING:
+    from daq.sweep.model import SweepOutcome, SweepRequest
+    from daq.sweep.pacing import Pacing
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -54,8 +55,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("--duration-s", type=float, default=defaults.duration_s, help="sweep duration (s)")
     parser.add_argument("--law", choices=[law.value for law in SweepLaw], default=defaults.law.value)
-    parser.add_argument("--settle-s", type=float, default=DEFAULT_SETTLE_S, help="recorded after the sweep")
-    parser.add_argument("--rest-s", type=float, default=DEFAULT_REST_S, help="read at rest before (zeroing)")
+    parser.add_argument("--settle-s", type=float, default=SETTLE_S, help="recorded after the sweep")
+    parser.add_argument("--rest-s", type=float, default=REST_S, help="read at rest before (zeroing)")
     parser.add_argument("--operator", default="", help="who runs the sweep (kept in the recording)")
     parser.add_argument("--seed", type=int, default=0, help="--simulated: seed of the laser noise")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -63,6 +64,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _request(args: argparse.Namespace) -> SweepRequest:
+    from daq.sweep.model import SweepRequest
+
     sweep = SweepSettings(
         start_Hz=args.start_hz,
         stop_Hz=args.stop_hz,
@@ -76,6 +79,15 @@ def _request(args: argparse.Namespace) -> SweepRequest:
 
 
 def run_sweep_command(args: argparse.Namespace) -> int:
+    import asyncio
+
+    from daq.bench_config import load_bench_config
+    from daq.formats.vehicle_file import read_vehicle
+    from daq.sweep.pacing import RealtimePacing, SimulatedPacing
+    from daq.sweep.run import SweepError, run_sweep
+    from service.cli.progress import SweepProgressBar
+    from simulators.devices.sim_bench import SimulatedBench, vehicle_preset
+
     request = _request(args)
     vehicle = read_vehicle(args.vehicle)
     bar = None if args.quiet else SweepProgressBar()

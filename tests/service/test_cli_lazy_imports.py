@@ -1,0 +1,73 @@
+"""`shockbench --help` stays light (issue 15: it took 2.5-3.5 s and 158 MB importing scipy.signal,
+scipy.stats and matplotlib through the doctor): the command modules import the estimator, the acquisition
+and device stacks, numpy and the plots inside the command that needs them. Its wall time is measured in
+benchmarks/bench_kernel.py, not here.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+HEAVY = (
+    "numpy",
+    "scipy",
+    "matplotlib",
+    "numba",
+    "estimator.doctor",
+    "estimator.identify",
+    "h5py",
+    "can",
+    "pymodbus",
+    "fastapi",
+    "sqlalchemy",
+)
+
+PROGRAM = """
+import json, sys
+from service.cli.main import main
+try:
+    main({argv!r})
+except SystemExit:
+    pass
+print(json.dumps(sorted(sys.modules)))
+"""
+
+
+def _modules_after(argv: list[str]) -> set[str]:
+    done = subprocess.run(
+        [sys.executable, "-c", PROGRAM.format(argv=argv)], capture_output=True, text=True, timeout=120
+    )
+    assert done.returncode == 0, done.stderr
+    return set(json.loads(done.stdout.strip().splitlines()[-1]))
+
+
+@pytest.mark.parametrize("argv", [["--help"], ["identify", "--help"], ["diagnose", "--help"]])
+def test_help_imports_no_heavy_module(argv: list[str]) -> None:
+    modules = _modules_after(argv)
+    assert "service.cli.identify" in modules and "service.cli.diagnose" in modules  # every command registered
+    heavy = sorted(m for m in modules if any(m == h or m.startswith(h + ".") for h in HEAVY))
+    assert heavy == [], f"shockbench {' '.join(argv)} imports {heavy[:10]}"
+
+
+def test_a_command_still_imports_what_it_needs() -> None:
+    """The check above can fail: running a command (fit-tanh on a missing file) does import the estimator."""
+    modules = _modules_after(["fit-tanh", "/nonexistent/points.csv"])
+    assert "numpy" in modules and "estimator.tanh_fit" in modules
+
+
+def test_the_names_the_parsers_use_equal_the_libraries() -> None:
+    """The few choices and defaults the CLI names itself (to stay light) are the libraries' own."""
+    from daq.probe import DEFAULT_TIMEOUT_S
+    from daq.sweep.model import DEFAULT_REST_S, DEFAULT_SETTLE_S
+    from estimator.identify import Solver
+    from service.cli import devices, identify, sweep
+    from simulators.devices.sim_bench import VEHICLE_PRESETS
+
+    assert tuple(solver.value for solver in Solver) == identify.SOLVERS
+    assert tuple(VEHICLE_PRESETS) == devices.VEHICLE_PRESET_NAMES
+    assert devices.PROBE_TIMEOUT_S == DEFAULT_TIMEOUT_S
+    assert (sweep.SETTLE_S, sweep.REST_S) == (DEFAULT_SETTLE_S, DEFAULT_REST_S)
