@@ -427,7 +427,8 @@ def identify(
             return build(recording, resolved, options.tyre, None, options.nsample, filters, grids, unknown)
 
         def refit(other: LinearResiduals, near: np.ndarray) -> np.ndarray:
-            return newton_refit(other, near, relaxation_time_identified=search_theta).theta
+            bounds = RELAXATION_TIME_BOUNDS_S if search_theta else None
+            return newton_refit(other, near, relaxation_time_bounds_s=bounds).theta
 
         intervals = identification_intervals(
             system, theta, recording.sample_time_s, search_theta, rebuild, refit

@@ -23,7 +23,6 @@ import numpy as np
 import scipy.linalg
 
 from estimator.equations import TYRE_DAMPING, LinearResiduals, maxwell_regressor
-from estimator.relaxation import RELAXATION_TIME_BOUNDS_S
 from estimator.vehicle import coefficient_from_relaxation_time, relaxation_time_from_coefficient
 
 LOG_TAU_STEP = 1e-3
@@ -132,18 +131,18 @@ class _Problem:
 def newton_refit(
     system: LinearResiduals,
     initial: np.ndarray,
-    relaxation_time_identified: bool = False,
+    relaxation_time_bounds_s: tuple[float, float] | None = None,
     tolerance: float = 1e-10,
 ) -> NewtonRefit:
     """Minimise GF of `system` starting from θ = `initial` (a nearby optimum) by damped Newton steps (module
-    docstring); with relaxation_time_identified, τ is an unknown too, starting at the system's ϑ and kept
-    within estimator.relaxation.RELAXATION_TIME_BOUNDS_S. Stops when a step lowers GF by less than
-    `tolerance` (relative) or no halving of it lowers GF."""
-    problem = _Problem(system, relaxation_time_identified)
+    docstring). relaxation_time_bounds_s: τ is an unknown too, starting at the system's ϑ and kept within
+    these bounds (None: ϑ stays as the system has it). Stops when a step lowers GF by less than `tolerance`
+    (relative) or no halving of it lowers GF."""
+    problem = _Problem(system, relaxation_time_bounds_s is not None)
     z = np.asarray(initial, dtype=float) * problem.scale
+    bounds = np.log(relaxation_time_bounds_s) if relaxation_time_bounds_s is not None else None
     if problem.free_tau:
         z = np.append(z, problem.log_tau0)
-    bounds = np.log(RELAXATION_TIME_BOUNDS_S)
     objective = problem.objective(z)
     iterations = 0
     for iterations in range(1, MAX_NEWTON_ITERATIONS + 1):  # noqa: B007
@@ -151,7 +150,7 @@ def newton_refit(
         length, improved = 1.0, False
         for _ in range(MAX_HALVINGS):
             trial = z + length * step
-            if problem.free_tau:
+            if problem.free_tau and bounds is not None:
                 trial[-1] = float(np.clip(trial[-1], *bounds))
             value = problem.objective(trial)
             if value < objective:
