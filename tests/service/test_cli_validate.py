@@ -11,10 +11,12 @@ import pytest
 
 from daq.formats.recording_csv import read_recording_csv, write_recording_csv
 from daq.formats.vehicle_file import read_vehicle, write_vehicle
+from drivers.exciter.sweep import SweepSettings
 from estimator.identify import identify
 from estimator.recording import Recording
 from service.cli.main import main
-from simulators.vehicle_sim import default_axle, default_quarter_car
+from simulators.vehicle_sim import SimulationSettings, default_axle, default_quarter_car, with_effects
+from simulators.vehicle_sim import simulate as simulate_car
 
 SAME_VEHICLE_MAX_RATIO = 0.05
 """gap_ratio of a model on another sweep of its own vehicle (measured: 0.015 quarter car at 1 ms)."""
@@ -161,3 +163,32 @@ def test_unreadable_model_file(quarter_car: Path, capsys: pytest.CaptureFixture[
         assert message in capsys.readouterr().err
     assert main(["validate", str(quarter_car / "b.csv"), "--model", str(tmp_path / "none.json")]) == 2
     assert "no such file" in capsys.readouterr().err
+
+
+def test_the_model_of_diagnose_validates_with_its_effects(
+    plate_offset_files: Path, plate_offset_m: float, capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    """validate takes the whole output of diagnose --json: its final model, with the plate laser's offset
+    the doctor named, explains another sweep of the same car on the same rig better than identify's model,
+    which lacks the offset."""
+    vehicle = plate_offset_files / "vehicle.toml"
+    recording = str(plate_offset_files / "rec.csv")
+    diagnosis = cli_json(capsys, "diagnose", recording, "--vehicle", str(vehicle), "--json")
+    assert diagnosis["model"]["effects"].keys() == {"sensor_offset_m"}
+    doctor_model = tmp_path / "diagnosis.json"
+    doctor_model.write_text(json.dumps(diagnosis))
+    identify_model = tmp_path / "identify.json"
+    identified = cli_json(capsys, "identify", recording, "--vehicle", str(vehicle), "--json")
+    identify_model.write_text(json.dumps(identified))
+    car = with_effects(default_quarter_car(), sensor_offset_m={"x_r": plate_offset_m})
+    other = tmp_path / "other.csv"
+    settings = SimulationSettings(sweep=SweepSettings(duration_s=8.0), seed=4, substeps=2)
+    write_recording_csv(other, simulate_car(car, settings).recording)
+    with_offset = cli_json(capsys, "validate", str(other), "--model", str(doctor_model), "--json")
+    without = cli_json(capsys, "validate", str(other), "--model", str(identify_model), "--json")
+    with capsys.disabled():
+        print(f"gap_ratio diagnose's model {with_offset['gap_ratio']:.4f}, "
+              f"identify's {without['gap_ratio']:.4f}")
+    assert with_offset["effects"] == ["sensor_offset_m"] and without["effects"] == []
+    assert with_offset["gap_ratio"] < SAME_VEHICLE_MAX_RATIO
+    assert with_offset["gap_ratio"] < 0.5 * without["gap_ratio"]
