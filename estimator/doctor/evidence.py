@@ -87,6 +87,15 @@ def _detail(
         return f"the fitted tyre would pull on the plate {share:.1f}% of the time, where the residual sits"
     if name is EffectName.ANTI_ROLL_BAR:
         return "the left and right wheel residuals it explains have opposite signs"
+    if name in (EffectName.SPRING_STIFFNESS, EffectName.TYRE_STIFFNESS):
+        which = "spring" if name is EffectName.SPRING_STIFFNESS else "tyre"
+        values = candidate.parameters(effect)
+        change = float(values["change_percent"])
+        return (
+            f"the data give a {which} rate of {float(values[f'{which}_stiffness_N_per_m']):.0f} N/m, "
+            f"{abs(change):.0f}% {'above' if change > 0 else 'below'} the stated "
+            f"{float(values[f'stated_{which}_stiffness_N_per_m']):.0f} N/m"
+        )
     if name is EffectName.CHANNEL_DELAY:
         delay = candidate.channel_values[effect]
         return f"{effect.channel} lags the other channels by {delay * 1e3:.2f} ms"

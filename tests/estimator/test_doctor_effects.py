@@ -49,6 +49,8 @@ STIFFNESS_ACCURACY = 0.06
 """The identified rate must be within this fraction of the true one (a complete model on this world
 identifies the rates a few per cent off: the curve's representation, the velocity low-pass)."""
 NEW_EFFECTS = {"spring_stiffness", "tyre_stiffness", "coulomb_friction"}
+MAX_STEPS = 2
+"""Rounds of the doctor: one hidden effect, and the lift-off a light corner may show besides (time budget)."""
 
 
 @cache
@@ -66,7 +68,8 @@ def _world(label: str, seed: int) -> tuple[Case, Recording, object, float]:
 @cache
 def _diagnosed(label: str, seed: int) -> tuple[Case, DiagnosisResult, float]:
     case, recording, vehicle, airborne = _world(label, seed)
-    return case, diagnose(recording, vehicle, DiagnoseOptions()), airborne  # type: ignore[arg-type]
+    options = DiagnoseOptions(max_steps=MAX_STEPS)
+    return case, diagnose(recording, vehicle, options), airborne  # type: ignore[arg-type]
 
 
 def _line(case: Case, result: DiagnosisResult) -> str:
@@ -99,6 +102,8 @@ def test_a_hidden_new_effect_is_named_and_the_gap_shrinks(effect: str, hit_rate)
             hit = hit and abs(error) <= STIFFNESS_ACCURACY
             stated = float(step.parameters[f"stated_{key}"])
             assert step.parameters["change_percent"] == pytest.approx(100 * (identified / stated - 1.0))
+            assert f"rate of {identified:.0f} N/m" in step.evidence
+            assert f"the stated {stated:.0f} N/m" in step.evidence
         if step is not None and effect == "coulomb_friction":
             detail = f"; fitted {float(step.parameters['coulomb_friction_N']):.0f} N"
         hit_rate(f"independent world: {effect} named", _line(case, result) + detail, hit)
