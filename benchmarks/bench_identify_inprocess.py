@@ -7,13 +7,15 @@ bias allowances were re-solved by Newton steps from the optimum (estimator.newto
 The recording: the embedded default quarter car (valve-model damper, Maxwell tyre, 5 µm noise), an 11 s
 sweep plus 1 s settling at 1 kHz (12 001 samples); nsample 5000, 20 curve points, exact solver,
 IdentifyOptions(output_error=False). Vehicle files: complete, and mass-only (spring, tyre and ϑ identified).
-Variants, run in turn within each repeat so that the machine's load falls on all alike (median reported):
+Variants, run in turn within each repeat so that the machine's load falls on all alike (median reported),
+each without and with the bands:
 
-- no bands: IdentifyOptions(intervals=False);
-- bands, before: identify without bands plus the bands as they were computed before (the sandwich, and the
-  two bias allowances re-solved from scratch: IRLS on the refined grid from the least-squares point, and
-  with the lowered kinematics cutoff the full ϑ search of estimator.relaxation, or IRLS when ϑ is stated);
-- bands, now: identify as it is (the allowances by Newton steps from the optimum found).
+- before: the joint ϑ search by IRLS alone to its tolerance (estimator.relaxation.NEWTON_HANDOVER set to 0
+  for the run, which is exactly the previous loop), and the bands as they were computed before: the
+  sandwich and the two bias allowances re-solved from scratch (IRLS on the refined grid from the
+  least-squares point; with the lowered kinematics cutoff the whole ϑ search, or IRLS when ϑ is stated);
+- now: identify as it is (IRLS handing over to Newton steps; the allowances by Newton steps from the
+  optimum found, estimator.newton_refit).
 
 It also prints the largest difference between the two bands' half-widths, relative (the same bands).
 """
@@ -29,6 +31,7 @@ from dataclasses import replace
 import numpy as np
 
 from drivers.exciter.sweep import SweepSettings
+from estimator import relaxation
 from estimator.equations import build
 from estimator.identify import IdentificationResult, IdentifyOptions, identify
 from estimator.relaxation import fit_relaxation_time
@@ -95,21 +98,33 @@ def run(recording, vehicle: VehicleParameters, label: str, repeats: int) -> None
     quick = IdentifyOptions(output_error=False, intervals=False)
     full = IdentifyOptions(output_error=False)
     reference = identify(recording, vehicle, full)  # warm-up, and θ to carry the old bands on
-    times: dict[str, list[float]] = {"no bands": [], "bands, before": [], "bands, now": []}
+    handover = relaxation.NEWTON_HANDOVER
+
+    def before(bands: bool):
+        relaxation.NEWTON_HANDOVER = 0.0  # IRLS alone, as before
+        try:
+            result = identify(recording, vehicle, quick)
+            return bands_before(recording, result, reference) if bands else result
+        finally:
+            relaxation.NEWTON_HANDOVER = handover
+
+    variants = {
+        "no bands, before": lambda: before(False),
+        "no bands, now": lambda: identify(recording, vehicle, quick),
+        "bands, before": lambda: before(True),
+        "bands, now": lambda: identify(recording, vehicle, full),
+    }
+    times: dict[str, list[float]] = {name: [] for name in variants}
+    values: dict[str, object] = {}
     for _ in range(repeats):
-        seconds, _ = timed(lambda: identify(recording, vehicle, quick))
-        times["no bands"].append(seconds)
-        seconds, old = timed(lambda: bands_before(recording, identify(recording, vehicle, quick), reference))
-        times["bands, before"].append(seconds)
-        seconds, _ = timed(lambda: identify(recording, vehicle, full))
-        times["bands, now"].append(seconds)
-    old_intervals = old
-    assert reference.intervals is not None
+        for name, variant in variants.items():
+            seconds, values[name] = timed(variant)
+            times[name].append(seconds)
+    old_intervals = values["bands, before"]
+    assert isinstance(old_intervals, Intervals) and reference.intervals is not None
     change = np.max(np.abs(reference.intervals.half_width / old_intervals.half_width - 1.0))
-    medians = {name: statistics.median(values) for name, values in times.items()}
-    base = medians["no bands"]
-    for name, seconds in medians.items():
-        print(f"| {label} | {name} | {seconds:.3f} | {seconds / base:.2f}x |")
+    for name, values_s in times.items():
+        print(f"| {label} | {name} | {statistics.median(values_s):.3f} | {min(values_s):.3f} |")
     print(f"|   | half-widths now vs before: largest relative difference {change:.1e} | | |")
 
 
@@ -129,7 +144,7 @@ def main() -> None:
         known, spring_stiffness_N_per_m=None, tyre_stiffness_N_per_m=None, tyre_viscoelastic_coefficient=None
     )
     print(f"{recording.time_s.size} samples at {recording.sample_time_s * 1e3:g} ms\n")
-    print("| vehicle file | identify | time (s) | vs no bands |")
+    print("| vehicle file | identify | median (s) | fastest (s) |")
     print("|---|---|---:|---:|")
     run(recording, known, "complete", args.repeats)
     run(recording, alone, "mass only", args.repeats)
