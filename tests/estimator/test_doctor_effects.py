@@ -41,7 +41,7 @@ from estimator.vehicle import PAPER_BENCH, VehicleConstant
 from simulators.independent.cases import Case, draw_case, simulate_case
 from simulators.independent.files import write_recording
 
-SWEEP_S = 8.0
+SWEEP_S = 6.0
 EFFECT_SEEDS = {"spring_stiffness": (0,), "tyre_stiffness": (0,), "coulomb_friction": (0,)}
 """Fixed draws of the independent world per hidden class (more in the benchmark)."""
 CONTROL_SEEDS = {"progressive_spring": (0,), "clean": (0,)}
