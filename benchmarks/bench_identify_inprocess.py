@@ -94,7 +94,8 @@ def timed(fn):
     return time.perf_counter() - start, value
 
 
-def run(recording, vehicle: VehicleParameters, label: str, repeats: int) -> None:
+def run(recording, vehicle: VehicleParameters, label: str, repeats: int) -> float:
+    """Prints the table rows of one vehicle file; returns the median of identify with bands, now."""
     quick = IdentifyOptions(output_error=False, intervals=False)
     full = IdentifyOptions(output_error=False)
     reference = identify(recording, vehicle, full)  # warm-up, and θ to carry the old bands on
@@ -126,6 +127,7 @@ def run(recording, vehicle: VehicleParameters, label: str, repeats: int) -> None
     for name, values_s in times.items():
         print(f"| {label} | {name} | {statistics.median(values_s):.3f} | {min(values_s):.3f} |")
     print(f"|   | half-widths now vs before: largest relative difference {change:.1e} | | |")
+    return statistics.median(times["bands, now"])
 
 
 def main() -> None:
@@ -147,8 +149,9 @@ def main() -> None:
     print("| vehicle file | identify | median (s) | fastest (s) |")
     print("|---|---|---:|---:|")
     run(recording, known, "complete", args.repeats)
-    run(recording, alone, "mass only", args.repeats)
-    print(f"\ntarget (mass only, with bands): < {TARGET_S} s")
+    seconds = run(recording, alone, "mass only", args.repeats)
+    verdict = "met" if seconds < TARGET_S else "NOT met"
+    print(f"\nmass only, with bands: {seconds:.3f} s; target < {TARGET_S} s: {verdict}")
 
 
 if __name__ == "__main__":
