@@ -67,6 +67,8 @@ micrometres off it during a 20 Hz sweep) for about half the CPU, so that the sim
 time on a loaded machine (one that falls behind makes every read wait for it) and a manual-clock sweep runs
 about as fast as real time."""
 START_TIMEOUT_S = 10.0
+CLOSE_STEP_TIMEOUT_S = 3.0
+"""Longest wait for the Modbus server's close, then for the loop's cancelled tasks, when the bench closes."""
 SIMULATED_BUFFER_LENGTH = 1000
 """Samples a simulated streaming amplifier keeps (1 s at 1 kHz). A real amplifier samples in hardware
 whatever the host does; a simulated one samples only when its process gets the CPU, so it is given the
@@ -191,7 +193,12 @@ class SimulatedBench:
             self._loop.call_soon_threadsafe(self._loop.stop)
             assert self._loop_thread is not None
             self._loop_thread.join(START_TIMEOUT_S)
-            self._loop.close()
+            if self._loop_thread.is_alive():
+                # a callback that never returns holds the loop: it cannot be closed, and its daemon thread
+                # ends with the process; every server on it was stopped above
+                log.warning("simulated bench: its event loop did not stop within %.0f s", START_TIMEOUT_S)
+            else:
+                self._loop.close()
             self._loop = self._loop_thread = None
         self._config = None
 
@@ -252,11 +259,15 @@ class SimulatedBench:
     async def _close_in_loop(self) -> None:
         """Close the Modbus server, then end every task left on the loop (ticker, connections)."""
         if self.modbus is not None:
-            await self.modbus.close()
+            # pymodbus's close can wait on a connection it is still trying to repeat; the tasks are
+            # cancelled below in any case
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(self.modbus.close(), CLOSE_STEP_TIMEOUT_S)
         tasks = [task for task in asyncio.all_tasks() if task is not asyncio.current_task()]
         for task in tasks:
             task.cancel()
-        await asyncio.gather(*tasks, return_exceptions=True)
+        if tasks:
+            await asyncio.wait(tasks, timeout=CLOSE_STEP_TIMEOUT_S)
 
     def _start_loop(self) -> None:
         self._loop = asyncio.new_event_loop()

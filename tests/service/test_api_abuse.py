@@ -302,13 +302,13 @@ def test_a_body_shorter_than_its_content_length_is_answered_408_and_the_connecti
     server: LiveServer,
 ) -> None:
     host, port = server.url.removeprefix("http://").split(":")
+    began = time.monotonic()  # before the connection: the server's timer may start when it accepts
     with socket.create_connection((host, int(port)), timeout=30) as raw:
         raw.sendall(
             b"POST /api/v1/jobs HTTP/1.1\r\nHost: x\r\nAuthorization: Bearer "
             + OPERATOR.encode()
             + b"\r\nContent-Type: multipart/form-data; boundary=XX\r\nContent-Length: 100000\r\n\r\n--XX\r\n"
         )
-        began = time.monotonic()
         answer = b""
         while chunk := raw.recv(65536):  # the server answers, then closes: recv returns b""
             answer += chunk
