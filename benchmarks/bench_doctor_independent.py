@@ -33,6 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
+from estimator.doctor import DiagnoseOptions
 from simulators.independent.cases import CLASSES, MIN_AIRBORNE_FRACTION, draw_case, simulate_case
 from simulators.independent.files import write_recording
 
@@ -52,6 +53,9 @@ class Outcome:
     simulate_s: float
     doctor_s: float
     conclusion: str
+    residual_ratio: float | None = None
+    """The final model's equation residual over that of a model without missing effects (None in results
+    written before it was recorded)."""
 
     @property
     def said(self) -> str:
@@ -119,6 +123,7 @@ def run_case(label: str, seed: int, folder: str, sweep_s: float) -> Outcome:
         simulate_s,
         doctor_s,
         result.conclusion,
+        data["residual_ratio"],  # type: ignore[arg-type]
     )
 
 
@@ -180,13 +185,23 @@ def print_report(outcomes: list[Outcome]) -> None:
         groups[kind].append(o)
     for kind, rows in groups.items():
         print(f"  {kind}: {sum(o.hit for o in rows)}/{len(rows)}")
-    ratios = [
-        o.gap_after_m / o.expected_gap_m
-        for o in outcomes
-        if o.label == "clean" and o.gap_after_m is not None and o.expected_gap_m
-    ]
-    if ratios:
-        print(f"clean: gap after / expected gap, median {statistics.median(ratios):.1f} (doctor's limit 4)")
+    limits = DiagnoseOptions()
+    for label in ("clean", "outside"):
+        rows = [o for o in outcomes if o.label == label]
+        gap_ratios = [
+            o.gap_after_m / o.expected_gap_m
+            for o in rows
+            if o.gap_after_m is not None and o.expected_gap_m and np.isfinite(o.expected_gap_m)
+        ]
+        residual_ratios = [o.residual_ratio for o in rows if o.residual_ratio is not None]
+        if gap_ratios and residual_ratios:
+            print(
+                f"{label}: gap after / expected gap {min(gap_ratios):.2f}-{max(gap_ratios):.2f} "
+                f"(median {statistics.median(gap_ratios):.2f}; unexplained above "
+                f"{limits.unexplained_gap_ratio:g}), equation residual ratio {min(residual_ratios):.2f}-"
+                f"{max(residual_ratios):.2f} (median {statistics.median(residual_ratios):.2f}; unexplained "
+                f"above {limits.unexplained_residual_ratio:g})"
+            )
     doctor = [o.doctor_s for o in outcomes]
     simulate = [o.simulate_s for o in outcomes]
     print(

@@ -1,0 +1,130 @@
+"""The sensor noise of a recording, measured from the data itself, so that the expected gap's synthetic
+recordings carry noise like the measured one (level, colour and reading resolution), not white noise of a
+level read off the top of the band.
+
+A laser's internal filter colours its noise: a first-order filter makes it an AR(1) process, whose density
+rises towards low frequencies, where the vehicle's response and the equations of motion are. Its density at
+the top of the band (what estimator.signals reads as the noise floor) then understates both the noise's RMS
+and its density in the signal band (AR(1) with ρ 0.67: a quarter of the RMS² at Nyquist, five times the
+white density at zero frequency). Measured on the independent world's clean recordings
+(benchmarks/bench_doctor_independent.py), white bootstrap noise of that level left the expected equation
+residual at a fifth of what the coloured noise gives.
+
+How it is measured: the output residual of the final model (simulated from the measured plate minus the
+measured reading) holds the noise plus the model's own error; the model's error lies in the band the
+vehicle responds in, the noise everywhere. Above NOISE_BAND_FROM × the excitation's top frequency the
+residual's Welch density is fitted, per channel, with an AR(1) density plus a white floor (sensor white noise
+and the reading's quantisation), S(f) = a/(1 − 2ρ·cos ω + ρ²) + b, a, b ≥ 0, ρ on a grid, least squares on
+the density relative to the measured one. The fitted law is extrapolated to the whole band.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import signal
+from scipy.optimize import nnls
+
+NOISE_BAND_FROM = 2.0
+"""The noise is fitted above this multiple of the excitation's top frequency (the vehicle responds below)."""
+LAG1_GRID = np.linspace(0.0, 0.98, 99)
+"""Candidate lag-1 correlations of the AR(1) part."""
+MIN_BINS = 8
+"""Fewest density bins a fit uses; with fewer in the noise band the whole band above 0 Hz is used."""
+
+
+@dataclass(frozen=True)
+class ChannelNoise:
+    """Noise of one channel: an AR(1) part e[n] = ρ·e[n−1] + w[n] of standard deviation coloured_m plus white
+    noise of standard deviation white_m; readings rounded to quantum_m (0: not quantised)."""
+
+    coloured_m: float
+    lag1_correlation: float
+    white_m: float
+    quantum_m: float = 0.0
+
+    @property
+    def rms_m(self) -> float:
+        return float(np.hypot(self.coloured_m, self.white_m))
+
+    def draw(self, samples: int, rng: np.random.Generator) -> np.ndarray:
+        """A stationary sequence of this noise (the AR(1) part started from its stationary law)."""
+        rho = self.lag1_correlation
+        innovation = rng.standard_normal(samples) * self.coloured_m * np.sqrt(1.0 - rho * rho)
+        innovation[0] = innovation[0] / np.sqrt(1.0 - rho * rho)
+        coloured = signal.lfilter([1.0], [1.0, -rho], innovation)
+        return coloured + rng.standard_normal(samples) * self.white_m
+
+    def read(self, true_m: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        """What a sensor with this noise and resolution reads of `true_m`."""
+        reading = true_m + self.draw(true_m.size, rng)
+        if self.quantum_m > 0.0:
+            reading = np.round(reading / self.quantum_m) * self.quantum_m
+        return reading
+
+
+def reading_quantum_m(x: np.ndarray) -> float:
+    """The resolution the readings are rounded to: the smallest step between distinct readings when every
+    reading is a whole multiple of it (0 when the readings are not quantised, or too finely to matter)."""
+    values = np.unique(x)
+    if values.size < 3:
+        return 0.0
+    step = float(np.min(np.diff(values)))
+    if step <= 0.0:
+        return 0.0
+    multiples = x / step
+    if np.max(np.abs(multiples - np.round(multiples))) > 1e-3:
+        return 0.0
+    return step
+
+
+def _ar1_shape(frequency_Hz: np.ndarray, sample_time_s: float, rho: float) -> np.ndarray:
+    omega = 2.0 * np.pi * frequency_Hz * sample_time_s
+    return 1.0 / (1.0 - 2.0 * rho * np.cos(omega) + rho * rho)
+
+
+def measure_channel_noise(
+    residual_m: np.ndarray, sample_time_s: float, band_from_Hz: float, quantum_m: float = 0.0
+) -> ChannelNoise:
+    """The AR(1)-plus-white law fitted to the residual's density above band_from_Hz (module docstring)."""
+    fs = 1.0 / sample_time_s
+    x = residual_m - np.mean(residual_m)
+    nperseg = int(min(x.size, max(256, 2 ** int(np.log2(fs)))))
+    frequency, density = signal.welch(x, fs=fs, nperseg=nperseg)
+    band = (frequency >= band_from_Hz) & (density > 0.0)
+    if np.count_nonzero(band) < MIN_BINS:
+        band = (frequency > 0.0) & (density > 0.0)
+    f, p = frequency[band], density[band]
+    if f.size == 0:
+        return ChannelNoise(0.0, 0.0, 0.0, quantum_m)
+    best: tuple[float, float, float, float] | None = None
+    for rho in LAG1_GRID:
+        shape = _ar1_shape(f, sample_time_s, float(rho))
+        design = np.column_stack([shape / p, 1.0 / p])
+        (a, b), misfit = nnls(design, np.ones(f.size))
+        if best is None or misfit < best[0]:
+            best = (float(misfit), float(rho), float(a), float(b))
+    assert best is not None
+    _, rho, a, b = best
+    # one-sided density of AR(1) with innovation variance s²: 2·s²·Δt / |1 − ρe^{−iω}|²; its variance
+    # s²/(1 − ρ²); white noise of variance σ²: 2·σ²·Δt
+    coloured_variance = a / (2.0 * sample_time_s) / (1.0 - rho * rho)
+    # the rounding of the synthetic readings adds the quantisation's own q²/12 again
+    white_variance = max(0.0, b / (2.0 * sample_time_s) - quantum_m * quantum_m / 12.0)
+    return ChannelNoise(float(np.sqrt(coloured_variance)), rho, float(np.sqrt(white_variance)), quantum_m)
+
+
+def measure_noise(
+    residual_m: dict[str, np.ndarray],
+    measured_m: dict[str, np.ndarray],
+    sample_time_s: float,
+    excitation_top_Hz: float,
+) -> dict[str, ChannelNoise]:
+    """Per channel: the noise of the output residual (module docstring), with the resolution of the
+    channel's measured readings."""
+    band_from = NOISE_BAND_FROM * excitation_top_Hz
+    return {
+        name: measure_channel_noise(r, sample_time_s, band_from, reading_quantum_m(measured_m[name]))
+        for name, r in residual_m.items()
+    }
