@@ -39,10 +39,10 @@ from estimator.solvers.exact import solve_exact
 from estimator.uncertainty import (
     KINEMATICS_CUTOFF_RATIO,
     KINEMATICS_RICHARDSON,
-    RICHARDSON_FACTOR,
     Intervals,
     confidence_intervals,
     refined_grids,
+    richardson_bias,
 )
 from estimator.vehicle import VehicleConstant, VehicleParameters
 from simulators.vehicle_sim import SimulationSettings, default_quarter_car, simulate
@@ -61,15 +61,7 @@ def bands_before(recording, result: IdentificationResult, reference: Identificat
     tyre = result.model.tyre_model
     fine_system = build(recording, vehicle, tyre, None, 5000, system.filters, refined_grids(system), unknown)
     fine = solve_exact(fine_system, tolerance=1e-9, initial=None, certify=False).theta
-    bias = np.zeros(system.n_params)
-    in_curves = np.zeros(system.n_params, bool)
-    for coarse, fine_slice in zip(system.curve_slices, fine_system.curve_slices, strict=True):
-        bias[coarse] = RICHARDSON_FACTOR * np.abs(theta[coarse] - fine[fine_slice][::2])
-        in_curves[coarse] = True
-    for index, name in enumerate(system.parameter_names):
-        if not in_curves[index]:
-            matching = fine[fine_system.parameter_names.index(name)]
-            bias[index] = RICHARDSON_FACTOR * abs(theta[index] - matching)
+    bias = richardson_bias(system, theta, fine_system, fine)
     cutoff = system.filters.kinematics_cutoff_Hz * KINEMATICS_CUTOFF_RATIO
     lower = replace(system.filters, kinematics_cutoff_Hz=cutoff)
     smoother = build(recording, vehicle, tyre, None, 5000, lower, system.grids_m_s, unknown)

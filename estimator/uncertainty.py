@@ -190,16 +190,21 @@ def refined_start(system: LinearResiduals, theta: np.ndarray, refined: LinearRes
     return start
 
 
-def representation_bias(
-    system: LinearResiduals, theta: np.ndarray, refined: LinearResiduals
-) -> np.ndarray:
+def representation_bias(system: LinearResiduals, theta: np.ndarray, refined: LinearResiduals) -> np.ndarray:
     """RICHARDSON_FACTOR·|θ − θ_refined| by unknown of `system`: θ_refined is the same identification on
     the grid with halved intervals (`refined`, built on refined_grids(system) with the same filters and
     samples), compared at the shared unknowns (masses, tyre damping, stiffnesses) and at the original grid
     points. Where the true curve bends between grid points (a knee at 0 m/s) the two differ by about the
     coarse grid's representation error; elsewhere by noise, so the allowance is conservative there."""
-    start = refined_start(system, theta, refined)
-    fine = newton_refit(refined, start).theta
+    fine = newton_refit(refined, refined_start(system, theta, refined)).theta
+    return richardson_bias(system, theta, refined, fine)
+
+
+def richardson_bias(
+    system: LinearResiduals, theta: np.ndarray, refined: LinearResiduals, fine: np.ndarray
+) -> np.ndarray:
+    """RICHARDSON_FACTOR·|θ − fine| by unknown of `system`, `fine` being the optimum on the `refined` grid:
+    curve points compared at the coarse grid's points, the other unknowns by name."""
     bias = np.zeros(system.n_params)
     in_curves = np.zeros(system.n_params, bool)
     for coarse_slice, fine_slice in zip(system.curve_slices, refined.curve_slices, strict=True):
