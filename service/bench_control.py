@@ -85,7 +85,7 @@ class BenchController:
         error = ""
         for attempt in range(1, STARTUP_STOP_ATTEMPTS + 1):  # a second STOP does no harm; a lost one does
             try:
-                asyncio.run(asyncio.wait_for(self._direct_stop(), timeout_s))
+                asyncio.run(asyncio.wait_for(self._direct_command(emergency=False), timeout_s))
             except Exception as exc:
                 error = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
                 log.warning("stop command at start-up, attempt %d: %s", attempt, error)
@@ -97,10 +97,12 @@ class BenchController:
         log.error("%s", message)
         return message
 
-    async def _direct_stop(self) -> None:
+    async def _direct_command(self, emergency: bool) -> None:
+        """Open the drive, send one stop (controlled, or emergency), close it: with no sweep running there
+        is no open driver to send it through."""
         exciter = await self.config.exciter.open(envelope=self.config.safety_envelope())
         try:
-            await exciter.stop()
+            await (exciter.emergency_stop() if emergency else exciter.stop())
         finally:
             await exciter.close()
 
@@ -244,12 +246,5 @@ class BenchController:
                 self._emergency.set()
         if running:
             return "emergency stop requested from the running sweep"
-        asyncio.run(self._direct_emergency_stop())
+        asyncio.run(self._direct_command(emergency=True))
         return "emergency stop sent to the drive"
-
-    async def _direct_emergency_stop(self) -> None:
-        exciter = await self.config.exciter.open(envelope=self.config.safety_envelope())
-        try:
-            await exciter.emergency_stop()
-        finally:
-            await exciter.close()

@@ -161,6 +161,7 @@ def test_emergency_stop_ends_the_running_sweep(client: httpx.Client) -> None:
 
     idle = client.post("/api/v1/emergency-stop")  # nothing running: straight to the drive
     assert idle.status_code == 200 and idle.json()["sweep_id"] is None
+    assert idle.json()["done"] == "emergency stop sent to the drive", idle.text
 
 
 def test_sweep_then_identification_job_finds_the_true_curve(client: httpx.Client) -> None:
