@@ -110,10 +110,12 @@ def _tyre_N(deflection_m: float, rate_m_s: float, maxwell_N: float, corner, code
 
 
 @_scalar
-def _maxwell_rate(rate_m_s: float, maxwell_N: float, corner, code: int) -> float:
-    """CornerPhysics.maxwell_rate for one column."""
+def _maxwell_rate(rate_m_s: float, maxwell_N: float, corner, code: int, tyre_N: float) -> float:
+    """CornerPhysics.maxwell_rate for one column (tyre_N: its _tyre_N; off the plate the element relaxes)."""
     if code != _MAXWELL:
         return 0.0
+    if corner[TYRE_LIFTOFF] != 0.0 and tyre_N <= -corner[STATIC_WHEEL_LOAD_N]:
+        rate_m_s = 0.0
     return (corner[TYRE_DAMPING_NS_PER_M] * rate_m_s - maxwell_N) / corner[MAXWELL_TIME_CONSTANT_S]
 
 
@@ -128,7 +130,7 @@ def _quarter_car_rates(state, plate_m, plate_rate_m_s, body, corner, code, grid,
         -q / body[SPRUNG_KG],
         v_t,
         (q + tyre) / body[UNSPRUNG_KG],
-        _maxwell_rate(v_t - plate_rate_m_s, f_v, corner, code),
+        _maxwell_rate(v_t - plate_rate_m_s, f_v, corner, code, tyre),
         0.0,
         0.0,
         0.0,
@@ -164,8 +166,8 @@ def _axle_rates(
         (q_l + tyre_l) / unsprung,
         v_tr,
         (q_r + tyre_r) / unsprung,
-        _maxwell_rate(v_tl - rate_l, fv_l, left, code_l),
-        _maxwell_rate(v_tr - rate_r, fv_r, right, code_r),
+        _maxwell_rate(v_tl - rate_l, fv_l, left, code_l, tyre_l),
+        _maxwell_rate(v_tr - rate_r, fv_r, right, code_r, tyre_r),
     )
 
 
