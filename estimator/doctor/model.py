@@ -336,16 +336,35 @@ def _airborne(
     signals: EquationSignals, dashpot: float, maxwell: float, stiffness_change: float
 ) -> list[np.ndarray]:
     """Per corner, 1.0 where the tyre force of the fitted tyre (its rate corrected by stiffness_change)
-    would pull on the plate, else 0.0."""
+    would pull on the plate, else 0.0. The Maxwell element is not driven while the tyre is off the plate (it
+    relaxes, as the viscoelastic column and the simulation have it), so with one the samples are decided in
+    order: each sample's element force is the one the previous decisions leave."""
     vehicle = signals.vehicle
+    load = vehicle.static_wheel_load_N
     masks = []
     for corner in signals.corners:
         force = (vehicle.tyre_stiffness_N_per_m + stiffness_change) * corner.tyre_deflection_smooth_m
         if dashpot:
             force = force + dashpot * corner.tyre_rate_m_s
-        if maxwell:
-            force = force + maxwell * signals.maxwell_regressor(corner.tyre_rate_m_s)
-        masks.append((force > vehicle.static_wheel_load_N).astype(float))
+        if not maxwell:
+            masks.append((force > load).astype(float))
+            continue
+        # the bilinear Maxwell recursion of EquationSignals.maxwell_regressor with a gated input
+        dt = signals.sample_time_s
+        tau = vehicle.maxwell_time_constant_s(dt)
+        pole, gain = (2.0 * tau - dt) / (2.0 * tau + dt), dt / (2.0 * tau + dt)
+        rates = corner.tyre_rate_m_s.tolist()
+        spring = force.tolist()
+        airborne = [0.0] * len(rates)
+        state, previous_input = 0.0, 0.0
+        for k, rate in enumerate(rates):
+            relaxed = pole * state + gain * previous_input
+            driven = relaxed + gain * rate
+            if spring[k] + maxwell * driven > load:
+                airborne[k], state, previous_input = 1.0, relaxed, 0.0
+            else:
+                state, previous_input = driven, rate
+        masks.append(np.array(airborne))
     return masks
 
 
