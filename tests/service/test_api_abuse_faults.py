@@ -114,12 +114,23 @@ def plate(bench: SimulatedBench) -> ExciterState:
     return bench.drive.status().state
 
 
+MIN_ROWS_BEFORE_FAULT = 200
+"""Rows with every sample present that a sweep records before a test injects its fault."""
+
+
 def sweeping(client: httpx.Client, bench: SimulatedBench, body: dict[str, Any]) -> dict[str, Any]:
     """Start a sweep and wait until the plate runs."""
     response = client.post("/api/v1/sweeps", json=body)
     assert response.status_code == 201, response.text
     wait_until(lambda: plate(bench) is ExciterState.RUNNING, 60, "the plate running")
     sweep: dict[str, Any] = response.json()
+
+    def recorded_rows() -> int:
+        progress = client.get(sweep["links"]["self"]).json().get("progress") or {}
+        return int(progress.get("rows", 0)) - int(progress.get("gap_rows", 0))
+
+    # a fault before the first samples arrive leaves nothing to keep (seen on a loaded CI machine)
+    wait_until(lambda: recorded_rows() >= MIN_ROWS_BEFORE_FAULT, 60, "samples recorded", 0.05)
     return sweep
 
 
