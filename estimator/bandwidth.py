@@ -63,9 +63,7 @@ def check_bandwidth(recording: Recording) -> BandwidthCheck:
         if key.startswith(RATE_PREFIX) and (rate := _number(metadata, key)) is not None
     }
     grid_Hz = 1.0 / recording.sample_time_s
-    rates = {
-        channel: min(rates.get(channel, grid_Hz), grid_Hz) for channel in sorted(recording.channels)
-    }
+    rates = {channel: min(rates.get(channel, grid_Hz), grid_Hz) for channel in sorted(recording.channels)}
     channel = min(rates, key=rates.__getitem__)
     rate = rates[channel]
     per_period = rate / top_Hz if top_Hz > 0 else math.inf

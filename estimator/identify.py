@@ -338,9 +338,7 @@ def _inspection(
     return result, balance
 
 
-def constants_to_identify(
-    vehicle: VehicleParameters, options: IdentifyOptions
-) -> frozenset[VehicleConstant]:
+def constants_to_identify(vehicle: VehicleParameters, options: IdentifyOptions) -> frozenset[VehicleConstant]:
     """What the recording has to give: the constants the vehicle does not state and those `free` asks for.
     ϑ only with the Maxwell tyre (the other tyre models have no ϑ); the bar only on an axle."""
     wanted = vehicle.unknown | options.free

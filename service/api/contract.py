@@ -35,6 +35,7 @@ CsvFile = Annotated[
 ]
 """An uploaded CSV file (multipart part with a file name)."""
 
+
 def upload_encoding(spec: JobKindSpec) -> dict[str, dict[str, str]]:
     """The multipart encoding of a kind's upload: the media type of each file part."""
     return {

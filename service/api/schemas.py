@@ -145,9 +145,7 @@ JOB_MODELS: dict[str, type[AnyJobOut]] = {
 """The response model of each job kind (service.jobs.kinds.KINDS); a new kind adds its model here."""
 
 
-def job_view(
-    record: JobRecord, live: Progress | None = None, *, with_result: bool = True
-) -> AnyJobOut:
+def job_view(record: JobRecord, live: Progress | None = None, *, with_result: bool = True) -> AnyJobOut:
     """The job as the API shows it: live progress while it runs, the result once it succeeded."""
     base = f"{API_PREFIX}/jobs/{record.id}"
     return JOB_MODELS[record.kind].model_validate(

@@ -47,7 +47,6 @@ class StreamLimit:
             del self._open[key_id]
 
 
-
 class HeldStreamingResponse(StreamingResponse):
     """A StreamingResponse that calls `on_close` once it has ended, however it ended (finished, client
     gone, service stopping): the stream's place under the limit is given back even when the body

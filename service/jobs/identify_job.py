@@ -60,8 +60,7 @@ class IdentifyJobOptions(BaseModel):
     refine: Flag = Field(False, description="refine the curve by DE on the output-error gap (true|false)")
     output_error: Flag = Field(
         True,
-        description="simulate the identified model for the output-error gap (off saves seconds; "
-        "true|false)",
+        description="simulate the identified model for the output-error gap (off saves seconds; true|false)",
     )
 
     def identify_options(self) -> IdentifyOptions:

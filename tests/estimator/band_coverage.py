@@ -34,8 +34,7 @@ class Coverage:
 
     def table(self) -> str:
         rows = [
-            f"  {name:<16} {np.mean(hits) * 100:5.1f}% of {len(hits)}"
-            for name, hits in self.inside.items()
+            f"  {name:<16} {np.mean(hits) * 100:5.1f}% of {len(hits)}" for name, hits in self.inside.items()
         ]
         widths = np.array(self.curve_half_width_percent)
         rows.append(

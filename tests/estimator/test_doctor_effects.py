@@ -135,6 +135,7 @@ def test_a_stiffness_the_file_does_not_state_is_not_a_candidate() -> None:
         (EffectName.TYRE_STIFFNESS, VehicleConstant.TYRE),
     ):
         assert CATALOG[name].instances(PAPER_BENCH, recording, frozenset({constant})) == []
+
     # the doctor's candidates: both rates when the file states them, only the stated one otherwise
     # (diagnose passes the constants it identified first as `identified`)
     def candidates(identified: frozenset[VehicleConstant]) -> set[str]:

@@ -134,8 +134,10 @@ def test_axle_cross_validation(tmp_path: Path, capsys: pytest.CaptureFixture[str
         (lambda m: m["curves"][0].update(force_N=[1.0]), "curves[0].force_N"),
         (lambda m: m.update(tyre_model="rubber"), "'tyre_model' must be one of"),
         (
-            lambda m: m.update(curves=[m["curves"][0]] * 2, roll_inertia_kg_m2=280.0, track_m=1.5)
-            or m["stiffness_N_per_m"].update(anti_roll_bar=0.0),
+            lambda m: (
+                m.update(curves=[m["curves"][0]] * 2, roll_inertia_kg_m2=280.0, track_m=1.5)
+                or m["stiffness_N_per_m"].update(anti_roll_bar=0.0)
+            ),
             "the model is for an axle but the recording has quarter-car channels",
         ),
         (lambda m: m.update(effects={"wheel_wobble_N": 3.0}), "unknown effect 'effects.wheel_wobble_N'"),
@@ -187,8 +189,10 @@ def test_the_model_of_diagnose_validates_with_its_effects(
     with_offset = cli_json(capsys, "validate", str(other), "--model", str(doctor_model), "--json")
     without = cli_json(capsys, "validate", str(other), "--model", str(identify_model), "--json")
     with capsys.disabled():
-        print(f"gap_ratio diagnose's model {with_offset['gap_ratio']:.4f}, "
-              f"identify's {without['gap_ratio']:.4f}")
+        print(
+            f"gap_ratio diagnose's model {with_offset['gap_ratio']:.4f}, "
+            f"identify's {without['gap_ratio']:.4f}"
+        )
     assert with_offset["effects"] == ["sensor_offset_m"] and without["effects"] == []
     assert with_offset["gap_ratio"] < SAME_VEHICLE_MAX_RATIO
     assert with_offset["gap_ratio"] < 0.5 * without["gap_ratio"]
