@@ -1,6 +1,6 @@
 """The output-error simulation compiled: the fixed-step Runge-Kutta of estimator.dynamics (quarter car or
 axle, piecewise-linear dampers, Maxwell / Kelvin-Voigt / spring tyre with a parallel dashpot, Coulomb
-friction, cubic spring, tyre lift-off) for a population of models, one column each, run by numba.
+friction, cubic spring, tyre lift-off) for a population of models, one column each.
 
 Why: the recursion is per sample (the Maxwell state, the damper's segment), so numpy cannot vectorise it
 over time; in a Python loop it was most of `shockbench identify` (about 2.5 s of 3.7 s on 12 s at 1 kHz) and
@@ -15,17 +15,31 @@ the kernel receives them all per column and per corner, so a new per-model quant
 Divergence: a column whose state stops being finite is filled with NaN from that step on (the reference
 carries on with inf/NaN); callers treat both as a diverged model.
 
-The compiled code is cached on disk (numba cache=True, in estimator/__pycache__ or numba's user cache), so
-the compile (a few seconds) is paid once per machine and source version; `compile_ahead()` pays it early.
+Which compiled code runs (the kernel's source is estimator/simulation_kernel_numba.py):
+- the extension built ahead of time, `estimator/_simulation_kernel_aot_<digest>` (numba's pycc, by
+  `compile_ahead()`: `shockbench demo` or `python -m estimator.simulation_kernel`), when it exists for the
+  present source (the digest is of this file and the kernel's). Loading it takes milliseconds: it needs
+  neither numba nor its cache. A process that only runs one identify would otherwise spend 1-3 s importing
+  numba and loading the cached kernel (numba's typing registries), about 100 times the simulation itself;
+- otherwise numba's just-in-time compile, cached on disk (cache=True: the compile, 10-30 s, is paid once
+  per machine and source version; later processes load it from the cache).
+This module imports numba only in the second case.
 """
 
 from __future__ import annotations
 
-import numba
+import hashlib
+import importlib
+import os
+import tempfile
+from collections.abc import Callable
+from functools import cache
+from pathlib import Path
+
 import numpy as np
 
 from estimator.damper import CurveBatch, PiecewiseLinearCurve
-from estimator.dynamics import COULOMB_SMOOTHING_M_S, AxlePhysics, CornerPhysics, QuarterCarPhysics
+from estimator.dynamics import AxlePhysics, CornerPhysics, QuarterCarPhysics
 from estimator.vehicle import TyreModel
 
 # rows of the per-corner parameter table, shape (corners, CORNER_ROWS, columns)
@@ -50,260 +64,44 @@ BODY_ROWS = 5
 
 # tyre models as the kernel knows them (one per corner)
 TYRE_CODES = {TyreModel.MAXWELL: 0, TyreModel.KELVIN_VOIGT: 1, TyreModel.SPRING: 2}
-_MAXWELL, _KELVIN_VOIGT = 0, 1
 
 STATE_SLOTS = 10
 """The kernel carries every model's state in 10 slots (the axle's); a quarter car leaves the last 5 at 0."""
 
-# The per-step functions take and return tuples of floats and 1-D arrays only, and are inlined into the
-# loop: passing numba arrays between functions costs reference counting at every call (25x slower here).
-# They are compiled into _integrate, whose cache holds them.
-_inline = numba.njit(error_model="numpy", inline="always")
-_scalar = numba.njit(error_model="numpy")  # no arrays in or out: LLVM inlines these
+KERNEL_FOLDER = Path(__file__).resolve().parent
+KERNEL_SOURCES = ("simulation_kernel.py", "simulation_kernel_numba.py")
+EXTENSION_PREFIX = "_simulation_kernel_aot_"
 
 
-@_inline
-def _damper_N(velocity_m_s: float, grid_m_s, force_N, slope_Ns_per_m, knots: int) -> float:
-    """CurveBatch.force for one column: the segment is the number of interior knots <= v (a NaN velocity
-    lands in the last segment, as numpy's searchsorted puts it); end segments extend linearly."""
-    low, high = 0, knots - 2
-    while low < high:
-        middle = (low + high) >> 1
-        if velocity_m_s < grid_m_s[middle + 1]:
-            high = middle
-        else:
-            low = middle + 1
-    return force_N[low] + (velocity_m_s - grid_m_s[low]) * slope_Ns_per_m[low]
+def source_digest() -> str:
+    """The kernel's version: a digest of this file and the kernel's source (the table layout is here)."""
+    digest = hashlib.sha256()
+    for name in KERNEL_SOURCES:
+        digest.update((KERNEL_FOLDER / name).read_bytes())
+    return digest.hexdigest()[:16]
 
 
-@_inline
-def _suspension_N(deflection_m: float, velocity_m_s: float, corner, grid, force, slope, knots: int) -> float:
-    """CornerPhysics.suspension_force_N for one column; `corner` is its row of the corner table."""
-    force_N = _damper_N(velocity_m_s, grid, force, slope, knots) + corner[SPRING_N_PER_M] * deflection_m
-    friction = corner[COULOMB_FRICTION_N]
-    if friction != 0.0:
-        force_N = force_N + friction * np.tanh(velocity_m_s / COULOMB_SMOOTHING_M_S)
-    cubic = corner[CUBIC_SPRING_N_PER_M3]
-    if cubic != 0.0:
-        force_N = force_N + cubic * deflection_m**3.0
-    return force_N
+def extension_name() -> str:
+    """The module name of the ahead-of-time extension built from the present source."""
+    return EXTENSION_PREFIX + source_digest()
 
 
-@_scalar
-def _tyre_N(deflection_m: float, rate_m_s: float, maxwell_N: float, corner, code: int) -> float:
-    """CornerPhysics.tyre_force_N for one column."""
-    if code == _KELVIN_VOIGT:
-        viscous = corner[TYRE_DAMPING_NS_PER_M] * rate_m_s
-    elif code == _MAXWELL:
-        viscous = maxwell_N
-    else:
-        viscous = 0.0
-    dashpot = corner[TYRE_DASHPOT_NS_PER_M]
-    if dashpot != 0.0:
-        viscous = viscous + dashpot * rate_m_s
-    force_N = -corner[TYRE_N_PER_M] * deflection_m - viscous
-    if corner[TYRE_LIFTOFF] != 0.0:
-        floor_N = -corner[STATIC_WHEEL_LOAD_N]
-        if force_N < floor_N:  # a NaN force stays NaN, as with np.maximum
-            force_N = floor_N
-    return force_N
+@cache
+def _kernel() -> tuple[str, Callable[..., None]]:
+    """("extension" or "numba", the kernel's integrate function): the extension built ahead of time when
+    it exists for the present source, else numba's just-in-time compile (loaded from its on-disk cache)."""
+    try:
+        extension = importlib.import_module(f"estimator.{extension_name()}")
+        return "extension", extension.integrate
+    except ImportError:  # not built for this source (or for this Python / numpy): numba compiles it
+        from estimator.simulation_kernel_numba import _integrate
+
+        return "numba", _integrate
 
 
-@_scalar
-def _maxwell_rate(rate_m_s: float, maxwell_N: float, corner, code: int, tyre_N: float) -> float:
-    """CornerPhysics.maxwell_rate for one column (tyre_N: its _tyre_N; off the plate the element relaxes)."""
-    if code != _MAXWELL:
-        return 0.0
-    if corner[TYRE_LIFTOFF] != 0.0 and tyre_N <= -corner[STATIC_WHEEL_LOAD_N]:
-        rate_m_s = 0.0
-    return (corner[TYRE_DAMPING_NS_PER_M] * rate_m_s - maxwell_N) / corner[MAXWELL_TIME_CONSTANT_S]
-
-
-@_inline
-def _quarter_car_rates(state, plate_m, plate_rate_m_s, body, corner, code, grid, force, slope, knots):
-    """QuarterCarPhysics.derivatives for one column (state in the first 5 of the 10 slots)."""
-    x_s, v_s, x_t, v_t, f_v = state[0], state[1], state[2], state[3], state[4]
-    q = _suspension_N(x_s - x_t, v_s - v_t, corner, grid, force, slope, knots)
-    tyre = _tyre_N(x_t - plate_m, v_t - plate_rate_m_s, f_v, corner, code)
-    return (
-        v_s,
-        -q / body[SPRUNG_KG],
-        v_t,
-        (q + tyre) / body[UNSPRUNG_KG],
-        _maxwell_rate(v_t - plate_rate_m_s, f_v, corner, code, tyre),
-        0.0,
-        0.0,
-        0.0,
-        0.0,
-        0.0,
-    )
-
-
-@_inline
-def _axle_rates(
-    state, plate_l, plate_r, rate_l, rate_r, body, left, right, code_l, code_r, damper_l, damper_r
-):
-    """AxlePhysics.derivatives for one column; damper_l, damper_r: (grid, force, slope, knots)."""
-    x_g, v_g, roll, roll_rate = state[0], state[1], state[2], state[3]
-    x_tl, v_tl, x_tr, v_tr, fv_l, fv_r = state[4], state[5], state[6], state[7], state[8], state[9]
-    half = 0.5 * body[TRACK_M]
-    zeta_l, zeta_r = x_g + half * roll - x_tl, x_g - half * roll - x_tr
-    vel_l, vel_r = v_g + half * roll_rate - v_tl, v_g - half * roll_rate - v_tr
-    bar = body[ANTI_ROLL_BAR_N_PER_M] * (zeta_l - zeta_r)
-    grid_l, force_l, slope_l, knots_l = damper_l
-    grid_r, force_r, slope_r, knots_r = damper_r
-    q_l = _suspension_N(zeta_l, vel_l, left, grid_l, force_l, slope_l, knots_l) + bar
-    q_r = _suspension_N(zeta_r, vel_r, right, grid_r, force_r, slope_r, knots_r) - bar
-    tyre_l = _tyre_N(x_tl - plate_l, v_tl - rate_l, fv_l, left, code_l)
-    tyre_r = _tyre_N(x_tr - plate_r, v_tr - rate_r, fv_r, right, code_r)
-    unsprung = body[UNSPRUNG_KG]
-    return (
-        v_g,
-        -(q_l + q_r) / body[SPRUNG_KG],
-        roll_rate,
-        -half * (q_l - q_r) / body[ROLL_INERTIA_KG_M2],
-        v_tl,
-        (q_l + tyre_l) / unsprung,
-        v_tr,
-        (q_r + tyre_r) / unsprung,
-        _maxwell_rate(v_tl - rate_l, fv_l, left, code_l, tyre_l),
-        _maxwell_rate(v_tr - rate_r, fv_r, right, code_r, tyre_r),
-    )
-
-
-@_inline
-def _rates(axle: bool, state, plate_m, plate_rate_m_s, body, left, right, code_l, code_r, damper_l, damper_r):
-    """The derivatives of the 10 state slots; plate_m, plate_rate_m_s: (left, right) (a quarter car: left)."""
-    if axle:
-        return _axle_rates(
-            state, plate_m[0], plate_m[1], plate_rate_m_s[0], plate_rate_m_s[1],
-            body, left, right, code_l, code_r, damper_l, damper_r,
-        )  # fmt: skip
-    grid, force, slope, knots = damper_l
-    return _quarter_car_rates(
-        state, plate_m[0], plate_rate_m_s[0], body, left, code_l, grid, force, slope, knots
-    )
-
-
-@_scalar
-def _combine(state, scale: float, rates):
-    """state + scale·rates, slot by slot."""
-    return (
-        state[0] + scale * rates[0], state[1] + scale * rates[1], state[2] + scale * rates[2],
-        state[3] + scale * rates[3], state[4] + scale * rates[4], state[5] + scale * rates[5],
-        state[6] + scale * rates[6], state[7] + scale * rates[7], state[8] + scale * rates[8],
-        state[9] + scale * rates[9],
-    )  # fmt: skip
-
-
-@_scalar
-def _rk4_update(state, sixth_h: float, k1, k2, k3, k4):
-    """state + (h/6)·(k1 + 2·k2 + 2·k3 + k4), slot by slot, summed in rk4_step's order."""
-    total = (
-        k1[0] + 2.0 * k2[0] + 2.0 * k3[0] + k4[0], k1[1] + 2.0 * k2[1] + 2.0 * k3[1] + k4[1],
-        k1[2] + 2.0 * k2[2] + 2.0 * k3[2] + k4[2], k1[3] + 2.0 * k2[3] + 2.0 * k3[3] + k4[3],
-        k1[4] + 2.0 * k2[4] + 2.0 * k3[4] + k4[4], k1[5] + 2.0 * k2[5] + 2.0 * k3[5] + k4[5],
-        k1[6] + 2.0 * k2[6] + 2.0 * k3[6] + k4[6], k1[7] + 2.0 * k2[7] + 2.0 * k3[7] + k4[7],
-        k1[8] + 2.0 * k2[8] + 2.0 * k3[8] + k4[8], k1[9] + 2.0 * k2[9] + 2.0 * k3[9] + k4[9],
-    )  # fmt: skip
-    return _combine(state, sixth_h, total)
-
-
-@_inline
-def _row(table, corner: int, column: int):
-    """One corner's parameters of one column, as a tuple indexed by the row constants."""
-    return (
-        table[corner, 0, column], table[corner, 1, column], table[corner, 2, column],
-        table[corner, 3, column], table[corner, 4, column], table[corner, 5, column],
-        table[corner, 6, column], table[corner, 7, column], table[corner, 8, column],
-    )  # fmt: skip
-
-
-@_inline
-def _store(target, state) -> None:
-    target[0], target[1], target[2], target[3], target[4] = state[0], state[1], state[2], state[3], state[4]
-    target[5], target[6], target[7], target[8], target[9] = state[5], state[6], state[7], state[8], state[9]
-
-
-@numba.njit(cache=True, error_model="numpy")
-def _integrate(
-    axle: bool,
-    initial_state,
-    step_s: float,
-    plate_m,
-    plate_rate_m_s,
-    table,
-    body,
-    tyre_codes,
-    grid_m_s,
-    knots,
-    force_N,
-    slope_Ns_per_m,
-    states,
-) -> None:
-    """integrate_rk4 (midpoints interpolated linearly) for every column into states[column, variable, step].
-
-    initial_state (columns, variables); plate_m, plate_rate_m_s (corners, plate columns, samples), where
-    plate columns is 1 (one drive for all) or one per column; table (corners, CORNER_ROWS, columns); body
-    (BODY_ROWS, columns); grid_m_s (corners, knots), force_N and slope_Ns_per_m (corners, columns, knots)."""
-    columns, variables = initial_state.shape
-    last = plate_m.shape[0] - 1  # the right corner's index (0 for a quarter car)
-    samples = plate_m.shape[2]
-    half_h = 0.5 * step_s
-    sixth_h = step_s / 6.0
-    code_l, code_r = tyre_codes[0], tyre_codes[last]
-    for column in range(columns):
-        drive = 0 if plate_m.shape[1] == 1 else column
-        left, right = _row(table, 0, column), _row(table, last, column)
-        body_row = (
-            body[0, column], body[1, column], body[2, column], body[3, column], body[4, column]
-        )  # fmt: skip
-        damper_l = (grid_m_s[0], force_N[0, column], slope_Ns_per_m[0, column], knots[0])
-        damper_r = (grid_m_s[last], force_N[last, column], slope_Ns_per_m[last, column], knots[last])
-        start = np.zeros(STATE_SLOTS)
-        start[:variables] = initial_state[column]
-        state = (
-            start[0], start[1], start[2], start[3], start[4],
-            start[5], start[6], start[7], start[8], start[9],
-        )  # fmt: skip
-        for i in range(variables):
-            states[column, i, 0] = start[i]
-        current = np.empty(STATE_SLOTS)
-        zero = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
-        for k in range(samples - 1):
-            p0 = (plate_m[0, drive, k], plate_m[last, drive, k])
-            p1 = (plate_m[0, drive, k + 1], plate_m[last, drive, k + 1])
-            r0 = (plate_rate_m_s[0, drive, k], plate_rate_m_s[last, drive, k])
-            r1 = (plate_rate_m_s[0, drive, k + 1], plate_rate_m_s[last, drive, k + 1])
-            pm = (0.5 * (p1[0] + p0[0]), 0.5 * (p1[1] + p0[1]))
-            rm = (0.5 * (r1[0] + r0[0]), 0.5 * (r1[1] + r0[1]))
-            # rk4_step's four stages, written as a loop so that _rates is inlined once (compile time)
-            k1 = k2 = k3 = rates = zero
-            for stage in range(4):
-                if stage == 0:
-                    trial, plate, rate = state, p0, r0
-                elif stage == 3:
-                    trial, plate, rate = _combine(state, step_s, rates), p1, r1
-                else:
-                    trial, plate, rate = _combine(state, half_h, rates), pm, rm
-                rates = _rates(
-                    axle, trial, plate, rate, body_row, left, right, code_l, code_r, damper_l, damper_r
-                )
-                if stage == 0:
-                    k1 = rates
-                elif stage == 1:
-                    k2 = rates
-                elif stage == 2:
-                    k3 = rates
-            state = _rk4_update(state, sixth_h, k1, k2, k3, rates)
-            finite = True
-            _store(current, state)  # constant indices: a tuple indexed at run time compiles slowly
-            for i in range(variables):
-                states[column, i, k + 1] = current[i]
-                finite = finite and np.isfinite(current[i])
-            if not finite:  # diverged: the rest of this column is NaN
-                states[column, :, k + 2 :] = np.nan
-                break
+def kernel_in_use() -> str:
+    """What integrate_compiled runs: "extension" (built ahead of time) or "numba" (just in time)."""
+    return _kernel()[0]
 
 
 def _per_column(value: object, columns: int) -> np.ndarray:
@@ -402,7 +200,7 @@ def integrate_compiled(
     if rate.shape != plate.shape:
         raise ValueError("the plate position and rate must have the same shape")
     states = np.empty((columns, physics.state_size, plate.shape[2]))
-    _integrate(
+    _kernel()[1](
         axle,
         np.ascontiguousarray(initial.T),
         float(step_s),
@@ -421,10 +219,40 @@ def integrate_compiled(
     return trajectories[:, :, 0] if single else trajectories
 
 
-def compile_ahead() -> None:
-    """Compile (or load from the on-disk cache) the kernel on a tiny model, so a user's first identify
-    does not pay the compile."""
+def _warm() -> None:
+    """Run the kernel on a tiny model (numba: compiles it or loads it from the on-disk cache)."""
     curve = PiecewiseLinearCurve(np.array([-1.0, 0.0, 1.0]), np.array([-1000.0, 0.0, 1000.0]))
     corner = CornerPhysics(damper=curve, spring_stiffness_N_per_m=20000.0, tyre_stiffness_N_per_m=200000.0)
     physics = QuarterCarPhysics(corner, 300.0, 40.0)
     integrate_compiled(physics, np.zeros(5), 0.001, np.zeros(3), np.zeros(3))
+
+
+def compile_ahead() -> str:
+    """Build the kernel ahead of time into its extension beside this file, so that no identify or diagnose
+    pays numba's compile or its import (returns "extension"); where that cannot be built (no C compiler,
+    a read-only folder), compile numba's just-in-time kernel into its on-disk cache instead (returns
+    "numba (...)" with the reason).
+    Extensions of older sources are removed. Safe to run in parallel: each build is renamed into place."""
+    name = extension_name()
+    if kernel_in_use() == "extension":
+        return "extension"
+    try:
+        from estimator.simulation_kernel_numba import build_extension
+
+        with tempfile.TemporaryDirectory(prefix="shockbench_kernel_", dir=KERNEL_FOLDER) as scratch:
+            built = build_extension(name, Path(scratch))
+            os.replace(built, KERNEL_FOLDER / built.name)
+    except Exception as exc:  # any failure to build leaves the just-in-time kernel in use
+        _warm()
+        return f"numba (the extension was not built: {exc})"
+    for stale in KERNEL_FOLDER.glob(EXTENSION_PREFIX + "*"):
+        if not stale.name.startswith(name + "."):
+            stale.unlink(missing_ok=True)
+    importlib.invalidate_caches()
+    _kernel.cache_clear()
+    _warm()
+    return kernel_in_use()
+
+
+if __name__ == "__main__":
+    print(f"simulation kernel: {compile_ahead()}")

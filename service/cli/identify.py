@@ -189,7 +189,6 @@ def run_identify(args: argparse.Namespace) -> int:
     from estimator.bandwidth import check_bandwidth
     from estimator.identify import Solver, identify
     from service.jobs.bounds import check_physical_bounds
-    from service.plots import save_curve_plot
 
     recording = read_recording_csv(args.recording)
     vehicle = read_vehicle(args.vehicle)
@@ -211,6 +210,8 @@ def run_identify(args: argparse.Namespace) -> int:
     else:
         print(summary(result))
     if plot is not None:
+        from service.plots import save_curve_plot  # matplotlib: only when a plot is wanted
+
         save_curve_plot(result, plot)
         if not args.json:
             print(f"\nplot: {plot}")
@@ -265,11 +266,14 @@ def run_demo(args: argparse.Namespace) -> int:
     from daq.formats.recording_csv import write_recording_csv
     from daq.formats.vehicle_file import write_vehicle
     from estimator.identify import identify
+    from estimator.simulation_kernel import compile_ahead
     from service.plots import save_curve_plot
     from simulators.vehicle_sim import SimulationSettings, default_quarter_car, simulate, true_damper
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
+    # once per machine and kernel version (10-30 s): later identify and diagnose runs load it in milliseconds
+    print(f"output-error simulation kernel: {compile_ahead()}")
     vehicle = default_quarter_car()
     print(
         f"simulating a {20:g} s sweep 0-20 Hz ±4 mm on the default quarter car "

@@ -3,8 +3,10 @@
 doctor simulates, populations of several columns, one diverging model; the trajectories agree to 1e-9
 relative (to each trajectory's amplitude up to that step).
 
-The kernel compiles once per machine (numba's on-disk cache); the cases are short (1.5 s at 1 kHz) so that
-the Python reference stays cheap.
+Every test runs with both forms of the kernel: the extension built ahead of time (built here by
+compile_ahead when the tree has none for the present source) and numba's just-in-time compile (once per
+machine, numba's on-disk cache). The cases are short (1.5 s at 1 kHz) so that the Python reference stays
+cheap.
 """
 
 from __future__ import annotations
@@ -12,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+import estimator.simulation_kernel as simulation_kernel
 from estimator.damper import CurveBatch, PiecewiseLinearCurve
 from estimator.dynamics import AxlePhysics, CornerPhysics, QuarterCarPhysics, integrate_rk4
 from estimator.simulation_kernel import integrate_compiled
@@ -21,6 +24,38 @@ SAMPLE_TIME_S = 0.001
 DURATION_S = 1.5
 RELATIVE_TOLERANCE = 1e-9
 GRAVITY_M_S2 = 9.81
+
+
+@pytest.fixture(scope="module")
+def extension_kernel():
+    """The ahead-of-time extension's integrate function, built by compile_ahead if missing."""
+    assert simulation_kernel.compile_ahead() == "extension"
+    kind, integrate = simulation_kernel._kernel()
+    assert kind == "extension"
+    return integrate
+
+
+@pytest.fixture(autouse=True, params=["extension", "numba"])
+def kernel(request, monkeypatch, extension_kernel) -> str:
+    """Runs the test with the extension built ahead of time, then with numba's just-in-time kernel."""
+    if request.param == "extension":
+        integrate = extension_kernel
+    else:
+        from estimator.simulation_kernel_numba import _integrate as integrate
+    monkeypatch.setattr(simulation_kernel, "_kernel", lambda: (request.param, integrate))
+    return request.param
+
+
+def test_the_extension_loads_without_numba_and_only_for_its_source(tmp_path) -> None:
+    """A fresh process finds the extension for the present source and never imports numba; the
+    extension's name carries the digest of the kernel's source, so an edited source falls back to numba."""
+    import subprocess
+    import sys
+
+    code = "import sys, estimator.simulation_kernel as k; print(k.kernel_in_use(), 'numba' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.split() == ["extension", "False"]
+    assert simulation_kernel.extension_name().endswith(simulation_kernel.source_digest())
 
 
 def assert_same_trajectories(reference: np.ndarray, compiled: np.ndarray) -> None:
