@@ -26,9 +26,9 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 
 import numpy as np
-from scipy import signal as sps
 
 from estimator.damper import hat_basis
+from estimator.digital_filters import first_order_filter
 from estimator.recording import AXLE_CHANNELS, QUARTER_CAR_CHANNELS, Recording
 from estimator.signals import FilterChoice, Kinematics, choose_filters, derivative, kinematics, lowpass
 from estimator.vehicle import TyreModel, VehicleConstant, VehicleParameters
@@ -145,7 +145,7 @@ def maxwell_regressor(rate_m_s: np.ndarray, theta: float) -> np.ndarray:
     if theta == 0.0:
         return np.asarray(rate_m_s, dtype=float)
     gain = (1.0 - theta) / (1.0 + theta)
-    return sps.lfilter([gain, gain], [1.0, -(3.0 * theta - 1.0) / (1.0 + theta)], rate_m_s)
+    return first_order_filter((gain, gain), -(3.0 * theta - 1.0) / (1.0 + theta), rate_m_s)
 
 
 def tyre_regressor(rate_m_s: np.ndarray, tyre: TyreModel, theta: float | None) -> np.ndarray | None:

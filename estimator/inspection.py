@@ -20,7 +20,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import signal as sps
+
+from estimator.digital_filters import analytic_signal
 
 PHASE_MIN_FREQUENCY_HZ = 5.0
 PHASE_WINDOW_S = 0.5
@@ -56,7 +57,7 @@ def phase_shift_min_deg(
 ) -> float:
     """Minimum of 180° − |arg(F/x_r)| over windows whose plate frequency is >= min_frequency_Hz (nan when the
     sweep never gets there)."""
-    analytic = sps.hilbert(plate_m - np.mean(plate_m))
+    analytic = analytic_signal(plate_m - np.mean(plate_m))
     phase = np.unwrap(np.angle(analytic))
     frequency = np.gradient(phase, sample_time_s) / (2 * np.pi)
     reference = np.exp(-1j * phase)

@@ -1,7 +1,7 @@
 """From measured displacements to velocities and accelerations, with filter settings chosen from the data.
 
-Only displacements are measured. Two zero-phase Butterworth low-passes (scipy.signal, 4th order, run
-forward and backward) are used:
+Only displacements are measured. Two zero-phase Butterworth low-passes (4th order, run forward and
+backward; estimator.digital_filters, scipy.signal's definitions without its import cost) are used:
 
 - the *kinematics* filter (cutoff `kinematics_cutoff_Hz`) before central differences gives the velocities
   used inside nonlinear terms (the damper curve's velocity, the tyre deflection rate), and the states used for
@@ -28,7 +28,8 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
-from scipy import signal
+
+from estimator.digital_filters import butterworth_lowpass_sos, sosfiltfilt, welch_density
 
 SNR_DB = 20.0
 KINEMATICS_CUTOFF_RATIO = 2.0
@@ -53,7 +54,7 @@ class FilterChoice:
 
 def _welch(x: np.ndarray, fs: float) -> tuple[np.ndarray, np.ndarray]:
     nperseg = int(min(x.size, max(256, 2 ** int(np.log2(fs)))))  # ~1 s segments: 1 Hz resolution
-    return signal.welch(x - np.mean(x), fs=fs, nperseg=nperseg)
+    return welch_density(x - np.mean(x), fs, nperseg)
 
 
 def choose_filters(channels: dict[str, np.ndarray], sample_time_s: float) -> FilterChoice:
@@ -89,13 +90,12 @@ def choose_filters(channels: dict[str, np.ndarray], sample_time_s: float) -> Fil
 @lru_cache(maxsize=64)
 def _butterworth(cutoff_Hz: float, sample_time_s: float) -> np.ndarray:
     """The low-pass's second-order sections, designed once per cutoff and sample time."""
-    return signal.butter(FILTER_ORDER, cutoff_Hz, btype="low", fs=1.0 / sample_time_s, output="sos")
+    return butterworth_lowpass_sos(FILTER_ORDER, cutoff_Hz, 1.0 / sample_time_s)
 
 
 def lowpass(x: np.ndarray, cutoff_Hz: float, sample_time_s: float, axis: int = 0) -> np.ndarray:
     """Zero-phase Butterworth low-pass (FILTER_ORDER, forward and backward)."""
-    sos = _butterworth(float(cutoff_Hz), float(sample_time_s)).copy()  # a copy: scipy wants it writable
-    return signal.sosfiltfilt(sos, x, axis=axis)
+    return sosfiltfilt(_butterworth(float(cutoff_Hz), float(sample_time_s)), x, axis=axis)
 
 
 def derivative(x: np.ndarray, sample_time_s: float, axis: int = 0) -> np.ndarray:

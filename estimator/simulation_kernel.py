@@ -16,8 +16,8 @@ Divergence: a column whose state stops being finite is filled with NaN from that
 carries on with inf/NaN); callers treat both as a diverged model.
 
 Which compiled code runs (the kernel's source is estimator/simulation_kernel_numba.py):
-- the extension built ahead of time, `estimator/_simulation_kernel_aot_<digest>` (numba's pycc, by
-  `compile_ahead()`: `shockbench demo` or `python -m estimator.simulation_kernel`), when it exists for the
+- the extension built ahead of time, `estimator/_simulation_kernel_aot_<digest>` (numba's pycc, built by
+  service/kernel_build.py: `shockbench demo` or `python -m service.kernel_build`), when it exists for the
   present source (the digest is of this file and the kernel's). Loading it takes milliseconds: it needs
   neither numba nor its cache. A process that only runs one identify would otherwise spend 1-3 s importing
   numba and loading the cached kernel (numba's typing registries), about 100 times the simulation itself;
@@ -30,11 +30,9 @@ from __future__ import annotations
 
 import hashlib
 import importlib
-import os
-import tempfile
+import importlib.util
 from collections.abc import Callable
 from functools import cache
-from pathlib import Path
 
 import numpy as np
 
@@ -68,16 +66,20 @@ TYRE_CODES = {TyreModel.MAXWELL: 0, TyreModel.KELVIN_VOIGT: 1, TyreModel.SPRING:
 STATE_SLOTS = 10
 """The kernel carries every model's state in 10 slots (the axle's); a quarter car leaves the last 5 at 0."""
 
-KERNEL_FOLDER = Path(__file__).resolve().parent
-KERNEL_SOURCES = ("simulation_kernel.py", "simulation_kernel_numba.py")
+KERNEL_MODULES = ("estimator.simulation_kernel", "estimator.simulation_kernel_numba")
 EXTENSION_PREFIX = "_simulation_kernel_aot_"
 
 
 def source_digest() -> str:
-    """The kernel's version: a digest of this file and the kernel's source (the table layout is here)."""
+    """The kernel's version: a digest of the source of this module (the table layout) and of the kernel's,
+    as the import system reads them (the kernel module is not imported: that would import numba)."""
     digest = hashlib.sha256()
-    for name in KERNEL_SOURCES:
-        digest.update((KERNEL_FOLDER / name).read_bytes())
+    for name in KERNEL_MODULES:
+        spec = importlib.util.find_spec(name)
+        source = spec.loader.get_source(name) if spec is not None and spec.loader is not None else None
+        if source is None:
+            raise ImportError(f"no source for {name}")
+        digest.update(source.encode())
     return digest.hexdigest()[:16]
 
 
@@ -219,40 +221,10 @@ def integrate_compiled(
     return trajectories[:, :, 0] if single else trajectories
 
 
-def _warm() -> None:
-    """Run the kernel on a tiny model (numba: compiles it or loads it from the on-disk cache)."""
+def warm() -> None:
+    """Load the kernel and run it on a tiny model (numba: compiles it or loads it from the on-disk cache), so
+    that a long-lived process (the service's worker) pays that once, at start, not in its first job."""
     curve = PiecewiseLinearCurve(np.array([-1.0, 0.0, 1.0]), np.array([-1000.0, 0.0, 1000.0]))
     corner = CornerPhysics(damper=curve, spring_stiffness_N_per_m=20000.0, tyre_stiffness_N_per_m=200000.0)
     physics = QuarterCarPhysics(corner, 300.0, 40.0)
     integrate_compiled(physics, np.zeros(5), 0.001, np.zeros(3), np.zeros(3))
-
-
-def compile_ahead() -> str:
-    """Build the kernel ahead of time into its extension beside this file, so that no identify or diagnose
-    pays numba's compile or its import (returns "extension"); where that cannot be built (no C compiler,
-    a read-only folder), compile numba's just-in-time kernel into its on-disk cache instead (returns
-    "numba (...)" with the reason).
-    Extensions of older sources are removed. Safe to run in parallel: each build is renamed into place."""
-    name = extension_name()
-    if kernel_in_use() == "extension":
-        return "extension"
-    try:
-        from estimator.simulation_kernel_numba import build_extension
-
-        with tempfile.TemporaryDirectory(prefix="shockbench_kernel_", dir=KERNEL_FOLDER) as scratch:
-            built = build_extension(name, Path(scratch))
-            os.replace(built, KERNEL_FOLDER / built.name)
-    except Exception as exc:  # any failure to build leaves the just-in-time kernel in use
-        _warm()
-        return f"numba (the extension was not built: {exc})"
-    for stale in KERNEL_FOLDER.glob(EXTENSION_PREFIX + "*"):
-        if not stale.name.startswith(name + "."):
-            stale.unlink(missing_ok=True)
-    importlib.invalidate_caches()
-    _kernel.cache_clear()
-    _warm()
-    return kernel_in_use()
-
-
-if __name__ == "__main__":
-    print(f"simulation kernel: {compile_ahead()}")

@@ -3,14 +3,13 @@ car or axle, piecewise-linear dampers, Maxwell / Kelvin-Voigt / spring tyre with
 friction, cubic spring, tyre lift-off) for a population of models, one column each.
 
 Callers use estimator.simulation_kernel (integrate_compiled), which lays the models out in the tables this
-kernel reads and runs it either as built ahead of time into a Python extension (`build_extension`, numba's
-pycc: no numba import, no cache load at run time) or compiled just in time by numba (cache=True, in
-estimator/__pycache__ or numba's user cache). Both compile this same source.
+kernel reads and runs it either as built ahead of time into a Python extension (service/kernel_build.py,
+numba's pycc, exporting _integrate as `integrate` with INTEGRATE_SIGNATURE: no numba import, no cache load
+at run time) or compiled just in time by numba (cache=True, in estimator/__pycache__ or numba's user
+cache). Both compile this same source.
 """
 
 from __future__ import annotations
-
-from pathlib import Path
 
 import numba
 import numpy as np
@@ -293,22 +292,3 @@ INTEGRATE_SIGNATURE = (
 )
 """_integrate's argument types, as the extension exports it (any memory layout)."""
 
-
-def build_extension(module_name: str, output_dir: Path) -> Path:
-    """Compile _integrate ahead of time into the Python extension `module_name` (exporting `integrate`)
-    in output_dir, with numba's pycc (needs a C compiler); returns the extension's path."""
-    import warnings
-
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # pycc is pending deprecation; no replacement exists yet
-        from numba.pycc import CC
-
-        compiler = CC(module_name)
-        compiler.output_dir = str(output_dir)
-        compiler.verbose = False
-        compiler.export("integrate", INTEGRATE_SIGNATURE)(_integrate.py_func)
-        compiler.compile()
-    built = [p for p in Path(output_dir).iterdir() if p.name.startswith(module_name + ".")]
-    if not built:
-        raise RuntimeError(f"numba pycc wrote no extension {module_name} into {output_dir}")
-    return built[0]

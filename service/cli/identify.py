@@ -266,7 +266,7 @@ def run_demo(args: argparse.Namespace) -> int:
     from daq.formats.recording_csv import write_recording_csv
     from daq.formats.vehicle_file import write_vehicle
     from estimator.identify import identify
-    from estimator.simulation_kernel import compile_ahead
+    from service.kernel_build import compile_ahead
     from service.plots import save_curve_plot
     from simulators.vehicle_sim import SimulationSettings, default_quarter_car, simulate, true_damper
 

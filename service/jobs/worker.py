@@ -158,6 +158,9 @@ def worker_main(conn: Connection, nice: int = 0, progress_interval_s: float = 0.
     for spec in KINDS.values():  # load the estimator and matplotlib now, not in the first job
         for module in (*spec.preload, spec.runner.partition(":")[0]):
             importlib.import_module(module)
+    from estimator.simulation_kernel import warm
+
+    warm()  # the output-error kernel too (numba's cache load when no extension is built: 1-3 s)
     send(WorkerReady(os.getpid()))
     while True:  # until the service says Shutdown or goes away (the listener ends the process)
         job = jobs.get()

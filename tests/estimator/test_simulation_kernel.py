@@ -19,6 +19,7 @@ from estimator.damper import CurveBatch, PiecewiseLinearCurve
 from estimator.dynamics import AxlePhysics, CornerPhysics, QuarterCarPhysics, integrate_rk4
 from estimator.simulation_kernel import integrate_compiled
 from estimator.vehicle import TyreModel
+from service.kernel_build import compile_ahead
 
 SAMPLE_TIME_S = 0.001
 DURATION_S = 1.5
@@ -29,7 +30,7 @@ GRAVITY_M_S2 = 9.81
 @pytest.fixture(scope="module")
 def extension_kernel():
     """The ahead-of-time extension's integrate function, built by compile_ahead if missing."""
-    assert simulation_kernel.compile_ahead() == "extension"
+    assert compile_ahead() == "extension"
     kind, integrate = simulation_kernel._kernel()
     assert kind == "extension"
     return integrate

@@ -1,0 +1,159 @@
+"""The few signal-processing routines identify needs, in numpy and LAPACK: the Butterworth low-pass design
+(second-order sections), zero-phase filtering forward and backward, a first-order recursive filter, Welch's
+power density and the analytic signal.
+
+Why not scipy.signal: importing it costs 1-2 s on this project's machines (it imports scipy.stats,
+scipy.interpolate and scipy.optimize, and rewrites the docstrings of some hundred functions at import),
+several times identify's own work, and every `shockbench identify` is a fresh process. These functions
+follow scipy.signal's definitions step by step (butter → zpk2sos with 'nearest' pairing, sosfiltfilt with
+odd padding and sosfilt_zi initial conditions, lfilter, welch with a periodic Hann window, half overlap and
+constant detrend, hilbert); tests/estimator/test_digital_filters.py checks them against scipy.signal to
+rounding (1e-12 relative). The recursions run in LAPACK's banded triangular solve (dtbtrs): a recursive
+filter y[n] + a1·y[n−1] + a2·y[n−2] = r[n] is that lower-triangular banded system, solved by the same
+forward substitution, in compiled code, for all columns at once.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy.linalg import lapack
+
+BLOCK_COLUMNS = 16
+"""sosfiltfilt filters this many columns at once: its temporaries (a few copies of a block) stay small
+beside the input and output, whatever the number of columns (the doctor filters hundreds)."""
+
+
+def butterworth_lowpass_sos(order: int, cutoff_Hz: float, sample_rate_Hz: float) -> np.ndarray:
+    """scipy.signal.butter(order, cutoff_Hz, btype="low", fs=sample_rate_Hz, output="sos") for an even
+    order: (order/2, 6) rows [b0, b1, b2, 1, a1, a2], the gain in the first section, the pole pair nearest
+    the unit circle in the last."""
+    if order % 2 or order <= 0:
+        raise ValueError("the Butterworth order must be even and positive")
+    normalized = 2.0 * cutoff_Hz / sample_rate_Hz
+    if not 0.0 < normalized < 1.0:
+        raise ValueError(f"the cutoff {cutoff_Hz} Hz must lie between 0 and half the rate {sample_rate_Hz}")
+    warped = 4.0 * math.tan(math.pi * normalized / 2.0)  # pre-warped, scipy's fs = 2 convention
+    analog = warped * -np.exp(1j * np.pi * np.arange(-order + 1, order, 2) / (2 * order))
+    poles = (4.0 + analog) / (4.0 - analog)  # bilinear transform; the zeros all go to -1
+    gain = float(warped**order * np.real(1.0 / np.prod(4.0 - analog)))
+    upper = poles[poles.imag > 0]  # one of each conjugate pair
+    upper = upper[np.argsort(-np.abs(1.0 - np.abs(upper)), kind="stable")]  # farthest from the circle first
+    sos = np.zeros((order // 2, 6))
+    sos[:, :3] = (1.0, 2.0, 1.0)
+    sos[:, 3] = 1.0
+    sos[:, 4] = -2.0 * upper.real
+    sos[:, 5] = (upper * upper.conj()).real
+    sos[0, :3] *= gain
+    return sos
+
+
+def sosfilt_zi(sos: np.ndarray) -> np.ndarray:
+    """scipy.signal.sosfilt_zi: each section's direct-form II transposed state, (sections, 2), for a unit
+    step's steady state."""
+    zi = np.empty((sos.shape[0], 2))
+    scale = 1.0
+    for index, (b0, b1, b2, a0, a1, a2) in enumerate(sos):
+        b = np.array([b0, b1, b2]) / a0
+        a = np.array([1.0, a1 / a0, a2 / a0])
+        i_minus_a = np.array([[1.0 + a[1], -1.0], [a[2], 1.0]])  # I − companion(a)ᵀ
+        zi[index] = scale * np.linalg.solve(i_minus_a, b[1:] - a[1:] * b[0])
+        scale *= b.sum() / a.sum()
+    return zi
+
+
+def _recursion(a1: float, a2: float, right: np.ndarray) -> np.ndarray:
+    """y with y[n] + a1·y[n−1] + a2·y[n−2] = right[n] (zero before n = 0), every column of `right` (n, m)."""
+    samples = right.shape[0]
+    band = np.empty((3, samples))
+    band[0], band[1], band[2] = 1.0, a1, a2
+    solution, info = lapack.dtbtrs(band, right, uplo="L", trans="N", diag="U", overwrite_b=1)
+    if info != 0:
+        raise ValueError(f"LAPACK dtbtrs failed (info {info})")
+    return solution
+
+
+def _sosfilt(sos: np.ndarray, x: np.ndarray, zi: np.ndarray) -> np.ndarray:
+    """scipy.signal.sosfilt along axis 0 of x (n, m), from the states zi (sections, 2, m)."""
+    y = x
+    for (b0, b1, b2, a0, a1, a2), state in zip(sos / sos[:, 3:4], zi, strict=True):
+        del a0
+        right = b0 * y  # column-major like y: LAPACK solves it in place
+        right[1:] += b1 * y[:-1]
+        right[2:] += b2 * y[:-2]
+        right[0] += state[0]  # direct form II transposed: y0 = b0·x0 + z0, y1 = … − a1·y0 + z1
+        right[1] += state[1]
+        y = _recursion(a1, a2, right)
+    return y
+
+
+def sosfiltfilt(sos: np.ndarray, x: np.ndarray, axis: int = 0) -> np.ndarray:
+    """scipy.signal.sosfiltfilt(sos, x, axis) with its defaults: odd extension by 3·(2·sections + 1)
+    samples at each end (less the sections' trailing zero coefficients), forward then backward from the
+    steady state of each end."""
+    x = np.moveaxis(np.asarray(x, dtype=float), axis, 0)
+    shape = x.shape
+    flat = x.reshape(shape[0], -1)
+    taps = 2 * sos.shape[0] + 1 - min(int(np.sum(sos[:, 2] == 0)), int(np.sum(sos[:, 5] == 0)))
+    edge = 3 * taps
+    if flat.shape[0] <= edge:
+        raise ValueError(f"the signal must be longer than {edge} samples to be filtered")
+    zi = sosfilt_zi(sos)[:, :, None]
+    out = np.empty(flat.shape)
+    for first in range(0, flat.shape[1], BLOCK_COLUMNS):  # a block at a time: the temporaries stay small
+        block = flat[:, first : first + BLOCK_COLUMNS]
+        extended = np.asfortranarray(
+            np.concatenate(
+                [2.0 * block[:1] - block[edge:0:-1], block, 2.0 * block[-1:] - block[-2 : -edge - 2 : -1]]
+            )
+        )  # column-major: each column's samples contiguous, as LAPACK takes them
+        forward = _sosfilt(sos, extended, zi * extended[0])
+        del extended
+        backward = _sosfilt(sos, forward[::-1], zi * forward[-1])
+        out[:, first : first + BLOCK_COLUMNS] = backward[::-1][edge:-edge]
+    return np.moveaxis(out.reshape(shape), 0, axis)
+
+
+def first_order_filter(b: tuple[float, float], a1: float, x: np.ndarray) -> np.ndarray:
+    """scipy.signal.lfilter([b0, b1], [1, a1], x) along the last axis, from rest:
+    y[n] = b0·x[n] + b1·x[n−1] − a1·y[n−1]."""
+    x = np.moveaxis(np.asarray(x, dtype=float), -1, 0)
+    flat = x.reshape(x.shape[0], -1)
+    right = np.asfortranarray(b[0] * flat)
+    right[1:] += b[1] * flat[:-1]
+    return np.moveaxis(_recursion(a1, 0.0, right).reshape(x.shape), 0, -1)
+
+
+def welch_density(x: np.ndarray, sample_rate_Hz: float, segment: int) -> tuple[np.ndarray, np.ndarray]:
+    """scipy.signal.welch(x, fs, nperseg=segment): frequencies and one-sided power density of a 1-D x,
+    periodic Hann window, half overlap, each segment's mean removed, the segments' densities averaged."""
+    x = np.asarray(x, dtype=float)
+    segment = min(segment, x.size)
+    step = segment - segment // 2
+    window = 0.5 - 0.5 * np.cos(2.0 * np.pi * np.arange(segment) / segment)
+    count = (x.size - segment // 2) // step
+    starts = np.arange(count) * step
+    pieces = x[starts[:, None] + np.arange(segment)]
+    pieces = pieces - pieces.mean(axis=1, keepdims=True)
+    spectra = np.fft.rfft(window * pieces, axis=1)
+    density = (spectra.real**2 + spectra.imag**2) / (sample_rate_Hz * np.sum(window * window))
+    if segment % 2:
+        density[:, 1:] *= 2.0
+    else:
+        density[:, 1:-1] *= 2.0
+    return np.fft.rfftfreq(segment, 1.0 / sample_rate_Hz), density.mean(axis=0)
+
+
+def analytic_signal(x: np.ndarray) -> np.ndarray:
+    """scipy.signal.hilbert(x) of a 1-D x: x + j·(its Hilbert transform), by the FFT."""
+    x = np.asarray(x, dtype=float)
+    size = x.size
+    weights = np.zeros(size)
+    weights[0] = 1.0
+    if size % 2 == 0:
+        weights[size // 2] = 1.0
+        weights[1 : size // 2] = 2.0
+    else:
+        weights[1 : (size + 1) // 2] = 2.0
+    return np.fft.ifft(np.fft.fft(x) * weights)
