@@ -90,9 +90,10 @@ def run_scipy_de(csv_path: str, toml_path: str, updating: str, generations: int)
     print(f"objective {float(system.objective(theta)):.6g} sprung mass {theta[0]:.2f} kg")
 
 
-def measured_process(command: list[str]) -> tuple[float, float, str]:
+def measured_process(command: list[str]) -> tuple[float, float, float, str]:
     """Run a child process (OPENBLAS_NUM_THREADS=1, from the repository root): its wall time (s), its own
-    peak resident memory (MiB) and its stdout. A failure raises with its stderr.
+    peak resident memory (MiB), its CPU time (user + system, s) and its stdout. A failure raises with its
+    stderr.
 
     The peak RSS is GNU time's (%M, the child's ru_maxrss): the child is started from that small process,
     because a child forked from this one starts with this process's resident pages in its own figure."""
@@ -101,14 +102,17 @@ def measured_process(command: list[str]) -> tuple[float, float, str]:
         peak = Path(folder) / "peak_KiB"
         start = time.perf_counter()
         child = subprocess.run(
-            [GNU_TIME, "-f", "%M", "-o", str(peak), *command], capture_output=True, env=environment, cwd=REPO
+            [GNU_TIME, "-f", "%M %U %S", "-o", str(peak), *command],
+            capture_output=True,
+            env=environment,
+            cwd=REPO,
         )
         seconds = time.perf_counter() - start
         if child.returncode != 0:
             reason = child.stderr.decode()[-500:]
             raise RuntimeError(f"{' '.join(command)} failed ({child.returncode}): {reason}")
-        peak_MiB = float(peak.read_text().split()[-1]) / 1024.0
-    return seconds, peak_MiB, child.stdout.decode()
+        peak_KiB, user_s, system_s = (float(v) for v in peak.read_text().split()[-3:])
+    return seconds, peak_KiB / 1024.0, user_s + system_s, child.stdout.decode()
 
 
 def main() -> None:
@@ -142,27 +146,37 @@ def main() -> None:
         kernel = kernel_in_use()
         times: dict[str, list[float]] = {name: [] for name in commands}
         memory: dict[str, list[float]] = {name: [] for name in commands}
+        cpu: dict[str, list[float]] = {name: [] for name in commands}
         load = [os.getloadavg()[0]]
         for round_index in range(args.repeats):
             for name, command in commands.items():
-                seconds, peak_MiB, _ = measured_process(command)
+                seconds, peak_MiB, cpu_s, _ = measured_process(command)
                 times[name].append(seconds)
                 memory[name].append(peak_MiB)
+                cpu[name].append(cpu_s)
                 load.append(os.getloadavg()[0])
-                print(f"round {round_index + 1} {name}: {seconds:.2f} s, {peak_MiB:.0f} MiB", file=sys.stderr)
+                print(
+                    f"round {round_index + 1} {name}: {seconds:.2f} s, CPU {cpu_s:.2f} s, {peak_MiB:.0f} MiB",
+                    file=sys.stderr,
+                )
     print(
         f"machine: {platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}; "
         f"load average {min(load):.1f}-{max(load):.1f} during the run; output-error kernel: {kernel}\n"
     )
     print(f"12 s at 1 kHz (independent world, motorcycle corner); {args.repeats} rounds, medians\n")
-    print("| process | wall time (s), median | each round (s) | peak RSS (MiB) | scipy DE / identify |")
-    print("|---|---:|---|---:|---:|")
-    identify_s = statistics.median(times["identify"])
+    print(
+        "| process | wall time (s), median | each round (s) | scipy DE / identify, wall | CPU time (s), "
+        "median | scipy DE / identify, CPU | peak RSS (MiB) |"
+    )
+    print("|---|---:|---|---:|---:|---:|---:|")
+    identify_s, identify_cpu_s = statistics.median(times["identify"]), statistics.median(cpu["identify"])
     for name, values in times.items():
         ratio = statistics.median(values) / identify_s
+        cpu_ratio = statistics.median(cpu[name]) / identify_cpu_s
         print(
             f"| {name} | {statistics.median(values):.2f} | {', '.join(f'{v:.2f}' for v in values)} | "
-            f"{max(memory[name]):.0f} | {'-' if name == 'identify' else f'{ratio:.1f}x'} |"
+            f"{'-' if name == 'identify' else f'{ratio:.1f}x'} | {statistics.median(cpu[name]):.2f} | "
+            f"{'-' if name == 'identify' else f'{cpu_ratio:.1f}x'} | {max(memory[name]):.0f} |"
         )
     for name in commands:
         if name != "identify":

@@ -49,7 +49,7 @@ def main() -> None:
         rows = []
         for command in ("identify", "diagnose"):
             for _ in range(args.repeats):
-                seconds, peak_MiB, _ = measured_process(
+                seconds, peak_MiB, _, _ = measured_process(
                     [str(SHOCKBENCH), command, str(csv_path), "--vehicle", str(toml_path), "--json"]
                 )
                 rows.append((command, seconds, peak_MiB))
