@@ -27,6 +27,10 @@ RELATIVE_TOLERANCE = 1e-9
 GRAVITY_M_S2 = 9.81
 
 
+LOADER = simulation_kernel._kernel
+"""The module's kernel loader (the fixture below replaces it while each test runs)."""
+
+
 @pytest.fixture(scope="module")
 def extension_kernel():
     """The ahead-of-time extension's integrate function, built by compile_ahead if missing."""
@@ -57,6 +61,18 @@ def test_the_extension_loads_without_numba_and_only_for_its_source(tmp_path) -> 
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.split() == ["extension", "False"]
     assert simulation_kernel.extension_name().endswith(simulation_kernel.source_digest())
+
+
+def test_without_an_extension_for_the_present_source_numba_runs_the_kernel(monkeypatch) -> None:
+    """A tree whose extension is missing or was built from another source (another digest) falls back to
+    numba's just-in-time kernel instead of running a stale one."""
+    other_source = simulation_kernel.EXTENSION_PREFIX + "0" * 16
+    monkeypatch.setattr(simulation_kernel, "extension_name", lambda: other_source)
+    LOADER.cache_clear()
+    try:
+        assert LOADER()[0] == "numba"
+    finally:
+        LOADER.cache_clear()
 
 
 def assert_same_trajectories(reference: np.ndarray, compiled: np.ndarray) -> None:
