@@ -40,8 +40,10 @@ times the re-identified one's, or when the model diverges.
 from __future__ import annotations
 
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
+from typing import TypeVar
 
 import numpy as np
 
@@ -64,6 +66,9 @@ from estimator.doctor.simulation import BatchOutputError, simulate_models
 from estimator.identify import IdentifyOptions, identify
 from estimator.recording import Recording
 from estimator.vehicle import TyreModel, VehicleConstant, VehicleParameters
+
+Item = TypeVar("Item")
+Value = TypeVar("Value")
 
 SCREEN_ITERATIONS = 1
 """Gauss-Newton steps a channel effect gets before the screen decides whether to pursue it."""
@@ -108,6 +113,9 @@ class DiagnoseOptions:
     """Seed of the noise added to the simulated response for the expected gap (draw k uses seed + k)."""
     expected_draws: int = 2
     """Synthetic recordings the expected gap and residual are the mean over."""
+    workers: int = 2
+    """Threads the fits of a round (and the expected gap's draws) run in; 1: one after the other. The
+    diagnosis does not depend on it: every fit is independent of the others and of their order."""
 
 
 @dataclass(frozen=True)
@@ -200,6 +208,19 @@ class _Doctor:
         self.reference = Reference.of(recording, vehicle, self.settings)
         plate = recording.channels["x_r_l" if vehicle.is_axle else "x_r"]
         self.frequency = sweep_frequency_Hz(plate, recording.sample_time_s)
+        self.pool: ThreadPoolExecutor | None = None
+        """The threads of `workers` while run() runs."""
+
+    def map(self, function: Callable[[Item], Value], items: Iterable[Item]) -> list[Value]:
+        """function over items, in the pool's threads when there is one (the heavy parts of a fit, the
+        low-pass filters' LAPACK solves and the normal matrices' BLAS products, release the GIL)."""
+        if self.pool is None:
+            return [function(item) for item in items]
+        return list(self.pool.map(function, items))
+
+    def each(self, function: Callable[[Item], Value], items: list[Item]) -> dict[Item, Value]:
+        """{item: function(item)} (see map)."""
+        return dict(zip(items, self.map(function, items), strict=True))
 
     def report(self, step: int, stage: str) -> None:
         if self.cancel is not None and self.cancel.is_set():
@@ -217,6 +238,16 @@ class _Doctor:
         ]
 
     def run(self) -> DiagnosisResult:
+        if self.options.workers <= 1:
+            return self.diagnose()
+        self.pool = ThreadPoolExecutor(self.options.workers, thread_name_prefix="doctor")
+        try:
+            return self.diagnose()
+        finally:
+            self.pool.shutdown(cancel_futures=True)
+            self.pool = None
+
+    def diagnose(self) -> DiagnosisResult:
         options = self.options
         structure = starting_structure(options.tyre)
         start_labels = structure.labels
@@ -298,7 +329,7 @@ class _Doctor:
         assert simulated is not None and initial is not None and located_before is not None
         self.report(len(steps), "simulating the expected gap")
         expected, residual_ratio = self.expected(current, simulated)
-        result = self.conclude(
+        return self.conclude(
             residual_ratio,
             start_labels,
             structure,
@@ -308,9 +339,8 @@ class _Doctor:
             simulated,
             expected,
             located_before,
+            current,
         )
-        result.final_model = current  # diagnose --json prints it as `model`, validate --model reads it
-        return result
 
     def expected(self, current: FittedModel, final: _Simulated) -> tuple[float, float]:
         """The gap a model without missing effects leaves on this sweep and the final model's objective over
@@ -319,24 +349,24 @@ class _Doctor:
         recording, dt = self.recording, self.recording.sample_time_s
         # the finer curve can make a model that diverges where the doctor's does not (the truth is then the
         # doctor's own curve made smooth); where both diverge there is no complete model to compare with
-        fine = plausible_truth(current, recording, self.settings)
-        truths = simulate_models([fine, smooth_truth(current)], recording)
-        finite = np.isfinite(truths.gap_m())
-        if not np.any(finite):
-            return float("nan"), float("inf")
-        chosen = int(np.argmax(finite))
+        truths = simulate_models([plausible_truth(current, recording, self.settings)], recording)
+        if not np.isfinite(truths.gap_m()[0]):  # only then is the fallback simulated
+            truths = simulate_models([smooth_truth(current)], recording)
+            if not np.isfinite(truths.gap_m()[0]):
+                return float("nan"), float("inf")
         measured = {name: recording.channels[name] for name in final.residual}
         residual = {
             name: r if np.all(np.isfinite(r)) else measured[name] for name, r in final.residual.items()
         }
         noise = measure_noise(residual, measured, dt, self.reference.filters.excitation_top_Hz)
-        predicted = {name: p[:, chosen] for name, p in truths.predicted.items()}
-        gaps, objectives = [], []
-        for draw in range(self.options.expected_draws):
-            synthetic = synthetic_recording(recording, predicted, noise, self.options.seed + draw)
+        predicted = {name: p[:, 0] for name, p in truths.predicted.items()}
+
+        def draw(number: int) -> tuple[float, float]:
+            synthetic = synthetic_recording(recording, predicted, noise, self.options.seed + number)
             refitted = refit_on(synthetic, current, self.settings)
-            gaps.append(float(simulate_models([refitted], recording, [synthetic]).gap_m()[0]))
-            objectives.append(refitted.objective)
+            return float(simulate_models([refitted], recording, [synthetic]).gap_m()[0]), refitted.objective
+
+        gaps, objectives = zip(*self.map(draw, range(self.options.expected_draws)), strict=True)
         finite = [g for g in gaps if np.isfinite(g)]  # a refit that diverges says nothing of the gap
         expected = float(np.mean(finite)) if finite else float("inf")
         return expected, current.objective / float(np.mean(objectives))
@@ -350,19 +380,22 @@ class _Doctor:
     ) -> _Candidates:
         """Every candidate fitted (channel effects one Gauss-Newton step first); those whose objective falls
         by at least screen_reduction fitted fully, and again on the fitting blocks only."""
-        trials = {
-            i: fit(self.reference, structure.with_effect(i), warm=current, iterations=SCREEN_ITERATIONS)
-            for i in instances
-        }
+        reference = self.reference
+        trials = self.each(
+            lambda i: fit(reference, structure.with_effect(i), warm=current, iterations=SCREEN_ITERATIONS),
+            instances,
+        )
         ratios = {i: m.objective / current.objective for i, m in trials.items()}
         kept = [i for i in instances if ratios[i] <= 1.0 - self.options.screen_reduction]
-        full = {
-            i: fit(self.reference, structure.with_effect(i), warm=trials[i])
-            if trials[i].channel_values
-            else trials[i]
-            for i in kept
-        }
-        held = {i: fit(self.reference, structure.with_effect(i), rows, warm=full[i]) for i in kept}
+        full = self.each(
+            lambda i: (
+                fit(reference, structure.with_effect(i), warm=trials[i])
+                if trials[i].channel_values
+                else trials[i]
+            ),
+            kept,
+        )
+        held = self.each(lambda i: fit(reference, structure.with_effect(i), rows, warm=full[i]), kept)
         return _Candidates(trials, ratios, kept, full, held)
 
     def score(
@@ -446,10 +479,12 @@ class _Doctor:
             return None, ""
         time_s = self.recording.time_s[full.system.sample_index]
         first = time_s < np.median(time_s)
-        halves = [
-            fit(self.reference, structure.with_effect(instance), rows, warm=full).effect_values(instance)
-            for rows in (first, ~first)
-        ]
+        halves = self.map(
+            lambda rows: fit(self.reference, structure.with_effect(instance), rows, warm=full).effect_values(
+                instance
+            ),
+            (first, ~first),
+        )
         spread, described = 0.0, ""
         for name, value in whole.items():
             a, b = halves[0][name], halves[1][name]
@@ -481,7 +516,10 @@ class _Doctor:
         final: _Simulated,
         expected: float,
         located_before,
+        final_model: FittedModel,
     ) -> DiagnosisResult:
+        """The diagnosis; final_model is the model the doctor ended with (diagnose --json prints it as
+        `model`, validate --model reads it)."""
         options = self.options
         ratio = final.gap_m / expected if np.isfinite(final.gap_m) and expected > 0 else np.inf
         unexplained = (
@@ -531,6 +569,7 @@ class _Doctor:
             predicted_before=initial.predicted,
             time_s=recording.time_s,
             sweep_frequency_Hz=self.frequency,
+            final_model=final_model,
         )
 
 

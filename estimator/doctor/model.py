@@ -12,11 +12,19 @@ counts: kelvin-voigt starts with tyre_damping, maxwell with tyre_viscoelastic). 
    offsets) are found by Gauss-Newton steps: the residual's change per unit of each channel parameter is
    taken by finite differences at the current solution, appended as columns, solved jointly, repeated.
    With tyre_liftoff the airborne samples come from the fitted tyre force and are re-determined once.
+
+Speed: a diagnosis fits a hundred or so models of one recording, most of them on the same corrected
+recording, so the equations built on it and the effects' columns are kept per Reference (a small
+least-recently-used cache: building them, low-pass filters and damper basis, was half of a fit), and every
+solve hands IRLS over to Newton steps once it is near the optimum (_minimise).
 """
 
 from __future__ import annotations
 
+import threading
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 from scipy import ndimage
@@ -33,12 +41,16 @@ from estimator.doctor.catalog import (
 )
 from estimator.doctor.columns import EquationSignals, restrict, with_columns
 from estimator.equations import LinearResiduals, build
+from estimator.newton_refit import newton_refit
 from estimator.recording import Recording
 from estimator.signals import FilterChoice
 from estimator.solvers.exact import solve_exact
 from estimator.uncertainty import confidence_intervals
 from estimator.vehicle import TyreModel, VehicleConstant, VehicleParameters
 
+NEWTON_HANDOVER = 1e-3
+"""A fit's IRLS hands over to Newton steps when an iteration lowers the objective by less than this
+(relative), as estimator.relaxation does."""
 GAUSS_NEWTON_ITERATIONS = 4
 GAUSS_NEWTON_STEP = {"delay": 5e-4, "offset": 1e-4}
 """Finite-difference step of each kind of channel parameter (s, m)."""
@@ -236,15 +248,31 @@ class FittedModel:
         return CATALOG[effect.name].implausible(self.effect_values(effect), self.context())
 
 
+BUILD_CACHE_ENTRIES = 8
+"""Equation systems a Reference keeps (the most recently used): every candidate of a round and its held-out
+and half-sweep fits start from the same corrected recording, so they share one build."""
+COLUMN_CACHE_ENTRIES = 32
+"""Effect columns a Reference keeps (the most recently used)."""
+
+
 @dataclass(frozen=True)
 class Reference:
-    """What every fit of one recording shares: the damper grid(s) and filters of the uncorrected recording."""
+    """What every fit of one recording shares: the damper grid(s) and filters of the uncorrected recording,
+    and the equation systems built on it so far (`built`, see _build)."""
 
     recording: Recording
     vehicle: VehicleParameters
     settings: FitSettings
     grids: list[np.ndarray]
     filters: FilterChoice
+    built: dict[tuple, tuple[LinearResiduals, EquationSignals]] = field(
+        default_factory=dict, compare=False, repr=False
+    )
+    columns: dict[tuple, tuple[dict[str, np.ndarray], np.ndarray | None]] = field(
+        default_factory=dict, compare=False, repr=False
+    )
+    lock: threading.Lock = field(default_factory=threading.Lock, compare=False, repr=False)
+    """Guards the caches: the doctor fits candidates in parallel threads."""
 
     @staticmethod
     def of(recording: Recording, vehicle: VehicleParameters, settings: FitSettings) -> Reference:
@@ -299,6 +327,20 @@ def friction_constraints(system: LinearResiduals, band_m_s: float = FRICTION_BAN
     return np.array(rows).reshape(len(rows), system.n_params)
 
 
+def _minimise(
+    system: LinearResiduals, initial: np.ndarray | None, tolerance: float
+) -> tuple[np.ndarray, float]:
+    """θ minimising the paper's objective, and the objective: IRLS (estimator.solvers.exact) until an
+    iteration gains less than NEWTON_HANDOVER, then Newton steps (estimator.newton_refit) to `tolerance`,
+    as identify does. IRLS converges linearly (a median 27 weighted normal matrices per fit of the doctor to
+    1e-10), Newton quadratically from near the optimum (every step checked to lower the objective); the
+    result is IRLS's own when Newton does not improve on it."""
+    near = solve_exact(system, NEWTON_HANDOVER, initial=initial, certify=False)
+    polished = newton_refit(system, near.theta, tolerance=tolerance)
+    theta = polished.theta if polished.objective < near.objective else near.theta
+    return theta, float(system.objective(theta))
+
+
 def _solve(
     system: LinearResiduals,
     constraints: np.ndarray,
@@ -310,8 +352,7 @@ def _solve(
     others), so the problem stays the same convex one on fewer unknowns."""
     p = system.n_params
     if constraints.shape[0] == 0:
-        solution = solve_exact(system, tolerance, initial=initial, certify=False)
-        return solution.theta, float(solution.objective)
+        return _minimise(system, initial, tolerance)
     rows = np.zeros((constraints.shape[0], p))
     rows[:, : constraints.shape[1]] = constraints
     pivots = [int(np.argmax(np.abs(r))) for r in rows]
@@ -328,8 +369,8 @@ def _solve(
         _flat_offset=None,
     )
     start = None if initial is None else np.asarray(initial)[keep]
-    solution = solve_exact(reduced, tolerance, initial=start, certify=False)
-    return basis @ solution.theta, float(solution.objective)
+    theta, objective = _minimise(reduced, start, tolerance)
+    return basis @ theta, objective
 
 
 def _airborne(
@@ -368,6 +409,49 @@ def _airborne(
     return masks
 
 
+def _cached(cache: dict, lock: threading.Lock, key: tuple, make: Callable[[], object], entries: int) -> Any:
+    """cache[key], made first if missing (outside the lock: two threads may make the same value, which is a
+    deterministic function of the key); the least recently used entries beyond `entries` are forgotten."""
+    with lock:
+        found = key in cache
+        value = cache.pop(key) if found else None
+        if found:
+            cache[key] = value
+    if not found:
+        value = make()
+        with lock:
+            cache[key] = value
+            while len(cache) > entries:
+                del cache[next(iter(cache))]
+    return value
+
+
+def _base_system(
+    reference: Reference, corrections: ChannelCorrections, friction: bool
+) -> tuple[tuple, LinearResiduals, EquationSignals]:
+    """The paper's system (no effect columns) on the recording as `corrections` correct it, with the
+    friction grids or not; built once per Reference and reused (the low-pass filters and the damper basis
+    are most of a fit's time otherwise). The key identifies it for the effect columns' cache."""
+    key = (tuple(sorted(corrections.delay_s.items())), tuple(sorted(corrections.offset_m.items())), friction)
+
+    def make() -> tuple[LinearResiduals, EquationSignals]:
+        recording = corrections.apply(reference.recording)
+        settings = reference.settings
+        base = build(
+            recording,
+            reference.vehicle,
+            TyreModel.SPRING,
+            settings.points,
+            settings.nsample,
+            reference.filters,
+            friction_grids(reference.grids) if friction else reference.grids,
+        )
+        return base, EquationSignals(recording, reference.vehicle, base)
+
+    base, signals = _cached(reference.built, reference.lock, key, make, BUILD_CACHE_ENTRIES)
+    return key, base, signals
+
+
 def _build(
     reference: Reference,
     structure: ModelStructure,
@@ -375,32 +459,28 @@ def _build(
     airborne: list[np.ndarray] | None,
     tyre: tuple[float, float, float],
 ) -> tuple[LinearResiduals, EquationSignals, list[np.ndarray]]:
-    recording = corrections.apply(reference.recording)
-    settings = reference.settings
     friction = structure.has(EffectName.COULOMB_FRICTION)
-    base = build(
-        recording,
-        reference.vehicle,
-        TyreModel.SPRING,
-        settings.points,
-        settings.nsample,
-        reference.filters,
-        friction_grids(reference.grids) if friction else reference.grids,
-    )
-    signals = EquationSignals(recording, reference.vehicle, base)
+    key, base, signals = _base_system(reference, corrections, friction)
     corners = len(signals.corners)
+    liftoff = structure.has(EffectName.TYRE_LIFTOFF)
     if airborne is None:
         airborne = (
-            _airborne(signals, *tyre)
-            if structure.has(EffectName.TYRE_LIFTOFF)
-            else [np.zeros(recording.time_s.size)] * corners
+            _airborne(signals, *tyre) if liftoff else [np.zeros(signals.recording.time_s.size)] * corners
         )
+    # the columns depend on where the tyre is off the plate only with tyre_liftoff (else nowhere)
+    where = tuple(a.tobytes() for a in airborne) if liftoff else None
     columns: dict[str, np.ndarray] = {}
     offset = base.offset.copy()
     for effect in structure.effects:
         entry = CATALOG[effect.name]
-        columns.update(entry.columns(signals, airborne))
-        change = entry.offset_change(signals, airborne)
+        effect_columns, change = _cached(
+            reference.columns,
+            reference.lock,
+            (key, effect, where),
+            lambda entry=entry: (entry.columns(signals, airborne), entry.offset_change(signals, airborne)),
+            COLUMN_CACHE_ENTRIES,
+        )
+        columns.update(effect_columns)
         if change is not None:
             offset = offset + change
     return with_columns(base, columns, offset), signals, airborne
