@@ -12,8 +12,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import signal as sps
 
+from estimator.digital_filters import first_order_filter
 from estimator.equations import LinearResiduals
 from estimator.recording import Recording
 from estimator.signals import lowpass
@@ -90,7 +90,7 @@ class EquationSignals:
         tau = self.vehicle.maxwell_time_constant_s(dt)
         pole = (2.0 * tau - dt) / (2.0 * tau + dt)
         gain = dt / (2.0 * tau + dt)
-        return sps.lfilter([gain, gain], [1.0, -pole], rate_m_s)
+        return first_order_filter((gain, gain), -pole, rate_m_s)
 
     def suspension_column(self, per_corner: list[np.ndarray]) -> np.ndarray:
         """(equations, samples) column of a force acting in each suspension (pushes the wheel up and the body

@@ -23,8 +23,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import signal
 from scipy.optimize import nnls
+
+from estimator.digital_filters import first_order_filter, welch_density
 
 NOISE_BAND_FROM = 2.0
 """The noise is fitted above this multiple of the excitation's top frequency (the vehicle responds below)."""
@@ -53,7 +54,7 @@ class ChannelNoise:
         rho = self.lag1_correlation
         innovation = rng.standard_normal(samples) * self.coloured_m * np.sqrt(1.0 - rho * rho)
         innovation[0] = innovation[0] / np.sqrt(1.0 - rho * rho)
-        coloured = signal.lfilter([1.0], [1.0, -rho], innovation)
+        coloured = first_order_filter((1.0, 0.0), -rho, innovation)
         return coloured + rng.standard_normal(samples) * self.white_m
 
     def read(self, true_m: np.ndarray, rng: np.random.Generator) -> np.ndarray:
@@ -91,7 +92,7 @@ def measure_channel_noise(
     fs = 1.0 / sample_time_s
     x = residual_m - np.mean(residual_m)
     nperseg = int(min(x.size, max(256, 2 ** int(np.log2(fs)))))
-    frequency, density = signal.welch(x, fs=fs, nperseg=nperseg)
+    frequency, density = welch_density(x, fs, nperseg)
     band = (frequency >= band_from_Hz) & (density > 0.0)
     if np.count_nonzero(band) < MIN_BINS:
         band = (frequency > 0.0) & (density > 0.0)

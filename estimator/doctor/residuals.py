@@ -17,9 +17,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import signal as sps
-from scipy import stats
+from scipy.special import chdtrc
 
+from estimator.digital_filters import welch_density
 from estimator.doctor.model import FittedModel
 
 BAND_WIDTH_HZ = 2.0
@@ -33,14 +33,29 @@ WHITENESS_LAGS = 20
 WHITENESS_LEVEL = 0.01
 
 
+def short_time_magnitude(
+    x: np.ndarray, sample_rate_Hz: float, segment: int, fft_size: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Frequencies, segment centre times and |STFT| (frequencies, segments) as scipy.signal.stft(x, fs,
+    nperseg=segment, noverlap=3·segment//4, nfft=fft_size) has them, up to its constant scale 1/Σwindow:
+    periodic Hann window, segment//2 zeros at either end, zeros after to fill the last segment. Here in
+    numpy so that a diagnosis does not import scipy.signal (1-2 s a process)."""
+    step = segment - 3 * segment // 4
+    half = segment // 2
+    padded = np.concatenate([np.zeros(half), np.asarray(x, dtype=float), np.zeros(half)])
+    padded = np.concatenate([padded, np.zeros((-(padded.size - segment) % step) % segment)])
+    starts = np.arange(0, padded.size - segment + 1, step)
+    window = 0.5 - 0.5 * np.cos(2.0 * np.pi * np.arange(segment) / segment)
+    spectrum = np.fft.rfft(window * padded[starts[:, None] + np.arange(segment)], n=fft_size, axis=1)
+    times = starts / sample_rate_Hz  # the segment centres, less the leading zeros
+    return np.fft.rfftfreq(fft_size, 1.0 / sample_rate_Hz), times, np.abs(spectrum).T
+
+
 def sweep_frequency_Hz(plate_m: np.ndarray, sample_time_s: float) -> np.ndarray:
     """The sweep's instantaneous frequency at every sample (NaN where the plate rests)."""
     rate = 1.0 / sample_time_s
     window = max(16, round(WINDOW_S * rate))
-    freqs, times, spectrum = sps.stft(
-        plate_m - np.mean(plate_m), fs=rate, nperseg=window, noverlap=3 * window // 4, nfft=8 * window
-    )
-    magnitude = np.abs(spectrum)
+    freqs, times, magnitude = short_time_magnitude(plate_m - np.mean(plate_m), rate, window, 8 * window)
     peak = freqs[np.argmax(magnitude, axis=0)]
     amplitude = magnitude.max(axis=0)
     peak = np.where(amplitude >= REST_FRACTION * amplitude.max(), peak, np.nan)
@@ -127,7 +142,7 @@ def ljung_box(residual: np.ndarray, sample_time_s: float, bandwidth_Hz: float) -
     lags = np.arange(1, WHITENESS_LAGS + 1)
     rho = np.array([np.dot(x[:-k], x[k:]) / denominator for k in lags])
     q = float(n * (n + 2) * np.sum(rho**2 / (n - lags)))
-    return Whiteness(q, WHITENESS_LAGS, float(stats.chi2.sf(q, WHITENESS_LAGS)))
+    return Whiteness(q, WHITENESS_LAGS, float(chdtrc(WHITENESS_LAGS, q)))  # the χ² law's upper tail
 
 
 def effective_samples(residual: np.ndarray) -> float:
@@ -222,7 +237,7 @@ def locate(model: FittedModel, output_residual: dict[str, np.ndarray], gap_m: fl
         worst_time = (start, start + window * dt)
     spectra = {}
     for channel, r in finite.items():
-        f, p = sps.welch(r - np.mean(r), fs=1.0 / dt, nperseg=min(r.size, 2048))
+        f, p = welch_density(r - np.mean(r), 1.0 / dt, min(r.size, 2048))
         spectra[channel] = (f, p)
     return Localisation(
         gap_m=gap_m,

@@ -56,7 +56,6 @@ def run_diagnose(args: argparse.Namespace) -> int:
     from daq.formats.recording_csv import read_recording_csv
     from daq.formats.vehicle_file import read_vehicle
     from estimator.doctor.diagnose import DiagnoseOptions, diagnose
-    from service.doctor_report import write_report
 
     report = Path(args.report) if args.report else None
     if report is not None and report.exists() and not report.is_dir():
@@ -68,6 +67,8 @@ def run_diagnose(args: argparse.Namespace) -> int:
     options = DiagnoseOptions(tyre=TyreModel(args.tyre), points=args.points)
     result = diagnose(recording, vehicle, options, progress=None if args.json else _progress)
     if report is not None:
+        from service.doctor_report import write_report  # matplotlib: only for a report (0.3-1 s to import)
+
         path = write_report(result, report, title=Path(args.recording).name)
         if not args.json:
             print(f"report: {path}", file=sys.stderr)
