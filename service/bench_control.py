@@ -24,6 +24,7 @@ from daq.bench_config import BenchConfig
 from daq.sweep.model import SweepOutcome, SweepProgress, SweepRequest
 from daq.sweep.pacing import Pacing, RealtimePacing, SimulatedPacing
 from daq.sweep.run import SweepError, check_request, run_sweep
+from estimator.errors import ConflictError
 from simulators.devices.sim_bench import SimulatedBench, vehicle_preset
 
 log = logging.getLogger("shockbench.bench")
@@ -38,7 +39,7 @@ SweepDone = Callable[[str, SweepOutcome | None, str], None]
 """Called in the sweep's thread when it ends: (sweep id, outcome or None, error message if it never began)."""
 
 
-class BenchBusyError(RuntimeError):
+class BenchBusyError(ConflictError, RuntimeError):
     """A sweep is already running on this bench."""
 
 

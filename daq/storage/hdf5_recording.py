@@ -52,6 +52,7 @@ import h5py
 import numpy as np
 
 from daq.formats.recording_csv import write_recording_csv
+from estimator.errors import UserError
 from estimator.recording import Recording
 
 FLAG_GAP = 0x01
@@ -89,7 +90,7 @@ _RESERVED = frozenset(
 _RATE_PREFIX = "rate_Hz."
 
 
-class RecordingFileError(ValueError):
+class RecordingFileError(UserError, ValueError):
     """The file is not a readable shockbench HDF5 recording; the message is one line naming the file."""
 
 

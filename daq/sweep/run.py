@@ -58,6 +58,7 @@ from drivers.compowayf.transport import CompowayFPort
 from drivers.exciter.codes import ExciterState
 from drivers.exciter.errors import EnvelopeBreachError, ExciterDeviceExceptionError
 from drivers.exciter.interface import ExciterStatus, PlateExciter
+from estimator.errors import UserError
 
 log = logging.getLogger(__name__)
 
@@ -75,7 +76,7 @@ REST_MAX_STD_M = 0.5e-3
 """A channel moving more than this (standard deviation at rest) means the vehicle is not at rest."""
 
 
-class SweepError(Exception):
+class SweepError(UserError):
     """The sweep could not begin; the plate did not move and nothing was written. One line."""
 
 

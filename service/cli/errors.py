@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+from estimator.errors import UserError
 
-class CliError(Exception):
+
+class CliError(UserError):
     """A problem the user can fix (bad file, bad option); its message is printed as one line."""
 
 
