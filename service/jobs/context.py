@@ -21,9 +21,8 @@ from service.jobs.messages import Progress
 class InputError(UserError, ValueError):
     """Submitted input that cannot run; `field` names the form field to blame (the API's 422 names it)."""
 
-    def __init__(self, field: str, message: str) -> None:
-        super().__init__(message)
-        self.field = field
+    def __init__(self, field: str | None, message: str) -> None:
+        super().__init__(message, field=field)
 
 
 def check_recording_fits(recording: Recording, vehicle: VehicleParameters) -> None:
