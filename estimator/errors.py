@@ -42,3 +42,9 @@ def one_line(exc: BaseException) -> str:
     """The first non-empty line of an exception's message, or its class name when it has none."""
     lines = [line for line in str(exc).strip().splitlines() if line.strip()]
     return lines[0].strip() if lines else type(exc).__name__
+
+
+class InvalidValueError(UserError, ValueError):
+    """A value outside its domain in a type built from user input (sweep settings, vehicle parameters, a
+    recording, identify options): a negative mass, a zero duration. Also a ValueError, as these checks
+    were before the root existed and callers catch them as such."""
