@@ -24,7 +24,7 @@ from daq.bench_config import BenchConfig
 from daq.sweep.model import SweepOutcome, SweepProgress, SweepRequest
 from daq.sweep.pacing import Pacing, RealtimePacing, SimulatedPacing
 from daq.sweep.run import SweepError, check_request, run_sweep
-from estimator.errors import ConflictError
+from estimator.errors import ConflictError, one_line
 from simulators.devices.sim_bench import SimulatedBench, vehicle_preset
 
 log = logging.getLogger("shockbench.bench")
@@ -88,7 +88,7 @@ class BenchController:
             try:
                 asyncio.run(asyncio.wait_for(self._direct_command(emergency=False), timeout_s))
             except Exception as exc:
-                error = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+                error = one_line(exc)
                 log.warning("stop command at start-up, attempt %d: %s", attempt, error)
                 continue
             message = f"drive {self.config.exciter.name!r} commanded to stop at start-up"

@@ -113,7 +113,7 @@ def run_sim_devices(args: argparse.Namespace) -> int:
     import can
 
     from daq.bench_config import write_bench_config
-    from daq.probe import one_line
+    from estimator.errors import one_line
     from simulators.devices.sim_bench import SimulatedBench, vehicle_preset
 
     can_interface, can_channel = _can_bus(args.can_url, args.exciter)
