@@ -165,12 +165,10 @@ def parse_free(text: str | None, vehicle: VehicleParameters, tyre: TyreModel) ->
 
 
 def options_from_args(args: argparse.Namespace, vehicle: VehicleParameters) -> IdentifyOptions:
-    from estimator.identify import IdentifyOptions, Solver
+    from estimator.identify import IdentifyOptions, Solver, check_curve_points
     from estimator.solvers.differential_evolution import DESettings
-    from estimator.tanh_fit import MIN_POINTS as MIN_TANH_POINTS
 
-    if args.points is not None and not MIN_TANH_POINTS <= args.points <= 60:
-        raise CliError(f"--points must lie between {MIN_TANH_POINTS} (the tanh fit needs as many) and 60")
+    check_curve_points(args.points, "--points")
     de = DESettings(generations=args.generations, seed=args.seed)
     tyre = TyreModel(args.tyre)
     return IdentifyOptions(
@@ -186,16 +184,13 @@ def options_from_args(args: argparse.Namespace, vehicle: VehicleParameters) -> I
 def run_identify(args: argparse.Namespace) -> int:
     from daq.formats.recording_csv import read_recording_csv
     from daq.formats.vehicle_file import read_vehicle
-    from estimator.bandwidth import check_bandwidth
     from estimator.identify import Solver, identify
     from service.jobs.bounds import check_physical_bounds
     from service.plots import save_curve_plot
 
     recording = read_recording_csv(args.recording)
     vehicle = read_vehicle(args.vehicle)
-    for warning in check_bandwidth(recording).warnings:  # refuses (ValueError, one line) when hopeless
-        print(f"shockbench identify: warning: {warning}", file=sys.stderr)
-    check_physical_bounds(recording, vehicle)  # the service's submit check (ValueError, one line)
+    check_physical_bounds(recording, vehicle)  # the service's submit check (InputError, one line)
     options = options_from_args(args, vehicle)
     progress = _ProgressLine() if options.solver is Solver.DE and not args.json else None
     result = identify(recording, vehicle, options, progress=progress)
