@@ -160,8 +160,7 @@ class IdentificationResult:
         sprung = self.intervals.interval("sprung_mass_kg")
         assert sprung is not None
         vehicle = self.model.vehicle
-        share = 2.0 if vehicle.is_axle else 1.0
-        unsprung = [(vehicle.mass_kg - sprung[1]) / share, (vehicle.mass_kg - sprung[0]) / share]
+        unsprung = [vehicle.unsprung_mass_kg(sprung[1]), vehicle.unsprung_mass_kg(sprung[0])]
         out: dict[str, object] = {
             "masses_kg_interval": {"sprung": list(sprung), "unsprung": unsprung},
             "stiffness_N_per_m_interval": {

@@ -137,8 +137,16 @@ class VehicleParameters:
     @property
     def static_wheel_load_N(self) -> float:
         """Static vertical load on one tyre."""
-        wheels = 2 if self.is_axle else 1
-        return self.mass_kg * STANDARD_GRAVITY_M_S2 / wheels
+        return self.mass_kg * STANDARD_GRAVITY_M_S2 / self.wheels
+
+    @property
+    def wheels(self) -> int:
+        return 2 if self.is_axle else 1
+
+    def unsprung_mass_kg(self, sprung_mass_kg: float) -> float:
+        """Unsprung mass per wheel, (M - M_s) / wheels: the one place this conversion is written (numpy
+        arrays of sprung masses work too)."""
+        return (self.mass_kg - sprung_mass_kg) / self.wheels
 
 
 PAPER_BENCH = VehicleParameters(
