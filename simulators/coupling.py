@@ -16,7 +16,7 @@ from typing import Protocol
 
 import numpy as np
 
-from drivers.exciter.sweep import SweepSettings
+from estimator.sweep import SweepSettings
 
 
 class SimulatedClock:

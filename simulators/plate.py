@@ -9,7 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from drivers.exciter.sweep import SweepSettings
+from estimator.sweep import SweepSettings
 from simulators.coupling import PlateState, PlateStatus, SimulatedClock
 from simulators.excitation import sweep_frequency_Hz, sweep_position_m
 

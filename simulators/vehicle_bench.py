@@ -21,8 +21,8 @@ from collections import deque
 
 import numpy as np
 
-from drivers.exciter.sweep import SweepSettings
 from estimator.dynamics import rk4_step
+from estimator.sweep import SweepSettings
 from simulators.coupling import PlateStatus, SimulatedClock
 from simulators.plate import SimulatedPlate
 from simulators.vehicle_sim import SimulatedVehicle

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from enum import IntEnum, StrEnum
 
-from drivers.exciter.sweep import SweepLaw
+from estimator.sweep import SweepLaw
 
 
 class ExciterState(StrEnum):

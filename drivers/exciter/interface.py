@@ -30,7 +30,7 @@ from dataclasses import dataclass
 from drivers.exciter.codes import CommandCode, ExciterState, StateCode
 from drivers.exciter.envelope import SafetyEnvelope
 from drivers.exciter.errors import EnvelopeBreachError, ExciterDeviceFaultError, ExciterError
-from drivers.exciter.sweep import SweepSettings
+from estimator.sweep import SweepSettings
 
 __all__ = ["ExciterState", "ExciterStatus", "PlateExciter"]
 

@@ -15,7 +15,7 @@ from fastapi import Query
 from pydantic import BaseModel, Field, create_model
 
 from daq.sweep.model import SweepProgress
-from drivers.exciter.sweep import SweepLaw
+from estimator.sweep import SweepLaw
 from service.api.results import DiagnoseResult, IdentifyResult, ValidateResult
 from service.jobs.diagnose_job import DiagnoseJobOptions
 from service.jobs.identify_job import IdentifyJobOptions

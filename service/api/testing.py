@@ -91,7 +91,7 @@ class SimulatedInputs:
 def _simulated(seconds: float, seed: int) -> tuple[str, str, Callable, np.ndarray]:
     from daq.formats.recording_csv import write_recording_csv
     from daq.formats.vehicle_file import format_vehicle
-    from drivers.exciter.sweep import SweepSettings
+    from estimator.sweep import SweepSettings
     from simulators.vehicle_sim import SimulationSettings, default_quarter_car, simulate, true_damper
 
     vehicle = default_quarter_car()

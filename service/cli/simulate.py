@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from drivers.exciter.sweep import SweepSettings
+from estimator.sweep import SweepSettings
 from estimator.vehicle import TyreModel
 from service.cli.errors import CliError
 

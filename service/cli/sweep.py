@@ -20,7 +20,7 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from drivers.exciter.sweep import SweepLaw, SweepSettings
+from estimator.sweep import SweepLaw, SweepSettings
 from service.cli.errors import EXIT_FAILED, CliError
 
 SETTLE_S, REST_S = 2.0, 1.0

@@ -31,7 +31,7 @@ from canopen.sdo import SdoAbortedError
 from drivers.exciter import cia402_objects as objects
 from drivers.exciter.cia402_objects import DriveState
 from drivers.exciter.codes import LawCode
-from drivers.exciter.sweep import SweepSettings
+from estimator.sweep import SweepSettings
 from simulators.coupling import BenchPhysics, PlateState
 
 DEFAULT_NODE_ID = 5

@@ -20,7 +20,7 @@ from typing import Any
 
 from drivers.exciter.codes import FAULT_NONE, FAULT_WATCHDOG, CommandCode, ExciterState, LawCode
 from drivers.exciter.interface import ExciterStatus
-from drivers.exciter.sweep import SweepSettings
+from estimator.sweep import SweepSettings
 from simulators.coupling import BenchPhysics, PlateState
 
 DEFAULT_WATCHDOG_TIMEOUT_S = 0.5

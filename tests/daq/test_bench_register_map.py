@@ -13,8 +13,8 @@ from daq.bench_config import BenchConfigError, dump_bench_config, load_bench_con
 from drivers.exciter.codes import ExciterState
 from drivers.exciter.errors import ExciterDeviceExceptionError
 from drivers.exciter.register_map import DEFAULT_REGISTER_MAP_PATH, RegisterMap
-from drivers.exciter.sweep import SweepSettings
 from drivers.exciter.urls import open_exciter
+from estimator.sweep import SweepSettings
 from simulators.devices.modbus_exciter import SimulatedModbusExciter
 from simulators.plate import PlateOnlyBench
 

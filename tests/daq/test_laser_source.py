@@ -14,7 +14,7 @@ from daq.sources.laser_source import LaserSource
 from drivers.compowayf.amplifier import CountUnit, MeasuredArea, MeasuredValueConfig, ZxlAmplifier
 from drivers.compowayf.errors import AreaTypeError, CompowayFError
 from drivers.compowayf.transport import CompowayFPort
-from drivers.exciter.sweep import SweepSettings
+from estimator.sweep import SweepSettings
 from simulators.devices.laser_amplifier import FaultKind, SimulatedAmplifier, TcpAmplifierServer
 from simulators.devices.sim_bench import SimulatedBench
 from simulators.excitation import sweep_position_m

@@ -30,7 +30,7 @@ from daq.sweep.pacing import DEFAULT_POLL_INTERVAL_S, SimulatedPacing
 from daq.sweep.run import DEFAULT_SILENCE_TIMEOUT_S, STEP_S, run_sweep
 from drivers.exciter.codes import ExciterState
 from drivers.exciter.interface import DEFAULT_KEEPALIVE_INTERVAL_S, ExciterStatus
-from drivers.exciter.sweep import SweepSettings
+from estimator.sweep import SweepSettings
 from simulators.coupling import PlateState
 from simulators.devices.exciter_drive import DEFAULT_WATCHDOG_TIMEOUT_S
 from simulators.devices.faulty_link import FaultyLink, LinkMode, modbus_tcp_requests

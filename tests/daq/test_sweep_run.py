@@ -20,8 +20,8 @@ from daq.sweep.model import StopKind, SweepOutcome, SweepProgress, SweepRequest
 from daq.sweep.pacing import SimulatedPacing
 from daq.sweep.run import SweepError, run_sweep
 from drivers.exciter.codes import CommandCode
-from drivers.exciter.sweep import SweepSettings
 from estimator.bandwidth import InsufficientBandwidthError, check_bandwidth
+from estimator.sweep import SweepSettings
 from simulators.devices.laser_amplifier import FaultKind
 from simulators.devices.sim_bench import SimulatedBench
 from simulators.excitation import sweep_position_m

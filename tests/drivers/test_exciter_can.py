@@ -26,8 +26,8 @@ from drivers.exciter.errors import (
     ExciterHeartbeatLostError,
     ExciterTimeoutError,
 )
-from drivers.exciter.sweep import SweepLaw, SweepSettings
 from drivers.exciter.urls import CanTarget, open_exciter, parse_exciter_url
+from estimator.sweep import SweepLaw, SweepSettings
 from simulators.devices.can_exciter import SimulatedCanExciter
 from simulators.plate import PlateOnlyBench
 

@@ -27,8 +27,8 @@ from drivers.exciter.errors import (
     ExciterHeartbeatLostError,
     ExciterTimeoutError,
 )
-from drivers.exciter.sweep import SweepLaw, SweepSettings
 from drivers.exciter.urls import Cia402Target, open_exciter, parse_exciter_url
+from estimator.sweep import SweepLaw, SweepSettings
 from simulators.devices.cia402_drive import SimulatedCia402Drive
 from simulators.plate import PlateOnlyBench
 

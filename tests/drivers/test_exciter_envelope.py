@@ -14,7 +14,7 @@ from drivers.exciter.can_bus import CanExciter
 from drivers.exciter.envelope import DEFAULT_HARD_LIMITS, EnvelopeLimits, SafetyEnvelope
 from drivers.exciter.errors import EnvelopeViolationError, ExciterConfigError, ExciterEncodingError
 from drivers.exciter.modbus import ModbusExciter, ModbusTcpLink
-from drivers.exciter.sweep import SweepLaw, SweepSettings
+from estimator.sweep import SweepLaw, SweepSettings
 from simulators.devices.can_exciter import SimulatedCanExciter
 from simulators.devices.modbus_exciter import SimulatedModbusExciter
 from simulators.plate import PlateOnlyBench

@@ -32,8 +32,8 @@ from drivers.exciter.register_map import (
     WordOrder,
     contiguous_runs,
 )
-from drivers.exciter.sweep import SweepSettings
 from drivers.exciter.urls import ModbusTarget, open_exciter, parse_exciter_url
+from estimator.sweep import SweepSettings
 from simulators.devices.modbus_exciter import SimulatedModbusExciter
 from simulators.plate import PlateOnlyBench
 

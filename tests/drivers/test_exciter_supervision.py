@@ -18,7 +18,7 @@ from drivers.exciter.codes import CommandCode, ExciterState
 from drivers.exciter.errors import EnvelopeBreachError, ExciterDeviceExceptionError
 from drivers.exciter.interface import ExciterStatus, PlateExciter
 from drivers.exciter.modbus import ModbusExciter, ModbusTcpLink
-from drivers.exciter.sweep import SweepSettings
+from estimator.sweep import SweepSettings
 from simulators.devices.can_exciter import SimulatedCanExciter
 from simulators.devices.exciter_drive import SimulatedDrive
 from simulators.devices.modbus_exciter import SimulatedModbusExciter

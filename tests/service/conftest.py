@@ -8,7 +8,7 @@ import pytest
 
 from daq.formats.recording_csv import write_recording_csv
 from daq.formats.vehicle_file import write_vehicle
-from drivers.exciter.sweep import SweepSettings
+from estimator.sweep import SweepSettings
 from service.api.testing import SimulatedInputs, simulated_inputs
 from simulators.vehicle_sim import (
     SimulationSettings,

@@ -18,9 +18,9 @@ import numpy as np
 import pytest
 from pydantic import BaseModel
 
-from drivers.exciter.sweep import SweepSettings
 from estimator.doctor.result import CandidateScore, DiagnosisResult, DiagnosisStep
 from estimator.identify import IdentifyOptions, identify
+from estimator.sweep import SweepSettings
 from estimator.validation import ValidationResult
 from service.access import KeyRing, Role
 from service.api import ServiceSettings, create_app

@@ -11,8 +11,8 @@ import httpx
 import pytest
 
 from daq.formats.recording_csv import write_recording_csv
-from drivers.exciter.sweep import SweepSettings
 from estimator.identify import identify
+from estimator.sweep import SweepSettings
 from service.access import KeyRing, Role
 from service.api import ServiceSettings, create_app
 from service.api.testing import LiveServer, wait_for_status

@@ -19,7 +19,7 @@ from drivers.compowayf.amplifier import AmplifierConfig, MeasuredArea, MeasuredV
 from drivers.compowayf.codec import build_command, parse_response
 from drivers.compowayf.layout import streaming_measured_config
 from drivers.compowayf.transport import CompowayFPort, LinkSettings
-from drivers.exciter.sweep import SweepSettings
+from estimator.sweep import SweepSettings
 from simulators.devices.laser_amplifier import (
     BUFFER_SIZE_BYTES,
     AmplifierLine,

@@ -6,7 +6,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from drivers.exciter.sweep import SweepSettings
+from estimator.sweep import SweepSettings
 from simulators.vehicle_bench import VehicleBench
 from simulators.vehicle_sim import (
     SensorModel,
