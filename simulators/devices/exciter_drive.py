@@ -18,8 +18,14 @@ import threading
 from enum import Enum
 from typing import Any
 
-from drivers.exciter.codes import FAULT_NONE, FAULT_WATCHDOG, CommandCode, ExciterState, LawCode
-from drivers.exciter.interface import ExciterStatus
+from drivers.exciter.codes import (
+    FAULT_NONE,
+    FAULT_WATCHDOG,
+    CommandCode,
+    ExciterState,
+    ExciterStatus,
+    LawCode,
+)
 from estimator.sweep import SweepSettings
 from simulators.coupling import BenchPhysics, PlateState
 

@@ -52,7 +52,6 @@ from typing import Self
 
 import numpy as np
 
-from drivers.compowayf.amplifier import AmplifierConfig
 from drivers.compowayf.codec import (
     STX,
     CommandFrame,
@@ -72,7 +71,7 @@ from drivers.compowayf.codec import (
     variable_element_width,
 )
 from drivers.compowayf.errors import CompowayFError, EndCodeError
-from drivers.compowayf.layout import COUNTER_MODULUS, MeasuredArea
+from drivers.compowayf.layout import COUNTER_MODULUS, AmplifierConfig, MeasuredArea
 from simulators.coupling import BenchPhysics
 from simulators.devices.sensor_heads import ZX_LD40, HeadModel, SimulatedHead
 

@@ -33,7 +33,7 @@ from typing import Any, Literal, Self
 import numpy as np
 
 from daq.bench_config import BenchConfig, ExciterConfig, LaserConfig
-from drivers.compowayf.amplifier import AmplifierConfig, streaming_measured_config
+from drivers.compowayf.layout import AmplifierConfig, streaming_measured_config
 from drivers.exciter.envelope import EnvelopeLimits
 from simulators.coupling import SimulatedClock
 from simulators.devices.can_exciter import SimulatedCanExciter
