@@ -24,7 +24,7 @@ from daq.bench_config import BenchConfig
 from daq.sweep.model import SweepOutcome, SweepProgress, SweepRequest
 from daq.sweep.pacing import Pacing, RealtimePacing, SimulatedPacing
 from daq.sweep.run import SweepError, check_request, run_sweep
-from simulators.devices.sim_bench import SimulatedBench, vehicle_preset
+from service.simulated_bench import SimulatedBench, vehicle_preset
 
 log = logging.getLogger("shockbench.bench")
 

@@ -15,8 +15,8 @@ from drivers.compowayf.amplifier import CountUnit, MeasuredArea, MeasuredValueCo
 from drivers.compowayf.errors import AreaTypeError, CompowayFError
 from drivers.compowayf.transport import CompowayFPort
 from estimator.sweep import SweepSettings
+from service.simulated_bench import SimulatedBench
 from simulators.devices.laser_amplifier import FaultKind, SimulatedAmplifier, TcpAmplifierServer
-from simulators.devices.sim_bench import SimulatedBench
 from simulators.excitation import sweep_position_m
 from simulators.plate import PlateOnlyBench
 

@@ -22,8 +22,8 @@ from daq.sweep.run import SweepError, run_sweep
 from drivers.exciter.codes import CommandCode
 from estimator.bandwidth import InsufficientBandwidthError, check_bandwidth
 from estimator.sweep import SweepSettings
+from service.simulated_bench import SimulatedBench
 from simulators.devices.laser_amplifier import FaultKind
-from simulators.devices.sim_bench import SimulatedBench
 from simulators.excitation import sweep_position_m
 from simulators.vehicle_sim import default_axle, default_quarter_car
 

@@ -29,7 +29,7 @@ from service.api.app import FINGERPRINT_SECRET_FILE
 from service.api.testing import LiveServer, SimulatedInputs, wait_until
 from service.api.testing import wait_for_status as wait_for
 from service.cli.main import main as cli_main
-from simulators.devices.sim_bench import SimulatedBench, vehicle_preset
+from service.simulated_bench import SimulatedBench, vehicle_preset
 from simulators.vehicle_sim import default_quarter_car
 
 OPERATOR = "operator-key-0123456789"

@@ -36,8 +36,8 @@ from drivers.exciter.codes import CommandCode, ExciterState
 from service.api.testing import wait_for_status as wait_for
 from service.api.testing import wait_until
 from service.bench_control import SERVICE_STOPPED
+from service.simulated_bench import SimulatedBench, vehicle_preset
 from service.store.sweeps import RESTART_REASON
-from simulators.devices.sim_bench import SimulatedBench, vehicle_preset
 
 ROOT = Path(__file__).resolve().parents[2]
 OPERATOR = "operator-key-0123456789"

@@ -21,8 +21,8 @@ from drivers.exciter.codes import CommandCode, LawCode
 from estimator.recording import AXLE_CHANNELS
 from estimator.vehicle import ModelKind
 from service.cli.main import main
+from service.simulated_bench import HEAD_MODELS, SimulatedBench, vehicle_preset
 from simulators.devices.laser_amplifier import FaultKind, PtyAmplifierServer, SimulatedAmplifier
-from simulators.devices.sim_bench import HEAD_MODELS, SimulatedBench, vehicle_preset
 
 ROOT = Path(__file__).resolve().parents[2]
 STARTUP_TIMEOUT_S = 30.0
