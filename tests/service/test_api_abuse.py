@@ -19,6 +19,8 @@ from typing import Any
 import h5py
 import httpx
 import pytest
+from live_server import LiveServer, SimulatedInputs, wait_until
+from live_server import wait_for_status as wait_for
 
 from daq.bench_config import write_bench_config
 from daq.formats.vehicle_file import format_vehicle
@@ -26,8 +28,6 @@ from drivers.exciter.codes import CommandCode
 from service.access import KeyRing, Role
 from service.api import ServiceSettings, create_app
 from service.api.app import FINGERPRINT_SECRET_FILE
-from service.api.testing import LiveServer, SimulatedInputs, wait_until
-from service.api.testing import wait_for_status as wait_for
 from service.cli.main import main as cli_main
 from service.simulated_bench import SimulatedBench, vehicle_preset
 from simulators.vehicle_sim import default_quarter_car

@@ -28,13 +28,13 @@ from typing import Any
 
 import httpx
 import pytest
+from live_server import wait_for_status as wait_for
+from live_server import wait_until
 
 from daq.bench_config import write_bench_config
 from daq.formats.vehicle_file import format_vehicle
 from daq.storage.hdf5_recording import read_recording
 from drivers.exciter.codes import CommandCode, ExciterState
-from service.api.testing import wait_for_status as wait_for
-from service.api.testing import wait_until
 from service.bench_control import SERVICE_STOPPED
 from service.simulated_bench import SimulatedBench, vehicle_preset
 from service.store.sweeps import RESTART_REASON
@@ -184,7 +184,7 @@ def test_sigterm_mid_sweep_fails_it_as_service_stopped_with_the_plate_stopped_an
 def test_a_killed_worker_fails_its_job_and_leaves_the_sweep_alone(
     folder: Path, bench: SimulatedBench, tmp_path: Path
 ) -> None:
-    from service.api.testing import simulated_inputs
+    from live_server import simulated_inputs
 
     inputs = simulated_inputs(tmp_path / "inputs", seconds=6.0, seed=1)
     service = serve(folder, "serve")

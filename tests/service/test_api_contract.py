@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from live_server import SimulatedInputs
 from pydantic import BaseModel
 
 from estimator.doctor.result import CandidateScore, DiagnosisResult, DiagnosisStep
@@ -25,7 +26,6 @@ from estimator.validation import ValidationResult
 from service.access import KeyRing, Role
 from service.api import ServiceSettings, create_app
 from service.api.results import DiagnoseResult, IdentifyResult, ValidateResult
-from service.api.testing import SimulatedInputs
 from service.jobs.context import finite_json
 from service.jobs.identify_job import IdentifyJobOptions
 from simulators.vehicle_sim import SimulationSettings, default_axle, simulate
