@@ -2,8 +2,8 @@
 port in a background thread (`LiveServer`), a deadline-bounded `wait_until`, and simulated input files
 (`simulated_inputs`) whose truth is known.
 
-It lives under tests/ (it was service/api/testing.py): it needs httpx, which only the test extra installs, so it
-is no part of the installed product. Benchmarks put tests/service on sys.path to use it."""
+It lives under tests/ (it was service/api/testing.py): it needs httpx, which only the test extra installs,
+so it is no part of the installed product. Benchmarks put tests/service on sys.path to use it."""
 
 from __future__ import annotations
 
