@@ -3,7 +3,7 @@ channel (TCP socket or pty), a Modbus or CAN plate drive, and the bench configur
 
     with SimulatedBench(default_quarter_car(), exciter="modbus") as bench:   # start() on entering
         config = bench.config            # daq.bench_config.BenchConfig with the live URLs
-        bench.advance(0.01)              # manual clock: move time, tick the drive, sample the lasers
+        bench.advance(0.01)              # manual clock: move time, tick the exciter, sample the lasers
 
 Time: by default the bench runs on a manual SimulatedClock that only `advance(dt_s)` moves, so a test (or
 `shockbench sweep --simulated`) is deterministic. With `realtime=True` the clock follows the wall clock
@@ -37,7 +37,7 @@ from drivers.compowayf.layout import AmplifierConfig, streaming_measured_config
 from drivers.exciter.envelope import EnvelopeLimits
 from simulators.coupling import SimulatedClock
 from simulators.devices.can_exciter import SimulatedCanExciter
-from simulators.devices.exciter_drive import SimulatedDrive
+from simulators.devices.exciter import SimulatedExciter
 from simulators.devices.laser_amplifier import (
     AmplifierLine,
     PtyAmplifierServer,
@@ -216,12 +216,12 @@ class SimulatedBench:
         return self._config
 
     @property
-    def drive(self) -> SimulatedDrive:
-        """The plate drive behind whichever protocol (inject_fault, watchdog state...)."""
+    def exciter(self) -> SimulatedExciter:
+        """The simulated exciter behind whichever protocol (inject_fault, watchdog state...)."""
         sim = self.modbus or self.can
         if sim is None:
             raise RuntimeError("simulated bench not started")
-        return sim.drive
+        return sim.exciter
 
     # ---- time ---------------------------------------------------------------------------------------
 

@@ -33,7 +33,7 @@ from drivers.exciter.interface import DEFAULT_KEEPALIVE_INTERVAL_S, ExciterStatu
 from estimator.sweep import SweepSettings
 from service.simulated_bench import SimulatedBench
 from simulators.coupling import PlateState
-from simulators.devices.exciter_drive import DEFAULT_WATCHDOG_TIMEOUT_S
+from simulators.devices.exciter import DEFAULT_WATCHDOG_TIMEOUT_S
 from simulators.devices.faulty_link import FaultyLink, LinkMode, modbus_tcp_requests
 from simulators.devices.laser_amplifier import FaultKind
 from simulators.plate import CONTROLLED_STOP_RAMP_S
@@ -130,7 +130,7 @@ def drive_reports(change: Callable[[ExciterStatus], ExciterStatus]) -> Callable[
     """The simulated drive misreports while running (a runaway drive or a broken encoder)."""
 
     def inject(rig: Rig) -> None:
-        drive = rig.bench.drive
+        drive = rig.bench.exciter
         honest = drive.status
 
         def misreported() -> ExciterStatus:

@@ -123,7 +123,7 @@ def test_modbus_sends_nothing_for_a_violation(settings: SweepSettings, field: st
                     await exciter.start()
             assert sim.writes == []
             assert sim.requests == 0
-            assert sim.drive.commands == []
+            assert sim.exciter.commands == []
 
     asyncio.run(scenario())
 
@@ -159,7 +159,7 @@ def test_can_sends_nothing_for_a_violation(settings: SweepSettings, field: str, 
             names = [name for name, _ in sim.received]
             assert names == ["EXC_Command"]
             assert sim.received[0][1]["Command"] == 0  # the status request, nothing else
-            assert sim.drive.commands == []
+            assert sim.exciter.commands == []
 
     asyncio.run(scenario())
 

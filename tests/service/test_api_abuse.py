@@ -421,7 +421,7 @@ def test_sweeps_and_schedules_the_bench_cannot_record_fast_enough_are_refused(tm
             assert_refused(test, "stop_Hz", "the bench records at 20 Hz")
             # a sweep it can carry (up to 4 Hz) is taken
             assert c.post("/api/v1/sweeps", json={**body, "stop_Hz": 4}, headers=AUTH).status_code == 201
-            assert slow.drive.commands[0] is CommandCode.STOP  # the start-up stop came first
+            assert slow.exciter.commands[0] is CommandCode.STOP  # the start-up stop came first
     finally:
         slow.close()
 

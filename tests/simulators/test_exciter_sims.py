@@ -15,7 +15,7 @@ from drivers.exciter.can_frames import CanResult, ExciterFrames
 from drivers.exciter.codes import FAULT_WATCHDOG, CommandCode, ExciterState, LawCode, StateCode
 from drivers.exciter.register_map import RegisterMap
 from simulators.devices.can_exciter import SimulatedCanExciter
-from simulators.devices.exciter_drive import DriveRefusalError, RefusalReason, SimulatedDrive
+from simulators.devices.exciter import ExciterRefusalError, RefusalReason, SimulatedExciter
 from simulators.devices.modbus_exciter import SimulatedModbusExciter
 from simulators.plate import PlateOnlyBench
 
@@ -25,8 +25,8 @@ SWEEP_PARAMS = {"start_Hz": 0.0, "stop_Hz": 20.0, "amplitude_m": 0.004, "duratio
 # ---- drive logic ------------------------------------------------------------------------------------------
 
 
-def started_drive(watchdog_timeout_s: float = 0.5) -> SimulatedDrive:
-    drive = SimulatedDrive(PlateOnlyBench(), watchdog_timeout_s)
+def started_drive(watchdog_timeout_s: float = 0.5) -> SimulatedExciter:
+    drive = SimulatedExciter(PlateOnlyBench(), watchdog_timeout_s)
     drive.set_sweep_params(**SWEEP_PARAMS)
     drive.command(CommandCode.START)
     return drive
@@ -57,7 +57,7 @@ def test_drive_watchdog_trip_is_a_controlled_stop_latched_until_reset() -> None:
     drive.clock.advance(0.4)
     rested = drive.status()
     assert (rested.state, rested.fault_code, rested.position_m) == (ExciterState.FAULT, FAULT_WATCHDOG, 0.0)
-    with pytest.raises(DriveRefusalError) as info:
+    with pytest.raises(ExciterRefusalError) as info:
         drive.command(CommandCode.START)
     assert info.value.reason is RefusalReason.FAULT
     drive.command(CommandCode.RESET_FAULT)
@@ -87,12 +87,12 @@ def test_drive_watchdog_sleeps_when_no_sweep_runs() -> None:
     ],
 )
 def test_drive_refuses_bad_starts(params: dict[str, float], reason: RefusalReason) -> None:
-    drive = SimulatedDrive(PlateOnlyBench())
+    drive = SimulatedExciter(PlateOnlyBench())
     drive.set_sweep_params(**params)
-    with pytest.raises(DriveRefusalError) as info:
+    with pytest.raises(ExciterRefusalError) as info:
         drive.command(CommandCode.START)
     assert info.value.reason is reason
-    with pytest.raises(DriveRefusalError):
+    with pytest.raises(ExciterRefusalError):
         drive.command(99)
 
 
@@ -101,7 +101,7 @@ def test_drive_fault_injection_needs_a_plate() -> None:
         clock = PlateOnlyBench().clock
 
     with pytest.raises(TypeError, match="SimulatedPlate"):
-        SimulatedDrive(NoPlate()).inject_fault(1)  # type: ignore[arg-type]
+        SimulatedExciter(NoPlate()).inject_fault(1)  # type: ignore[arg-type]
 
 
 # ---- Modbus drive seen with a plain pymodbus client --------------------------------------------------------
