@@ -22,7 +22,7 @@ import can
 from drivers.exciter import can_frames as frames
 from drivers.exciter.can_frames import CanResult, ExciterFrames, Signals
 from drivers.exciter.codes import StateCode
-from simulators.coupling import BenchPhysics
+from simulators.coupling import PlatePhysics
 from simulators.devices.exciter import (
     DEFAULT_WATCHDOG_TIMEOUT_S,
     ExciterRefusalError,
@@ -47,7 +47,7 @@ class SimulatedCanExciter:
 
     def __init__(
         self,
-        bench: BenchPhysics,
+        bench: PlatePhysics,
         *,
         channel: str,
         interface: str = "virtual",

@@ -32,7 +32,7 @@ from drivers.exciter import cia402_objects as objects
 from drivers.exciter.cia402_objects import DriveState
 from drivers.exciter.codes import LawCode
 from estimator.sweep import SweepSettings
-from simulators.coupling import BenchPhysics, PlateState
+from simulators.coupling import PlatePhysics, PlateState
 
 DEFAULT_NODE_ID = 5
 READER_POLL_S = 0.02
@@ -70,7 +70,7 @@ class SimulatedCia402Exciter:
 
     def __init__(
         self,
-        bench: BenchPhysics,
+        bench: PlatePhysics,
         *,
         channel: str,
         interface: str = "virtual",

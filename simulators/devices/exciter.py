@@ -30,7 +30,7 @@ from drivers.exciter.codes import (
     LawCode,
 )
 from estimator.sweep import SweepSettings
-from simulators.coupling import BenchPhysics, PlateState
+from simulators.coupling import PlatePhysics, PlateState
 
 DEFAULT_WATCHDOG_TIMEOUT_S = 0.5
 
@@ -53,10 +53,10 @@ class ExciterRefusalError(Exception):
 
 
 class SimulatedExciter:
-    """Drive controller logic on top of a BenchPhysics. Thread-safe (CAN frames arrive on a reader
+    """Drive controller logic on top of a PlatePhysics. Thread-safe (CAN frames arrive on a reader
     thread while tests advance the clock)."""
 
-    def __init__(self, bench: BenchPhysics, watchdog_timeout_s: float = DEFAULT_WATCHDOG_TIMEOUT_S) -> None:
+    def __init__(self, bench: PlatePhysics, watchdog_timeout_s: float = DEFAULT_WATCHDOG_TIMEOUT_S) -> None:
         self.bench = bench
         self.clock = bench.clock
         self.watchdog_timeout_s = watchdog_timeout_s

@@ -72,7 +72,7 @@ from drivers.compowayf.codec import (
 )
 from drivers.compowayf.errors import CompowayFError, EndCodeError
 from drivers.compowayf.layout import COUNTER_MODULUS, AmplifierConfig, MeasuredArea
-from simulators.coupling import BenchPhysics
+from simulators.coupling import PlatePhysics
 from simulators.devices.sensor_heads import ZX_LD40, HeadModel, SimulatedHead
 
 BUFFER_SIZE_BYTES = 217
@@ -154,7 +154,7 @@ class SimulatedAmplifier:
     @classmethod
     def for_channel(
         cls,
-        bench: BenchPhysics,
+        bench: PlatePhysics,
         channel: str,
         model: HeadModel = ZX_LD40,
         *,

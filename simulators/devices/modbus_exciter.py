@@ -29,7 +29,7 @@ from pymodbus.simulator import DataType, SimData, SimDevice
 
 from drivers.exciter.codes import StateCode
 from drivers.exciter.register_map import RegisterMap, RegisterSpec
-from simulators.coupling import BenchPhysics
+from simulators.coupling import PlatePhysics
 from simulators.devices.exciter import (
     DEFAULT_WATCHDOG_TIMEOUT_S,
     ExciterRefusalError,
@@ -58,7 +58,7 @@ class SimulatedModbusExciter:
 
     def __init__(
         self,
-        bench: BenchPhysics,
+        bench: PlatePhysics,
         *,
         register_map: RegisterMap | None = None,
         unit: int = 1,

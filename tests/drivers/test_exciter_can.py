@@ -29,7 +29,7 @@ from drivers.exciter.errors import (
 from drivers.exciter.urls import CanTarget, open_exciter, parse_exciter_url
 from estimator.sweep import SweepLaw, SweepSettings
 from simulators.devices.can_exciter import SimulatedCanExciter
-from simulators.plate import PlateOnlyBench
+from simulators.plate import EmptyPlate
 
 SWEEP = SweepSettings(start_Hz=0.0, stop_Hz=20.0, amplitude_m=0.004, duration_s=20.0)
 REPLY_TIMEOUT_S = 0.2
@@ -43,7 +43,7 @@ def fresh_channel() -> str:
 @asynccontextmanager
 async def can_rig(**sim_kwargs: object) -> AsyncIterator[tuple[SimulatedCanExciter, CanExciter]]:
     """Simulated drive and driver on one virtual channel, the driver supervising on the simulated clock."""
-    bench = PlateOnlyBench()
+    bench = EmptyPlate()
     channel = fresh_channel()
     with SimulatedCanExciter(bench, channel=channel, **sim_kwargs) as sim:  # type: ignore[arg-type]
         sim.tick()  # first heartbeat
@@ -144,7 +144,7 @@ def test_can_urls() -> None:
 
 def test_full_cycle_on_the_virtual_bus_opened_from_a_url() -> None:
     async def scenario() -> None:
-        bench = PlateOnlyBench()
+        bench = EmptyPlate()
         channel = fresh_channel()
         with SimulatedCanExciter(bench, channel=channel) as sim:
             sim.tick()
@@ -319,7 +319,7 @@ def test_watchdog_over_can() -> None:
 
 def test_moved_frame_set_from_a_url_talks_to_a_drive_on_the_same_base() -> None:
     async def scenario() -> None:
-        bench = PlateOnlyBench()
+        bench = EmptyPlate()
         channel = fresh_channel()
         with SimulatedCanExciter(bench, channel=channel, base_id=0x6C0) as sim:
             sim.tick()
@@ -367,7 +367,7 @@ class _RigExciter(CanExciter):
 @pytest.mark.filterwarnings("ignore::pytest.PytestUnhandledThreadExceptionWarning")
 def test_reader_error_fails_the_call_then_a_new_bus_is_opened() -> None:
     async def scenario() -> None:
-        bench = PlateOnlyBench()
+        bench = EmptyPlate()
         channel = fresh_channel()
         with SimulatedCanExciter(bench, channel=channel) as sim:
             sim.tick()

@@ -30,7 +30,7 @@ from drivers.exciter.errors import (
 from drivers.exciter.urls import Cia402Target, open_exciter, parse_exciter_url
 from estimator.sweep import SweepLaw, SweepSettings
 from simulators.devices.cia402_exciter import SimulatedCia402Exciter
-from simulators.plate import PlateOnlyBench
+from simulators.plate import EmptyPlate
 
 SWEEP = SweepSettings(start_Hz=0.0, stop_Hz=20.0, amplitude_m=0.004, duration_s=20.0)
 REPLY_TIMEOUT_S = 0.2
@@ -44,7 +44,7 @@ def fresh_channel() -> str:
 @asynccontextmanager
 async def rig(**exciter_kwargs: object) -> AsyncIterator[tuple[SimulatedCia402Exciter, Cia402Exciter]]:
     """Simulated drive and back end on one virtual channel, supervision on the simulated clock."""
-    bench = PlateOnlyBench()
+    bench = EmptyPlate()
     channel = fresh_channel()
     with SimulatedCia402Exciter(bench, channel=channel, node_id=NODE) as sim:
         exciter = Cia402Exciter(
@@ -427,7 +427,7 @@ def test_bench_config_takes_a_canopen_drive() -> None:
 
 def test_opened_from_a_url() -> None:
     async def scenario() -> None:
-        bench = PlateOnlyBench()
+        bench = EmptyPlate()
         channel = fresh_channel()
         with SimulatedCia402Exciter(bench, channel=channel, node_id=9) as sim:
             exciter = await open_exciter(

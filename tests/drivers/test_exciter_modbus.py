@@ -35,7 +35,7 @@ from drivers.exciter.register_map import (
 from drivers.exciter.urls import ModbusTarget, open_exciter, parse_exciter_url
 from estimator.sweep import SweepSettings
 from simulators.devices.modbus_exciter import SimulatedModbusExciter
-from simulators.plate import PlateOnlyBench
+from simulators.plate import EmptyPlate
 
 SWEEP = SweepSettings(start_Hz=0.0, stop_Hz=20.0, amplitude_m=0.004, duration_s=20.0)
 TIMEOUT_S = 0.3
@@ -48,7 +48,7 @@ def run(scenario: Callable[[], Awaitable[None]]) -> None:
 @asynccontextmanager
 async def tcp_rig(**sim_kwargs: object) -> AsyncIterator[tuple[SimulatedModbusExciter, ModbusExciter]]:
     """Simulated drive on loopback TCP and a driver connected to it, both on the same simulated clock."""
-    bench = PlateOnlyBench()
+    bench = EmptyPlate()
     async with SimulatedModbusExciter(bench, **sim_kwargs) as sim:  # type: ignore[arg-type]
         exciter = ModbusExciter(
             ModbusTcpLink(sim.host, sim.port), timeout_s=TIMEOUT_S, clock=bench.clock.now_s
@@ -220,7 +220,7 @@ def test_full_cycle_over_rtu_on_a_pty_through_the_url() -> None:
         pytest.skip("no pseudo-terminals on this platform")
 
     async def scenario() -> None:
-        bench = PlateOnlyBench()
+        bench = EmptyPlate()
         async with SimulatedModbusExciter(bench, framer="rtu", unit=7) as sim:
             device = await sim.attach_pty()
             url = f"modbus-rtu://{device}?baudrate=19200&unit=7&timeout={TIMEOUT_S}"
@@ -243,7 +243,7 @@ def test_full_cycle_over_rtu_on_a_pty_through_the_url() -> None:
 
 def test_rtu_framing_over_a_socket_url() -> None:
     async def scenario() -> None:
-        bench = PlateOnlyBench()
+        bench = EmptyPlate()
         async with SimulatedModbusExciter(bench, framer="rtu") as sim:
             link = ModbusRtuLink(sim.serial_url)
             async with ModbusExciter(link, timeout_s=TIMEOUT_S, clock=bench.clock.now_s) as exciter:
@@ -374,7 +374,7 @@ def test_keepalive_comes_only_from_supervision_on_a_wall_clock_drive() -> None:
     from simulators.coupling import SimulatedClock
 
     async def scenario() -> None:
-        bench = PlateOnlyBench(SimulatedClock(follow_wall_clock=True))
+        bench = EmptyPlate(SimulatedClock(follow_wall_clock=True))
         async with SimulatedModbusExciter(bench, watchdog_timeout_s=0.25) as sim:
             link = ModbusTcpLink(sim.host, sim.port)
             async with ModbusExciter(link, timeout_s=1.0, keepalive_interval_s=0.02) as exciter:

@@ -22,7 +22,7 @@ from estimator.sweep import SweepSettings
 from simulators.devices.can_exciter import SimulatedCanExciter
 from simulators.devices.exciter import SimulatedExciter
 from simulators.devices.modbus_exciter import SimulatedModbusExciter
-from simulators.plate import CONTROLLED_STOP_RAMP_S, PlateOnlyBench
+from simulators.plate import CONTROLLED_STOP_RAMP_S, EmptyPlate
 
 SWEEP = SweepSettings(start_Hz=0.0, stop_Hz=20.0, amplitude_m=0.004, duration_s=20.0)
 TIMEOUT_S = 0.3
@@ -42,7 +42,7 @@ class Rig:
 
 @asynccontextmanager
 async def rig(backend: Backend) -> AsyncIterator[Rig]:
-    bench = PlateOnlyBench()
+    bench = EmptyPlate()
     if backend == "modbus":
         async with SimulatedModbusExciter(bench) as sim:
             exciter = ModbusExciter(
