@@ -44,7 +44,7 @@ class BenchBusyError(RuntimeError):
 
 @dataclass(frozen=True)
 class BenchState:
-    """A snapshot for the status endpoint."""
+    """A snapshot of the BenchController for the status endpoint (GET /bench; BenchOut is its API schema)."""
 
     name: str
     model: str
@@ -56,6 +56,9 @@ class BenchState:
 
 
 class BenchController:
+    """The bench the service owns: one sweep at a time on it, its status, and the stop on shutdown. Exists
+    so that the API routes and the scheduler share one owner of the devices."""
+
     def __init__(
         self, config: BenchConfig | None = None, *, simulated: bool = False, model: str = "quarter-car"
     ):
