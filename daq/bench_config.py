@@ -306,7 +306,9 @@ class ExciterConfig:
 
 @dataclass(frozen=True)
 class BenchConfig:
-    """A whole bench. envelope None: the hard limits (drivers.exciter.envelope.DEFAULT_HARD_LIMITS)."""
+    """A whole bench as its TOML file states it: every device by URL and which channel each laser measures.
+    The one description of a bench that acquisition, probing and the service read, real or simulated.
+    envelope None: the hard limits (drivers.exciter.envelope.DEFAULT_HARD_LIMITS)."""
 
     name: str
     model: ModelKind

@@ -25,7 +25,7 @@ from daq.sweep.model import SweepOutcome, SweepProgress, SweepRequest
 from daq.sweep.pacing import Pacing, RealtimePacing, SimulatedPacing
 from daq.sweep.run import SweepError, check_request, run_sweep
 from estimator.errors import ConflictError, one_line
-from simulators.devices.sim_bench import SimulatedBench, vehicle_preset
+from service.simulated_bench import SimulatedBench, vehicle_preset
 
 log = logging.getLogger("shockbench.bench")
 
@@ -45,7 +45,7 @@ class BenchBusyError(ConflictError, RuntimeError):
 
 @dataclass(frozen=True)
 class BenchState:
-    """A snapshot for the status endpoint."""
+    """A snapshot of the BenchController for the status endpoint (GET /bench; BenchOut is its API schema)."""
 
     name: str
     model: str
@@ -57,6 +57,9 @@ class BenchState:
 
 
 class BenchController:
+    """The bench the service owns: one sweep at a time on it, its status, and the stop on shutdown. Exists
+    so that the API routes and the scheduler share one owner of the devices."""
+
     def __init__(
         self, config: BenchConfig | None = None, *, simulated: bool = False, model: str = "quarter-car"
     ):

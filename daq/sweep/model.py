@@ -8,8 +8,8 @@ from enum import StrEnum
 from pathlib import Path
 
 from daq.sources.laser_source import SourceStatistics
-from drivers.exciter.sweep import SweepSettings
 from estimator.errors import InvalidValueError
+from estimator.sweep import SweepSettings
 
 DEFAULT_SETTLE_S = 2.0
 """Recorded after the sweep's end, while the vehicle comes to rest."""

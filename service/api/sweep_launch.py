@@ -20,8 +20,8 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from daq.sweep.model import DEFAULT_SETTLE_S, StopKind, SweepOutcome, SweepRequest
 from daq.sweep.run import SAMPLE_TIME_S, SweepError
-from drivers.exciter.sweep import SweepLaw, SweepSettings
 from estimator.bandwidth import REFUSE_SAMPLES_PER_PERIOD
+from estimator.sweep import SweepLaw, SweepSettings
 from estimator.vehicle import VehicleParameters
 from service.api.intake import parse_vehicle_field
 from service.bench_control import BenchBusyError, BenchController, SweepDone

@@ -1,4 +1,7 @@
-"""What a plate exciter is told to do: the sine-sweep settings every back end (Modbus, CAN) understands."""
+"""What the plate is told to do: the sine-sweep settings every exciter back end (Modbus, CAN, CiA 402)
+understands, the simulators integrate and the estimator checks a recording against. Pure data with no
+dependency, so every layer may import it (it lived in drivers/exciter/ before, where simulators and
+daq had to reach into a driver for it)."""
 
 from __future__ import annotations
 
