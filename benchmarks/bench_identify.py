@@ -28,11 +28,11 @@ from dataclasses import replace
 import numpy as np
 from scipy.optimize import differential_evolution
 
-from drivers.exciter.sweep import SweepSettings
 from estimator.equations import build
 from estimator.identify import Coordinates, IdentifyOptions, de_problem, identify
 from estimator.solvers.differential_evolution import DESettings, DifferentialEvolution
 from estimator.solvers.exact import solve_exact
+from estimator.sweep import SweepSettings
 from estimator.vehicle import TyreModel
 from simulators.vehicle_sim import SimulationSettings, default_quarter_car, simulate, true_damper
 

@@ -30,12 +30,12 @@ from dataclasses import replace
 
 import numpy as np
 
-from drivers.exciter.sweep import SweepSettings
 from estimator import relaxation
 from estimator.equations import build
 from estimator.identify import IdentificationResult, IdentifyOptions, identify
 from estimator.relaxation import fit_relaxation_time
 from estimator.solvers.exact import solve_exact
+from estimator.sweep import SweepSettings
 from estimator.uncertainty import (
     KINEMATICS_CUTOFF_RATIO,
     KINEMATICS_RICHARDSON,

@@ -27,7 +27,7 @@ TARGET_MIB = 1024.0
 def write_axle_recording(folder: Path, seconds: float) -> tuple[Path, Path]:
     from daq.formats.recording_csv import write_recording_csv
     from daq.formats.vehicle_file import write_vehicle
-    from drivers.exciter.sweep import SweepSettings
+    from estimator.sweep import SweepSettings
     from simulators.vehicle_sim import SimulationSettings, default_axle, simulate
 
     vehicle = default_axle()

@@ -38,8 +38,11 @@ import numpy as np
 
 from daq.formats.recording_csv import read_recording_csv, write_recording_csv
 from daq.formats.vehicle_file import format_vehicle, write_vehicle
-from service.api.testing import wait_until
 from simulators.vehicle_sim import SimulationSettings, default_quarter_car, simulate
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "service"))
+
+from live_server import wait_until  # the tests' deadline-bounded wait, shared
 
 KEY = "benchmark-operator-key-0123456789"
 PATHS = ("/api/v1/status", "/api/v1/jobs")

@@ -39,7 +39,7 @@ from daq.sweep.model import SweepRequest
 from daq.sweep.pacing import RealtimePacing
 from daq.sweep.run import run_sweep
 from drivers.exciter.envelope import EnvelopeLimits
-from drivers.exciter.sweep import SweepSettings
+from estimator.sweep import SweepSettings
 
 START_TIMEOUT_S = 30.0
 MINUTE_S = 60.0

@@ -32,8 +32,11 @@ import httpx
 
 from daq.formats.recording_csv import write_recording_csv
 from daq.formats.vehicle_file import write_vehicle
-from service.api.testing import wait_until
 from simulators.vehicle_sim import SimulationSettings, default_quarter_car, simulate
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "service"))
+
+from live_server import wait_until  # the tests' deadline-bounded wait, shared
 
 KEY = "benchmark-operator-key-0123456789"
 TARGET_P99_MS = 50.0

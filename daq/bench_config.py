@@ -102,6 +102,7 @@ from drivers.exciter.errors import ExciterConfigError
 from drivers.exciter.interface import DEFAULT_KEEPALIVE_INTERVAL_S, PlateExciter
 from drivers.exciter.register_map import RegisterMap
 from drivers.exciter.urls import CanTarget, Cia402Target, open_exciter, parse_exciter_url
+from estimator.errors import UserError
 from estimator.recording import AXLE_CHANNELS, QUARTER_CAR_CHANNELS
 from estimator.vehicle import ModelKind
 
@@ -120,7 +121,7 @@ CHANNELS: dict[ModelKind, tuple[str, ...]] = {
 }
 
 
-class BenchConfigError(ValueError):
+class BenchConfigError(UserError, ValueError):
     """A bench configuration that cannot be used. `key` is where the problem is, as a path into the TOML
     document (("lasers", 1, "channel") is the channel of the second [[lasers]] table), when known."""
 
@@ -128,6 +129,11 @@ class BenchConfigError(ValueError):
         super().__init__(message)
         self.message = message
         self.key = key
+
+    @property
+    def field(self) -> str | None:  # type: ignore[override]
+        """The key as a dotted path ("lasers.1.channel"), the field to blame."""
+        return ".".join(str(part) for part in self.key) or None
 
 
 @dataclass(frozen=True)
@@ -300,7 +306,9 @@ class ExciterConfig:
 
 @dataclass(frozen=True)
 class BenchConfig:
-    """A whole bench. envelope None: the hard limits (drivers.exciter.envelope.DEFAULT_HARD_LIMITS)."""
+    """A whole bench as its TOML file states it: every device by URL and which channel each laser measures.
+    The one description of a bench that acquisition, probing and the service read, real or simulated.
+    envelope None: the hard limits (drivers.exciter.envelope.DEFAULT_HARD_LIMITS)."""
 
     name: str
     model: ModelKind

@@ -21,6 +21,7 @@ from drivers.compowayf.amplifier import ZxlAmplifier
 from drivers.compowayf.transport import CompowayFPort, LinkSettings
 from drivers.compowayf.urls import parse_device_url
 from drivers.exciter.urls import CanTarget, parse_exciter_url
+from estimator.errors import one_line
 
 DEFAULT_TIMEOUT_S = 0.5
 """Reply timeout of one CompoWay/F attempt while probing (unless the URL says otherwise)."""
@@ -50,12 +51,6 @@ class DeviceReport:
         else:
             out["error"] = self.error
         return out
-
-
-def one_line(exc: BaseException) -> str:
-    """The first line of an exception's message, or its class name when it has none."""
-    lines = str(exc).strip().splitlines()
-    return lines[0] if lines else type(exc).__name__
 
 
 def probe_bench(config: BenchConfig, timeout_s: float = DEFAULT_TIMEOUT_S) -> list[DeviceReport]:

@@ -23,6 +23,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from estimator.errors import UserError
 from estimator.recording import Recording
 
 REFUSE_SAMPLES_PER_PERIOD = 5.0
@@ -31,7 +32,7 @@ DEFAULT_TOP_HZ = 20.0
 RATE_PREFIX = "rate_Hz."
 
 
-class InsufficientBandwidthError(ValueError):
+class InsufficientBandwidthError(UserError, ValueError):
     """A sensor's achieved rate cannot carry the sweep; the message names the channel, its rate and the
     sweep's top frequency."""
 

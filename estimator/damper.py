@@ -11,6 +11,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from estimator.errors import InvalidValueError
+
 
 def hat_basis(velocity_m_s: np.ndarray, grid_m_s: np.ndarray) -> np.ndarray:
     """Basis of linear interpolation on `grid_m_s`: column j is the tent function of grid point j, so that
@@ -37,11 +39,11 @@ class PiecewiseLinearCurve:
         v = np.asarray(self.velocity_m_s, dtype=float)
         f = np.asarray(self.force_N, dtype=float)
         if v.ndim != 1 or v.shape != f.shape or v.size < 2:
-            raise ValueError(
+            raise InvalidValueError(
                 "a piecewise-linear curve needs matching 1-D velocity and force arrays of >= 2 points"
             )
         if np.any(np.diff(v) <= 0):
-            raise ValueError("curve velocities must be strictly increasing")
+            raise InvalidValueError("curve velocities must be strictly increasing")
         object.__setattr__(self, "velocity_m_s", v)
         object.__setattr__(self, "force_N", f)
 

@@ -29,6 +29,7 @@ import numpy as np
 
 from estimator.damper import hat_basis
 from estimator.digital_filters import first_order_filter
+from estimator.errors import InvalidValueError
 from estimator.recording import AXLE_CHANNELS, QUARTER_CAR_CHANNELS, Recording
 from estimator.signals import FilterChoice, Kinematics, choose_filters, derivative, kinematics, lowpass
 from estimator.vehicle import TyreModel, VehicleConstant, VehicleParameters
@@ -92,7 +93,7 @@ class LinearResiduals:
         """The same system with the Maxwell tyre column built for another ϑ (at the recording's sample
         time): only that column changes, so a search over ϑ does not rebuild the system."""
         if self.tyre_model is not TyreModel.MAXWELL:
-            raise ValueError("ϑ applies to the maxwell tyre model only")
+            raise InvalidValueError("ϑ applies to the maxwell tyre model only")
         column = self.parameter_names.index(TYRE_DAMPING)
         matrix = self.matrix.copy()
         for rate, equation in zip(self.tyre_rates_m_s, self.tyre_equations, strict=True):
@@ -156,7 +157,7 @@ def tyre_regressor(rate_m_s: np.ndarray, tyre: TyreModel, theta: float | None) -
     if tyre is TyreModel.KELVIN_VOIGT:
         return rate_m_s
     if theta is None:
-        raise ValueError("the maxwell tyre needs ϑ")
+        raise InvalidValueError("the maxwell tyre needs ϑ")
     return maxwell_regressor(rate_m_s, theta)
 
 
@@ -165,7 +166,7 @@ def select_samples(n: int, sample_time_s: float, nsample: int | None) -> np.ndar
     trim = round(EDGE_TRIM_S / sample_time_s)
     usable = np.arange(trim, n - trim)
     if usable.size < 10:
-        raise ValueError("recording too short: less than 10 samples after trimming filter transients")
+        raise InvalidValueError("recording too short: less than 10 samples after trimming filter transients")
     if nsample is None or nsample >= usable.size:
         return usable
     return usable[np.linspace(0, usable.size - 1, nsample).round().astype(int)]
@@ -174,7 +175,9 @@ def select_samples(n: int, sample_time_s: float, nsample: int | None) -> np.ndar
 def velocity_grid(velocity_m_s: np.ndarray, points: int) -> np.ndarray:
     lo, hi = np.quantile(velocity_m_s, [GRID_QUANTILE, 1.0 - GRID_QUANTILE])
     if not hi > lo:
-        raise ValueError("the suspension barely moved: no velocity range to identify a damper curve on")
+        raise InvalidValueError(
+            "the suspension barely moved: no velocity range to identify a damper curve on"
+        )
     return np.linspace(lo, hi, points)
 
 
@@ -218,7 +221,7 @@ def free_stiffnesses(
     for (`free`); the anti-roll bar only on an axle."""
     wanted = (vehicle.unknown | free) & set(STIFFNESS_NAMES)
     if VehicleConstant.BAR in wanted and not vehicle.is_axle:
-        raise ValueError("the anti-roll bar applies to an axle only")
+        raise InvalidValueError("the anti-roll bar applies to an axle only")
     return frozenset(wanted)
 
 
@@ -250,7 +253,7 @@ def _tyre_theta(vehicle: VehicleParameters, tyre: TyreModel, sample_time_s: floa
     if tyre is not TyreModel.MAXWELL:
         return None
     if vehicle.tyre_viscoelastic_coefficient is None:
-        raise ValueError("the maxwell tyre needs ϑ: state it, or identify it (estimator.identify)")
+        raise InvalidValueError("the maxwell tyre needs ϑ: state it, or identify it (estimator.identify)")
     return vehicle.viscoelastic_coefficient_at(sample_time_s)
 
 

@@ -16,9 +16,11 @@ import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from enum import StrEnum
+from typing import ClassVar
 
 import numpy as np
 
+from estimator.bandwidth import check_bandwidth
 from estimator.damper import PiecewiseLinearCurve
 from estimator.equations import (
     STIFFNESS_NAMES,
@@ -28,6 +30,7 @@ from estimator.equations import (
     population_sum_of_norms,
     tyre_regressor,
 )
+from estimator.errors import InvalidValueError
 from estimator.inspection import CornerInspection, corner_inspection, imbalance
 from estimator.newton_refit import newton_refit
 from estimator.output_error import IdentifiedModel, refine_on_output_error, simulate_identified
@@ -36,6 +39,7 @@ from estimator.relaxation import RELAXATION_TIME_BOUNDS_S, fit_relaxation_time
 from estimator.signals import FilterChoice
 from estimator.solvers.differential_evolution import DEProgress, DESettings, DifferentialEvolution
 from estimator.solvers.exact import solve_exact
+from estimator.tanh_fit import MIN_POINTS as MIN_TANH_POINTS
 from estimator.tanh_fit import TanhFit, fit_tanh
 from estimator.uncertainty import Intervals, identification_intervals
 from estimator.vehicle import (
@@ -80,6 +84,12 @@ class Coordinates(StrEnum):
 
 @dataclass(frozen=True)
 class IdentifyOptions:
+    MIN_POINTS: ClassVar[int] = MIN_TANH_POINTS
+    """The fewest damper curve points accepted: the tanh fit of the curve needs as many."""
+    MAX_POINTS: ClassVar[int] = 60
+    """The most damper curve points accepted: more resolve nothing the 1 kHz recording carries, and the
+    convex solve grows with them. The CLI, the job options and the diagnosis take their limits from here."""
+
     tyre: TyreModel = TyreModel.MAXWELL
     points: int | None = None
     """Damper curve points; default 20 for a quarter car, 10 per side for an axle."""
@@ -93,6 +103,19 @@ class IdentifyOptions:
     """Constants to identify although the vehicle file states them (those it does not state always are)."""
     intervals: bool = True
     """95% confidence intervals (estimator.uncertainty): one more convex solve on a refined grid."""
+
+    def __post_init__(self) -> None:
+        check_curve_points(self.points)
+
+
+def check_curve_points(points: int | None, field: str = "points") -> None:
+    """InvalidValueError (naming `field`) unless `points` is None or within IdentifyOptions' limits."""
+    low, high = IdentifyOptions.MIN_POINTS, IdentifyOptions.MAX_POINTS
+    if points is not None and not low <= points <= high:
+        raise InvalidValueError(
+            f"{field} must lie between {low} (the tanh fit needs as many) and {high}, got {points}",
+            field=field,
+        )
 
 
 @dataclass(frozen=True)
@@ -137,8 +160,7 @@ class IdentificationResult:
         sprung = self.intervals.interval("sprung_mass_kg")
         assert sprung is not None
         vehicle = self.model.vehicle
-        share = 2.0 if vehicle.is_axle else 1.0
-        unsprung = [(vehicle.mass_kg - sprung[1]) / share, (vehicle.mass_kg - sprung[0]) / share]
+        unsprung = [vehicle.unsprung_mass_kg(sprung[1]), vehicle.unsprung_mass_kg(sprung[0])]
         out: dict[str, object] = {
             "masses_kg_interval": {"sprung": list(sprung), "unsprung": unsprung},
             "stiffness_N_per_m_interval": {
@@ -343,10 +365,10 @@ def constants_to_identify(vehicle: VehicleParameters, options: IdentifyOptions) 
     ϑ only with the Maxwell tyre (the other tyre models have no ϑ); the bar only on an axle."""
     wanted = vehicle.unknown | options.free
     if VehicleConstant.BAR in wanted and not vehicle.is_axle:
-        raise ValueError("the anti-roll bar ('bar') applies to an axle only")
+        raise InvalidValueError("the anti-roll bar ('bar') applies to an axle only")
     if options.tyre is not TyreModel.MAXWELL:
         if VehicleConstant.THETA in options.free:
-            raise ValueError("ϑ ('theta') belongs to the maxwell tyre model only")
+            raise InvalidValueError("ϑ ('theta') belongs to the maxwell tyre model only")
         wanted = wanted - {VehicleConstant.THETA}
     return frozenset(wanted)
 
@@ -360,7 +382,7 @@ def _resolved(
         value = system.value(theta, name)
         if value is not None:
             if not value > 0:
-                raise ValueError(
+                raise InvalidValueError(
                     f"the identified {name} is {value:.4g}, not positive: the recording does not "
                     "determine it (state it in the vehicle file)"
                 )
@@ -387,10 +409,15 @@ def identify(
     cancel: threading.Event | None = None,
 ) -> IdentificationResult:
     """Identify the damper curve(s), the masses, the tyre damping and the vehicle constants the file does not
-    state (or options.free names) from a recording."""
+    state (or options.free names) from a recording. An undersampled recording is refused here
+    (InsufficientBandwidthError, estimator.bandwidth), so every path (CLI, job, library) gets the check;
+    a marginal one is identified with the bandwidth warning among the result's warnings."""
     if vehicle.is_axle != recording.is_axle:
         kind = "axle" if vehicle.is_axle else "quarter-car"
-        raise ValueError(f"the vehicle file is for a {kind} model but the recording's channels are not")
+        raise InvalidValueError(
+            f"the vehicle file is for a {kind} model but the recording's channels are not"
+        )
+    bandwidth = check_bandwidth(recording)
     unknown = constants_to_identify(vehicle, options)
     search_theta = VehicleConstant.THETA in unknown
     start = vehicle
@@ -398,7 +425,7 @@ def identify(
         start = vehicle.with_relaxation_time(STARTING_RELAXATION_TIME_S)
     system = build(recording, start, options.tyre, options.points, options.nsample, free=unknown)
     relaxation_time = None
-    warnings: list[str] = []
+    warnings: list[str] = list(bandwidth.warnings)
     if search_theta:
         fit = fit_relaxation_time(system)
         system, exact, relaxation_time = fit.system, fit.solution, fit.relaxation_time_s

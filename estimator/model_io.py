@@ -33,6 +33,7 @@ import numpy as np
 
 from estimator.damper import PiecewiseLinearCurve
 from estimator.dynamics import AxlePhysics, CornerPhysics, QuarterCarPhysics
+from estimator.errors import UserError
 from estimator.output_error import IdentifiedModel
 from estimator.recording import AXLE_CHANNELS, QUARTER_CAR_CHANNELS
 from estimator.vehicle import (
@@ -44,7 +45,7 @@ from estimator.vehicle import (
 )
 
 
-class ModelFormatError(ValueError):
+class ModelFormatError(UserError, ValueError):
     """The model dict lacks a key or holds a value the model cannot be built from (one line, names it)."""
 
 

@@ -55,8 +55,7 @@ class IdentifiedModel:
     @property
     def unsprung_mass_kg(self) -> float:
         """Per wheel."""
-        wheels = 2 if self.vehicle.is_axle else 1
-        return (self.vehicle.mass_kg - self.sprung_mass_kg) / wheels
+        return self.vehicle.unsprung_mass_kg(self.sprung_mass_kg)
 
     def physics(self, curves: tuple[object, ...] | None = None):
         curves = curves or self.curves

@@ -6,6 +6,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from estimator.errors import InvalidValueError
+
 QUARTER_CAR_CHANNELS = ("x_s", "x_t", "x_r")
 AXLE_CHANNELS = ("x_s_l", "x_s_r", "x_t_l", "x_t_r", "x_r_l", "x_r_r")
 
@@ -25,19 +27,21 @@ class Recording:
         self.time_s = np.asarray(self.time_s, dtype=float)
         n = self.time_s.size
         if n < 3:
-            raise ValueError("a recording needs at least 3 samples")
+            raise InvalidValueError("a recording needs at least 3 samples")
         for name, values in list(self.channels.items()):
             arr = np.asarray(values, dtype=float)
             if arr.shape != (n,):
-                raise ValueError(f"channel {name} has {arr.size} samples, time has {n}")
+                raise InvalidValueError(f"channel {name} has {arr.size} samples, time has {n}")
             if not np.all(np.isfinite(arr)):
-                raise ValueError(f"channel {name} has non-finite values")
+                raise InvalidValueError(f"channel {name} has non-finite values")
             self.channels[name] = arr
         steps = np.diff(self.time_s)
         dt = float(np.median(steps))
         if dt <= 0 or np.max(np.abs(steps - dt)) > 1e-3 * dt:
             bad = int(np.argmax(np.abs(steps - dt))) + 1
-            raise ValueError(f"sample time is not uniform at sample {bad} (t = {self.time_s[bad]:.6f} s)")
+            raise InvalidValueError(
+                f"sample time is not uniform at sample {bad} (t = {self.time_s[bad]:.6f} s)"
+            )
 
     @property
     def sample_time_s(self) -> float:
@@ -50,4 +54,4 @@ class Recording:
     def require(self, names: tuple[str, ...]) -> None:
         missing = [c for c in names if c not in self.channels]
         if missing:
-            raise ValueError(f"recording lacks channel(s) {', '.join(missing)}")
+            raise InvalidValueError(f"recording lacks channel(s) {', '.join(missing)}")

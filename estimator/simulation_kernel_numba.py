@@ -291,4 +291,3 @@ INTEGRATE_SIGNATURE = (
     " f8[:, :, :], f8[:, :, :], f8[:, :, :])"
 )
 """_integrate's argument types, as the extension exports it (any memory layout)."""
-

@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from estimator.doctor.model import ChannelCorrections
+from estimator.errors import InvalidValueError
 from estimator.model_io import ModelWithEffects
 from estimator.output_error import DIVERGED_GAP_M, IdentifiedModel, simulate_identified
 from estimator.recording import Recording
@@ -58,7 +59,7 @@ def check_model_fits(model: IdentifiedModel, recording: Recording) -> None:
     if model.vehicle.is_axle != recording.is_axle:
         has = "axle" if recording.is_axle else "quarter-car"
         kind = "an axle" if model.vehicle.is_axle else "a quarter car"
-        raise ValueError(f"the model is for {kind} but the recording has {has} channels")
+        raise InvalidValueError(f"the model is for {kind} but the recording has {has} channels")
 
 
 def validate(model: IdentifiedModel, recording: Recording) -> ValidationResult:

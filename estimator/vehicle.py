@@ -20,6 +20,8 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 from enum import StrEnum
 
+from estimator.errors import InvalidValueError
+
 
 class ModelKind(StrEnum):
     QUARTER_CAR = "quarter-car"
@@ -81,18 +83,18 @@ class VehicleParameters:
 
     def __post_init__(self) -> None:
         if not self.mass_kg > 0:
-            raise ValueError(f"mass_kg must be > 0, got {self.mass_kg}")
+            raise InvalidValueError(f"mass_kg must be > 0, got {self.mass_kg}")
         for name in ("spring_stiffness_N_per_m", "tyre_stiffness_N_per_m"):
             value = getattr(self, name)
             if value is not None and not value > 0:
-                raise ValueError(f"{name} must be > 0, got {value}")
+                raise InvalidValueError(f"{name} must be > 0, got {value}")
         theta = self.tyre_viscoelastic_coefficient
         if theta is not None and not 0.0 <= theta < 1.0:
-            raise ValueError("tyre_viscoelastic_coefficient (ϑ) must be in [0, 1)")
+            raise InvalidValueError("tyre_viscoelastic_coefficient (ϑ) must be in [0, 1)")
         if self.model is ModelKind.AXLE and (self.track_m is None or not self.track_m > 0):
-            raise ValueError("an axle needs track_m > 0")
+            raise InvalidValueError("an axle needs track_m > 0")
         if self.anti_roll_bar_stiffness_N_per_m < 0:
-            raise ValueError("anti_roll_bar_stiffness_N_per_m must be >= 0")
+            raise InvalidValueError("anti_roll_bar_stiffness_N_per_m must be >= 0")
 
     @property
     def is_axle(self) -> bool:
@@ -124,7 +126,7 @@ class VehicleParameters:
         to 1 ms; `sample_time_s` is accepted (and not needed) for callers that pass the recording's."""
         tau = self.tyre_relaxation_time_s
         if tau is None:
-            raise ValueError("the tyre's viscoelastic coefficient ϑ is not known: identify it first")
+            raise InvalidValueError("the tyre's viscoelastic coefficient ϑ is not known: identify it first")
         return tau
 
     def with_relaxation_time(self, relaxation_time_s: float) -> VehicleParameters:
@@ -135,8 +137,16 @@ class VehicleParameters:
     @property
     def static_wheel_load_N(self) -> float:
         """Static vertical load on one tyre."""
-        wheels = 2 if self.is_axle else 1
-        return self.mass_kg * STANDARD_GRAVITY_M_S2 / wheels
+        return self.mass_kg * STANDARD_GRAVITY_M_S2 / self.wheels
+
+    @property
+    def wheels(self) -> int:
+        return 2 if self.is_axle else 1
+
+    def unsprung_mass_kg(self, sprung_mass_kg: float) -> float:
+        """Unsprung mass per wheel, (M - M_s) / wheels: the one place this conversion is written (numpy
+        arrays of sprung masses work too)."""
+        return (self.mass_kg - sprung_mass_kg) / self.wheels
 
 
 PAPER_BENCH = VehicleParameters(

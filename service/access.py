@@ -25,6 +25,8 @@ from dataclasses import dataclass
 from enum import IntEnum
 from pathlib import Path
 
+from estimator.errors import UserError
+
 MIN_KEY_LENGTH = 16
 """Shorter keys are refused: a key is a password, and the service may listen beyond loopback."""
 
@@ -41,7 +43,7 @@ class Role(IntEnum):
         return self.name.lower()
 
 
-class KeysFileError(ValueError):
+class KeysFileError(UserError, ValueError):
     """The keys file is unusable; the message is one line and names the file."""
 
 

@@ -24,7 +24,8 @@ from daq.bench_config import BenchConfig
 from daq.sweep.model import SweepOutcome, SweepProgress, SweepRequest
 from daq.sweep.pacing import Pacing, RealtimePacing, SimulatedPacing
 from daq.sweep.run import SweepError, check_request, run_sweep
-from simulators.devices.sim_bench import SimulatedBench, vehicle_preset
+from estimator.errors import ConflictError, one_line
+from service.simulated_bench import SimulatedBench, vehicle_preset
 
 log = logging.getLogger("shockbench.bench")
 
@@ -38,13 +39,13 @@ SweepDone = Callable[[str, SweepOutcome | None, str], None]
 """Called in the sweep's thread when it ends: (sweep id, outcome or None, error message if it never began)."""
 
 
-class BenchBusyError(RuntimeError):
+class BenchBusyError(ConflictError, RuntimeError):
     """A sweep is already running on this bench."""
 
 
 @dataclass(frozen=True)
 class BenchState:
-    """A snapshot for the status endpoint."""
+    """A snapshot of the BenchController for the status endpoint (GET /bench; BenchOut is its API schema)."""
 
     name: str
     model: str
@@ -56,6 +57,9 @@ class BenchState:
 
 
 class BenchController:
+    """The bench the service owns: one sweep at a time on it, its status, and the stop on shutdown. Exists
+    so that the API routes and the scheduler share one owner of the devices."""
+
     def __init__(
         self, config: BenchConfig | None = None, *, simulated: bool = False, model: str = "quarter-car"
     ):
@@ -87,7 +91,7 @@ class BenchController:
             try:
                 asyncio.run(asyncio.wait_for(self._direct_command(emergency=False), timeout_s))
             except Exception as exc:
-                error = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+                error = one_line(exc)
                 log.warning("stop command at start-up, attempt %d: %s", attempt, error)
                 continue
             message = f"drive {self.config.exciter.name!r} commanded to stop at start-up"

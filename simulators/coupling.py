@@ -1,7 +1,7 @@
 """How simulated devices are coupled to the simulated bench physics.
 
 Simulated devices (laser amplifiers, plate exciters) speak the real protocols on real transports; what they
-report comes from a `BenchPhysics`: the exciter commands its plate, the amplifiers read its channel positions.
+report comes from a `PlatePhysics`: the exciter commands its plate, the amplifiers read its channel positions.
 Time is a `SimulatedClock`, advanced explicitly in tests (deterministic, no sleeps) or following the wall
 clock when the devices are served to a real client (`shockbench sim-devices`).
 """
@@ -16,7 +16,7 @@ from typing import Protocol
 
 import numpy as np
 
-from drivers.exciter.sweep import SweepSettings
+from estimator.sweep import SweepSettings
 
 
 class SimulatedClock:
@@ -63,8 +63,10 @@ class PlateStatus:
     extra: dict[str, float] = field(default_factory=dict)
 
 
-class BenchPhysics(Protocol):
-    """The physical bench as the simulated devices see it (all at clock.now_s())."""
+class PlatePhysics(Protocol):
+    """The plate and what stands on it, as the simulated devices see it (all at clock.now_s()). The one
+    interface between physics (EmptyPlate, VehicleOnPlate) and devices (exciters, amplifiers), so a device
+    is tested on the bare plate and served on a vehicle alike."""
 
     clock: SimulatedClock
 

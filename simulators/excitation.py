@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from drivers.exciter.sweep import SweepLaw, SweepSettings
+from estimator.sweep import SweepLaw, SweepSettings
 
 
 def sweep_phase_rad(settings: SweepSettings, t_s: np.ndarray | float) -> np.ndarray:

@@ -1,5 +1,5 @@
 """The plate of a simulated bench: runs a commanded sweep in simulated time, with controlled and emergency
-stops. Alone it is an empty bench (`PlateOnlyBench`); the vehicle bench puts a car on it."""
+stops. Alone it is an empty bench (`EmptyPlate`); the vehicle bench puts a car on it."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from drivers.exciter.sweep import SweepSettings
+from estimator.sweep import SweepSettings
 from simulators.coupling import PlateState, PlateStatus, SimulatedClock
 from simulators.excitation import sweep_frequency_Hz, sweep_position_m
 
@@ -115,8 +115,9 @@ class SimulatedPlate:
             return PlateStatus(state, freq, self._position_locked(now))
 
 
-class PlateOnlyBench:
-    """A bench with nothing on the plate: x_r moves, x_t and x_s stay at zero. Implements BenchPhysics."""
+class EmptyPlate:
+    """Nothing on the plate: x_r moves, x_t and x_s stay at zero. Implements PlatePhysics; exists so that
+    the exciter and amplifier simulators (and the drivers' tests) run without integrating a vehicle."""
 
     def __init__(self, clock: SimulatedClock | None = None) -> None:
         self.clock = clock or SimulatedClock()

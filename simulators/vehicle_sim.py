@@ -16,10 +16,10 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from drivers.exciter.sweep import SweepSettings
 from estimator.damper import PiecewiseLinearCurve, TanhCurve
 from estimator.dynamics import AxlePhysics, CornerPhysics, QuarterCarPhysics, integrate_rk4
 from estimator.recording import Recording
+from estimator.sweep import SweepSettings
 from estimator.vehicle import ModelKind, TyreModel, VehicleParameters
 from simulators.dampers import smooth_table, valve_damper
 from simulators.excitation import plate_motion

@@ -15,13 +15,14 @@ from pathlib import Path
 import numpy as np
 
 from daq.formats.atomic import atomic_write
+from estimator.errors import UserError
 from estimator.recording import AXLE_CHANNELS, QUARTER_CAR_CHANNELS, Recording
 
 UNIFORM_TOLERANCE = 1e-3
 """A sample interval may differ from the first one by this fraction (timestamps printed to 1 µs)."""
 
 
-class RecordingFormatError(ValueError):
+class RecordingFormatError(UserError, ValueError):
     """The file is not a valid recording CSV; the message names the line."""
 
 

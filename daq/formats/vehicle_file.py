@@ -23,6 +23,7 @@ import tomllib
 from pathlib import Path
 
 from daq.formats.atomic import atomic_write
+from estimator.errors import UserError
 from estimator.vehicle import ModelKind, VehicleParameters
 
 REQUIRED = ("model", "mass_kg")
@@ -36,7 +37,7 @@ OPTIONAL = (
 )
 
 
-class VehicleFileError(ValueError):
+class VehicleFileError(UserError, ValueError):
     """The vehicle file is invalid; the message names the key."""
 
 

@@ -52,6 +52,7 @@ import h5py
 import numpy as np
 
 from daq.formats.recording_csv import write_recording_csv
+from estimator.errors import UserError, one_line
 from estimator.recording import Recording
 
 FLAG_GAP = 0x01
@@ -89,7 +90,7 @@ _RESERVED = frozenset(
 _RATE_PREFIX = "rate_Hz."
 
 
-class RecordingFileError(ValueError):
+class RecordingFileError(UserError, ValueError):
     """The file is not a readable shockbench HDF5 recording; the message is one line naming the file."""
 
 
@@ -474,8 +475,7 @@ def load_recording(path: Path | str) -> StoredRecording:
     except RecordingFileError:
         raise
     except (OSError, KeyError, ValueError, TypeError) as exc:
-        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        raise RecordingFileError(f"{path}: cannot read the recording ({first})") from None
+        raise RecordingFileError(f"{path}: cannot read the recording ({one_line(exc)})") from None
     if not np.all(np.isfinite(time_s)):
         bad = int(np.argmin(np.isfinite(time_s)))
         raise RecordingFileError(f"{path}: time is not finite at row {bad}")

@@ -8,7 +8,8 @@ from enum import StrEnum
 from pathlib import Path
 
 from daq.sources.laser_source import SourceStatistics
-from drivers.exciter.sweep import SweepSettings
+from estimator.errors import InvalidValueError
+from estimator.sweep import SweepSettings
 
 DEFAULT_SETTLE_S = 2.0
 """Recorded after the sweep's end, while the vehicle comes to rest."""
@@ -34,9 +35,9 @@ class SweepRequest:
         for name in ("settle_s", "rest_s"):
             value = getattr(self, name)
             if not (math.isfinite(value) and 0 <= value <= 600):
-                raise ValueError(f"{name} must be within 0..600 s, got {value}")
+                raise InvalidValueError(f"{name} must be within 0..600 s, got {value}")
         if self.rest_s < 0.1:
-            raise ValueError(f"rest_s must be at least 0.1 s to zero the sensors, got {self.rest_s}")
+            raise InvalidValueError(f"rest_s must be at least 0.1 s to zero the sensors, got {self.rest_s}")
 
     @property
     def recorded_s(self) -> float:

@@ -3,9 +3,10 @@
 * `RealtimePacing`: real devices (or simulated ones on their own wall clock). One thread per serial line
   (lasers sharing an RS-485 line take turns on it) polls its sources: streaming amplifiers every
   `poll_interval_s`, polled ones back to back, as fast as the line answers. Time is time.monotonic.
-* `SimulatedPacing`: a SimulatedBench on a manual clock, for tests and `shockbench sweep --simulated`.
-  `wait(dt)` moves the bench's clock in steps of `poll_interval_s` and polls every source after each step,
-  so a run is deterministic and needs no sleeps (and runs as fast as the machine allows).
+* `SimulatedPacing`: a simulated bench on a manual clock (any `SteppedSimulation`: the service's
+  SimulatedBench), for tests and `shockbench sweep --simulated`. `wait(dt)` moves the bench's clock in
+  steps of `poll_interval_s` and polls every source after each step, so a run is deterministic and needs
+  no sleeps (and runs as fast as the machine allows).
 
 Both keep going when a read fails: the source counts it, and the orchestration judges a source that stays
 silent (daq/sweep/run.py).
@@ -21,7 +22,6 @@ from collections.abc import Callable, Sequence
 from typing import Protocol
 
 from daq.sources.laser_source import LaserSource
-from simulators.devices.sim_bench import SimulatedBench
 
 log = logging.getLogger(__name__)
 
@@ -94,8 +94,24 @@ class RealtimePacing:
         self._threads.clear()
 
 
+class SimulationClock(Protocol):
+    def now_s(self) -> float:
+        """Bench time in seconds."""
+
+
+class SteppedSimulation(Protocol):
+    """What SimulatedPacing needs of a simulated bench. A protocol, so that daq/ does not import the
+    simulators (or the service module that assembles them into a bench)."""
+
+    realtime: bool
+    clock: SimulationClock
+
+    def advance(self, dt_s: float) -> None:
+        """Move the bench's clock by dt_s and let every simulated device act on it."""
+
+
 class SimulatedPacing:
-    def __init__(self, bench: SimulatedBench, poll_interval_s: float = DEFAULT_POLL_INTERVAL_S) -> None:
+    def __init__(self, bench: SteppedSimulation, poll_interval_s: float = DEFAULT_POLL_INTERVAL_S) -> None:
         if bench.realtime:
             raise ValueError("SimulatedPacing needs a bench on a manual clock; use RealtimePacing")
         self.bench = bench

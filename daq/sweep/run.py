@@ -58,6 +58,7 @@ from drivers.compowayf.transport import CompowayFPort
 from drivers.exciter.codes import ExciterState
 from drivers.exciter.errors import EnvelopeBreachError, ExciterDeviceExceptionError
 from drivers.exciter.interface import ExciterStatus, PlateExciter
+from estimator.errors import UserError, one_line
 
 log = logging.getLogger(__name__)
 
@@ -75,7 +76,7 @@ REST_MAX_STD_M = 0.5e-3
 """A channel moving more than this (standard deviation at rest) means the vehicle is not at rest."""
 
 
-class SweepError(Exception):
+class SweepError(UserError):
     """The sweep could not begin; the plate did not move and nothing was written. One line."""
 
 
@@ -127,7 +128,7 @@ def check_request(config: BenchConfig, request: SweepRequest, out_path: Path) ->
         try:
             vehicle = read_vehicle(request.vehicle_file)
         except (OSError, ValueError) as exc:
-            raise SweepError(str(exc).splitlines()[0]) from None
+            raise SweepError(one_line(exc)) from None
         if vehicle.model != config.model:
             raise SweepError(
                 f"{request.vehicle_file}: a {vehicle.model} vehicle cannot be tested on the {config.model} "

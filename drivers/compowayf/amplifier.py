@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import contextlib
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 from drivers.compowayf.codec import (
     ControllerAttributes,
@@ -45,9 +45,11 @@ from drivers.compowayf.errors import (
 from drivers.compowayf.layout import (
     COUNTER_MODULUS,
     STREAM_BUFFER_LENGTH,
+    AmplifierConfig,
     CountUnit,
     MeasuredArea,
     MeasuredValueConfig,
+    OperationCodes,
     streaming_measured_config,
 )
 from drivers.compowayf.rate import RateMeter, ReadRate
@@ -72,26 +74,6 @@ class StreamRead:
 
     counter: int
     counts: list[int]
-
-
-@dataclass(frozen=True)
-class OperationCodes:
-    """Command code + related information of the operation commands (3005) the driver sends.
-
-    The defaults are placeholders (OMRON assigns codes per amplifier generation); the simulator honours
-    whatever is configured here.
-    """
-
-    zero_reset: tuple[int, int] = (0x01, 0x00)
-    zero_reset_cancel: tuple[int, int] = (0x01, 0x01)
-
-
-@dataclass(frozen=True)
-class AmplifierConfig:
-    """Everything that describes one amplifier on the line besides its node number."""
-
-    measured: MeasuredValueConfig = field(default_factory=MeasuredValueConfig)
-    operations: OperationCodes = field(default_factory=OperationCodes)
 
 
 class ZxlAmplifier:

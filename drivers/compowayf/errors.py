@@ -15,6 +15,8 @@ from __future__ import annotations
 
 from typing import ClassVar
 
+from estimator.errors import UserError
+
 
 class CompowayFError(Exception):
     """Base of every CompoWay/F failure."""
@@ -75,7 +77,7 @@ class PortLostError(PortError):
     retryable = True
 
 
-class DeviceUrlError(CompowayFError, ValueError):
+class DeviceUrlError(CompowayFError, UserError, ValueError):
     """A device URL that cannot be understood (unknown scheme option, node out of 00..99, bad number)."""
 
 

@@ -18,12 +18,15 @@ Sources (OMRON's CompoWay/F command references; the ZX-L amplifier's own map cou
   values 7FF0..7FFF are taken to be markers (an assumption, no OMRON text says so).
 * The streaming layout (sample counter and a ring of samples) is the simulator's own: no ZX manual at hand
   describes a buffered read over CompoWay/F.
+
+`AmplifierConfig` (the value layout plus the operation codes) is the whole address map of one amplifier; the
+driver reads by it and the simulated amplifier serves by it.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from enum import Enum, StrEnum
 
 from drivers.compowayf.codec import parameter_element_width, variable_element_width
@@ -185,3 +188,23 @@ def streaming_measured_config(
         sample_period_s=sample_period_s,
         counter_address=counter_address,
     )
+
+
+@dataclass(frozen=True)
+class OperationCodes:
+    """Command code + related information of the operation commands (3005) the driver sends.
+
+    The defaults are placeholders (OMRON assigns codes per amplifier generation); the simulator honours
+    whatever is configured here.
+    """
+
+    zero_reset: tuple[int, int] = (0x01, 0x00)
+    zero_reset_cancel: tuple[int, int] = (0x01, 0x01)
+
+
+@dataclass(frozen=True)
+class AmplifierConfig:
+    """Everything that describes one amplifier on the line besides its node number."""
+
+    measured: MeasuredValueConfig = field(default_factory=MeasuredValueConfig)
+    operations: OperationCodes = field(default_factory=OperationCodes)

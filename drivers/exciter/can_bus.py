@@ -50,7 +50,7 @@ from drivers.exciter.errors import (
     ExciterTimeoutError,
 )
 from drivers.exciter.interface import DEFAULT_KEEPALIVE_INTERVAL_S, ExciterStatus, PlateExciter
-from drivers.exciter.sweep import SweepSettings
+from estimator.sweep import SweepSettings
 
 log = logging.getLogger(__name__)
 

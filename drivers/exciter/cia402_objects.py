@@ -1,5 +1,5 @@
 """The object dictionary of a CiA 402 plate drive, as the host back end (drivers/exciter/cia402.py) and the
-simulated drive (simulators/devices/cia402_drive.py) both use it, built in code with canopen's classes.
+simulated drive (simulators/devices/cia402_exciter.py) both use it, built in code with canopen's classes.
 
 Standard objects (CiA 301 communication, CiA 402 drive profile):
 

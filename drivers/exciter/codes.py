@@ -2,14 +2,18 @@
 
 Both protocols carry the same vocabulary: a command code written by the host, a state code and a fault
 code reported by the drive, a sweep-law code. The DBC value tables (VAL_) repeat these numbers for CAN
-tools; tests check that the two agree.
+tools; tests check that the two agree. `ExciterStatus` is a status decoded from those codes: the driver
+returns it and the simulated drive reports it, so it lives here with the codes and not in the driver's
+interface (simulators may use a driver's codecs and address maps only).
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from enum import IntEnum, StrEnum
 
-from drivers.exciter.sweep import SweepLaw
+from drivers.exciter.errors import ExciterDeviceFaultError, ExciterError
+from estimator.sweep import SweepLaw
 
 
 class ExciterState(StrEnum):
@@ -65,3 +69,33 @@ FAULT_NONE = 0
 FAULT_WATCHDOG = 0x0010
 """The host keep-alive stopped for longer than the drive's watchdog timeout: the drive made a controlled
 stop and latched this code until a RESET_FAULT command. Other codes come from the drive itself."""
+
+
+@dataclass(frozen=True)
+class ExciterStatus:
+    """What the drive reports: state, latched fault code (0 = none), actual frequency and plate position."""
+
+    state: ExciterState
+    fault_code: int
+    frequency_Hz: float
+    position_m: float
+
+    @classmethod
+    def from_codes(
+        cls, state_code: float, fault_code: float, frequency_Hz: float, position_m: float
+    ) -> ExciterStatus:
+        """Status from the numbers on the wire; an unknown state code is a protocol error."""
+        try:
+            state = StateCode(int(state_code)).to_state()
+        except ValueError:
+            raise ExciterError(f"drive reported unknown state code {state_code!r}") from None
+        return cls(state, int(fault_code), float(frequency_Hz), float(position_m))
+
+    @property
+    def is_fault(self) -> bool:
+        return self.state is ExciterState.FAULT
+
+    def raise_for_fault(self) -> None:
+        """Raise ExciterDeviceFaultError if the drive is in fault."""
+        if self.is_fault:
+            raise ExciterDeviceFaultError(self.fault_code)

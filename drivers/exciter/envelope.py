@@ -22,7 +22,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, fields
 
 from drivers.exciter.errors import EnvelopeViolationError, ExciterConfigError
-from drivers.exciter.sweep import SweepSettings
+from estimator.sweep import SweepSettings
 
 
 @dataclass(frozen=True)

@@ -8,12 +8,14 @@ map, URL, envelope limits) are `ExciterConfigError`, which is also a `ValueError
 
 from __future__ import annotations
 
+from estimator.errors import UserError
+
 
 class ExciterError(Exception):
     """Base of every error raised by a plate exciter driver."""
 
 
-class ExciterConfigError(ExciterError, ValueError):
+class ExciterConfigError(ExciterError, UserError, ValueError):
     """A configuration is unusable: register map file, exciter URL, envelope limits above the hard limits."""
 
 
@@ -58,7 +60,7 @@ class ExciterHeartbeatLostError(ExciterError):
         self.timeout_s = timeout_s
 
 
-class EnvelopeViolationError(ExciterError, ValueError):
+class EnvelopeViolationError(ExciterError, UserError, ValueError):
     """A sweep lies outside the safety envelope; raised before anything is sent to the drive.
 
     `field` names the offending SweepSettings field, `limit_name` the envelope limit it broke."""
@@ -90,6 +92,6 @@ class EnvelopeBreachError(ExciterError):
         self.stopped = stopped
 
 
-class ExciterEncodingError(ExciterError, ValueError):
+class ExciterEncodingError(ExciterError, UserError, ValueError):
     """A value cannot be represented on the wire (out of the register or signal range after scaling);
     raised before anything is sent."""

@@ -25,12 +25,11 @@ import logging
 import time
 from abc import ABC, abstractmethod
 from collections.abc import Callable
-from dataclasses import dataclass
 
-from drivers.exciter.codes import CommandCode, ExciterState, StateCode
+from drivers.exciter.codes import CommandCode, ExciterState, ExciterStatus
 from drivers.exciter.envelope import SafetyEnvelope
-from drivers.exciter.errors import EnvelopeBreachError, ExciterDeviceFaultError, ExciterError
-from drivers.exciter.sweep import SweepSettings
+from drivers.exciter.errors import EnvelopeBreachError, ExciterError
+from estimator.sweep import SweepSettings
 
 __all__ = ["ExciterState", "ExciterStatus", "PlateExciter"]
 
@@ -42,36 +41,6 @@ several missed periods (the simulated drive after 0.5 s, a typical real one afte
 
 StatusCheck = Callable[["ExciterStatus"], None]
 """A caller's own check of a status during a supervision step; it raises to withhold the keep-alive."""
-
-
-@dataclass(frozen=True)
-class ExciterStatus:
-    """What the drive reports: state, latched fault code (0 = none), actual frequency and plate position."""
-
-    state: ExciterState
-    fault_code: int
-    frequency_Hz: float
-    position_m: float
-
-    @classmethod
-    def from_codes(
-        cls, state_code: float, fault_code: float, frequency_Hz: float, position_m: float
-    ) -> ExciterStatus:
-        """Status from the numbers on the wire; an unknown state code is a protocol error."""
-        try:
-            state = StateCode(int(state_code)).to_state()
-        except ValueError:
-            raise ExciterError(f"drive reported unknown state code {state_code!r}") from None
-        return cls(state, int(fault_code), float(frequency_Hz), float(position_m))
-
-    @property
-    def is_fault(self) -> bool:
-        return self.state is ExciterState.FAULT
-
-    def raise_for_fault(self) -> None:
-        """Raise ExciterDeviceFaultError if the drive is in fault."""
-        if self.is_fault:
-            raise ExciterDeviceFaultError(self.fault_code)
 
 
 class PlateExciter(ABC):

@@ -39,7 +39,7 @@ from drivers.exciter.errors import (
 )
 from drivers.exciter.interface import DEFAULT_KEEPALIVE_INTERVAL_S, ExciterStatus, PlateExciter
 from drivers.exciter.register_map import RegisterMap, contiguous_runs
-from drivers.exciter.sweep import SweepSettings
+from estimator.sweep import SweepSettings
 
 
 @dataclass(frozen=True)

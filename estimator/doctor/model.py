@@ -41,6 +41,7 @@ from estimator.doctor.catalog import (
 )
 from estimator.doctor.columns import EquationSignals, restrict, with_columns
 from estimator.equations import LinearResiduals, build
+from estimator.errors import InvalidValueError
 from estimator.newton_refit import newton_refit
 from estimator.recording import Recording
 from estimator.signals import FilterChoice
@@ -278,7 +279,9 @@ class Reference:
     def of(recording: Recording, vehicle: VehicleParameters, settings: FitSettings) -> Reference:
         if vehicle.is_axle != recording.is_axle:
             kind = "axle" if vehicle.is_axle else "quarter-car"
-            raise ValueError(f"the vehicle file is for a {kind} model but the recording's channels are not")
+            raise InvalidValueError(
+                f"the vehicle file is for a {kind} model but the recording's channels are not"
+            )
         base = build(recording, vehicle, TyreModel.SPRING, settings.points, settings.nsample)
         return Reference(recording, vehicle, settings, base.grids_m_s, base.filters)
 

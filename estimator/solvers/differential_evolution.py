@@ -21,6 +21,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from estimator.errors import InvalidValueError
+
 
 @dataclass(frozen=True)
 class DESettings:
@@ -37,11 +39,11 @@ class DESettings:
 
     def __post_init__(self) -> None:
         if self.population_size < 4:
-            raise ValueError("DE/rand/1 needs a population of at least 4")
+            raise InvalidValueError("DE/rand/1 needs a population of at least 4")
         if not 0.0 <= self.crossover_probability <= 1.0 or not 0.0 <= self.mutation_probability <= 1.0:
-            raise ValueError("probabilities must lie in [0, 1]")
+            raise InvalidValueError("probabilities must lie in [0, 1]")
         if self.generations < 1:
-            raise ValueError("generations must be >= 1")
+            raise InvalidValueError("generations must be >= 1")
 
 
 @dataclass(frozen=True)

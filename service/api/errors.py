@@ -1,5 +1,12 @@
 """Typed JSON errors: every error a client sees is {"error": {"code", "message", "field"?}}, with a one-line
-message; a stack trace never leaves the service (it goes to the log)."""
+message; a stack trace never leaves the service (it goes to the log).
+
+The one place where domain errors become HTTP: the bench, sweep and job logic raises `UserError`s
+(estimator.errors: bad input, a thing not found, a state conflict such as a busy bench) and never an HTTP
+status; `DOMAIN_ERRORS` maps each class to its status and code (the most specific class in an exception's
+MRO wins). `ApiError` stays for the routes themselves (authentication, a missing job, limits). Any other
+exception is a bug: 500 with an error id, logged with its traceback under that id.
+"""
 
 from __future__ import annotations
 
@@ -12,6 +19,10 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from pydantic import BaseModel, Field
 from starlette.exceptions import HTTPException as StarletteHTTPException
+
+from daq.storage.hdf5_recording import RecordingFileError, RecordingGapError
+from estimator.errors import ConflictError, NotFoundError, UserError, one_line
+from service.bench_control import BenchBusyError
 
 log = logging.getLogger("shockbench.api")
 
@@ -31,6 +42,25 @@ CODES = {
     500: "internal",
     503: "unavailable",
 }
+
+
+DOMAIN_ERRORS: dict[type[UserError], tuple[int, str]] = {
+    UserError: (422, "invalid"),
+    NotFoundError: (404, "not_found"),
+    ConflictError: (409, "conflict"),
+    BenchBusyError: (409, "bench_busy"),
+    RecordingFileError: (422, "bad_recording"),
+    RecordingGapError: (422, "recording_gaps"),
+}
+"""Domain error class -> (HTTP status, error code); a class not listed takes its nearest listed base's."""
+
+
+def status_of(exc: UserError) -> tuple[int, str]:
+    """(HTTP status, error code) of a domain error, by `DOMAIN_ERRORS`."""
+    for cls in type(exc).__mro__:
+        if cls in DOMAIN_ERRORS:
+            return DOMAIN_ERRORS[cls]  # type: ignore[index]
+    raise AssertionError("unreachable: UserError is in the table")
 
 
 class ErrorDetail(BaseModel):
@@ -71,8 +101,7 @@ MAX_FIELD_CHARS = 80
 
 def clip(text: str, limit: int = MAX_MESSAGE_CHARS) -> str:
     """The first line of `text`, cut to `limit` characters with an ellipsis saying how much was left out."""
-    lines = text.strip().splitlines()
-    line = lines[0] if lines else ""
+    line = one_line(Exception(text)) if text.strip() else ""
     if len(line) <= limit:
         return line
     return f"{line[: limit - 30]}... ({len(line) - limit + 30} more characters)"
@@ -99,6 +128,12 @@ def _field_of(location: tuple[Any, ...] | list[Any]) -> str | None:
 async def _api_error(_request: Request, exc: Exception) -> JSONResponse:
     assert isinstance(exc, ApiError)
     return error_response(exc.status, exc.code, exc.message, exc.field, exc.headers)
+
+
+async def _user_error(_request: Request, exc: Exception) -> JSONResponse:
+    assert isinstance(exc, UserError)
+    status, code = status_of(exc)
+    return error_response(status, code, one_line(exc), exc.field)
 
 
 async def _validation_error(_request: Request, exc: Exception) -> JSONResponse:
@@ -144,6 +179,7 @@ async def _unexpected(request: Request, exc: Exception) -> JSONResponse:
 
 def install_error_handlers(app: FastAPI) -> None:
     app.add_exception_handler(ApiError, _api_error)
+    app.add_exception_handler(UserError, _user_error)
     app.add_exception_handler(RequestValidationError, _validation_error)
     app.add_exception_handler(StarletteHTTPException, _http_error)
     app.add_exception_handler(Exception, _unexpected)

@@ -22,12 +22,12 @@ from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 from typing import Any
 
-from service.api.errors import ApiError
+from service.jobs.context import InputError
 
 log = logging.getLogger("shockbench.api")
 
-Refusal = tuple[int, str, str | None]
-"""(HTTP status, message, field) of an input the checks refuse."""
+Refusal = tuple[str, str | None]
+"""(message, field) of an input the checks refuse (an InputError in the caller's process)."""
 
 
 def inspect_inputs(
@@ -39,6 +39,7 @@ def inspect_inputs(
     vehicle_name: str,
 ) -> Refusal | None:
     """Runs in the helper process: read both files and run the kind's checks; None when the job can run."""
+    from estimator.errors import UserError, one_line
     from service.api.intake import check_files
     from service.jobs.kinds import kind_spec
 
@@ -52,8 +53,8 @@ def inspect_inputs(
             Path(vehicle_path),
             vehicle_name,
         )
-    except ApiError as exc:
-        return exc.status, exc.message, exc.field
+    except UserError as exc:  # InputError mostly; any bad input is refused alike
+        return one_line(exc), exc.field
     return None
 
 
@@ -110,7 +111,7 @@ class InputChecker:
         recording: tuple[Path, str],
         vehicle: tuple[Path, str],
     ) -> None:
-        """ApiError (422 naming the field) when the input cannot run. Blocking: call it in a thread."""
+        """InputError (naming the field) when the input cannot run. Blocking: call it in a thread."""
         args = (kind, options, str(recording[0]), recording[1], str(vehicle[0]), vehicle[1])
         try:
             refusal = self._submit(*args).result()
@@ -120,8 +121,8 @@ class InputChecker:
                 self._pool = None
             refusal = self._submit(*args).result()
         if refusal is not None:
-            status, message, field = refusal
-            raise ApiError(status, message, field=field)
+            message, field = refusal
+            raise InputError(field, message)
 
 
 CHECKER = InputChecker()

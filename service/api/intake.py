@@ -1,5 +1,6 @@
 """Taking in a job: check its input the way the worker will read it, so that a job that cannot run is
-refused at submit (422 naming the field) instead of failing in the queue; then store it.
+refused at submit (InputError naming the field, a 422 by service.api.errors) instead of failing in the
+queue; then store it.
 
 Two ways in: `accept_upload` (recording CSV and vehicle file uploaded with the request; they are kept in
 the job's folder) and `accept_recording` (a recording already on disk, e.g. a sweep's, with a vehicle
@@ -21,10 +22,10 @@ from pydantic import BaseModel
 
 from daq.formats.recording_csv import read_recording_csv
 from daq.formats.vehicle_file import parse_vehicle
+from estimator.errors import one_line
 from estimator.recording import Recording
 from estimator.vehicle import VehicleParameters
 from service.access import Principal
-from service.api.errors import ApiError
 from service.api.settings import ServiceSettings
 from service.jobs.context import InputError
 from service.jobs.inputs import VEHICLE_FILE
@@ -44,36 +45,29 @@ def _read_inputs(
         message = str(exc).replace(str(recording_path), recording_name) or "not a recording CSV"
         if isinstance(exc, UnicodeDecodeError):
             message = f"{recording_name}: not a text file (UTF-8 expected)"
-        raise ApiError(422, message, field="recording") from None
+        raise InputError("recording", message) from None
     field = spec.companion.field
     try:
         text = vehicle_path.read_text(encoding="utf-8")
     except UnicodeDecodeError:
-        raise ApiError(422, f"{vehicle_name}: not a text file (UTF-8 expected)", field=field) from None
+        raise InputError(field, f"{vehicle_name}: not a text file (UTF-8 expected)") from None
     if spec.companion is VEHICLE_FILE:
         return recording, parse_vehicle_field(text, vehicle_name, field)
     try:
         return recording, spec.companion.read(text, vehicle_name)
     except ValueError as exc:
-        raise ApiError(422, str(exc).strip().splitlines()[0], field=field) from None
+        raise InputError(field, one_line(exc)) from None
 
 
 def parse_vehicle_field(text: str, source: str, field: str) -> VehicleParameters:
-    """The vehicle file's text as parameters, or ApiError 422 naming `field`: not TOML, wrong keys, or
+    """The vehicle file's text as parameters, or InputError naming `field`: not TOML, wrong keys, or
     nested so deep that the TOML parser runs out of stack (RecursionError, not a TOMLDecodeError)."""
     try:
         return parse_vehicle(text, source=source)
     except ValueError as exc:  # VehicleFileError
-        raise ApiError(422, str(exc), field=field) from None
+        raise InputError(field, str(exc)) from None
     except RecursionError:
-        raise ApiError(422, f"{source}: not valid TOML (nested too deeply)", field=field) from None
-
-
-def _check(spec: JobKindSpec, options: BaseModel, recording: Recording, vehicle: Any) -> None:
-    try:
-        spec.check(options, recording, vehicle)
-    except InputError as exc:
-        raise ApiError(422, str(exc), field=exc.field) from None
+        raise InputError(field, f"{source}: not valid TOML (nested too deeply)") from None
 
 
 def check_files(
@@ -84,9 +78,9 @@ def check_files(
     vehicle_path: Path,
     vehicle_name: str,
 ) -> None:
-    """Read both files and run the kind's checks (ApiError 422 naming the field). Runs in the input
+    """Read both files and run the kind's checks (InputError naming the field). Runs in the input
     checker's process (service.api.input_check), never in the service's."""
-    _check(spec, options, *_read_inputs(spec, recording_path, recording_name, vehicle_path, vehicle_name))
+    spec.check(options, *_read_inputs(spec, recording_path, recording_name, vehicle_path, vehicle_name))
 
 
 def _check_elsewhere(

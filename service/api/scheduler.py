@@ -28,11 +28,11 @@ from pathlib import Path
 
 from pydantic import ValidationError
 
-from service.api.errors import ApiError
+from estimator.errors import UserError, one_line
 from service.api.settings import ServiceSettings
 from service.api.sweep_launch import SweepIn, launch_sweep
 from service.api.sweep_recordings import accept_sweep_job
-from service.bench_control import BenchController
+from service.bench_control import BenchBusyError, BenchController
 from service.jobs.identify_job import IdentifyJobOptions
 from service.jobs.manager import JobManager
 from service.store.jobs import JobRecord, JobStore
@@ -136,7 +136,7 @@ class InspectionScheduler:
         try:
             options = IdentifyJobOptions.model_validate(test.job_options)
             job = accept_sweep_job(self.settings, self.jobs, sweep, options, test.created_by)
-        except (ApiError, ValidationError) as exc:
+        except (UserError, ValidationError) as exc:
             reason = f"no identification job on sweep {sweep.id}: {_message(exc)}"
             self.tests.finish(test.id, ScheduleStatus.FAILED, reason=reason)
             log.warning("scheduled test %d failed: %s", test.id, reason)
@@ -156,10 +156,10 @@ class InspectionScheduler:
             sweep = launch_sweep(
                 self.bench, self.sweeps, self.settings.data_dir, body, test.created_by, self.wake
             )
-        except ApiError as exc:
-            if exc.status == 409:  # an operator's sweep took the bench first: wait for the next gap
-                self.tests.release(test.id)
-                return
+        except BenchBusyError:  # an operator's sweep took the bench first: wait for the next gap
+            self.tests.release(test.id)
+            return
+        except UserError as exc:
             self.tests.finish(test.id, ScheduleStatus.FAILED, reason=_message(exc))
             log.warning("scheduled test %d refused by the bench: %s", test.id, _message(exc))
             return
@@ -177,9 +177,7 @@ def sweep_request_of(test: ScheduleRecord) -> SweepIn:
 
 
 def _message(exc: Exception) -> str:
-    if isinstance(exc, ApiError):
-        return exc.message
     if isinstance(exc, ValidationError):
         first = exc.errors()[0]
         return f"{'.'.join(str(p) for p in first['loc'])}: {first['msg']}"
-    return str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+    return one_line(exc)

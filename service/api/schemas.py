@@ -15,7 +15,7 @@ from fastapi import Query
 from pydantic import BaseModel, Field, create_model
 
 from daq.sweep.model import SweepProgress
-from drivers.exciter.sweep import SweepLaw
+from estimator.sweep import SweepLaw
 from service.api.results import DiagnoseResult, IdentifyResult, ValidateResult
 from service.jobs.diagnose_job import DiagnoseJobOptions
 from service.jobs.identify_job import IdentifyJobOptions
@@ -243,6 +243,8 @@ class SweepProgressOut(BaseModel):
 
 
 class BenchOut(BaseModel):
+    # The bench in the API (GET /bench): BenchState as JSON. A comment, not a docstring: a docstring would
+    # become the schema's description, and the name and schema are part of the OpenAPI contract.
     name: str
     model: str = Field(description="quarter-car or axle")
     simulated: bool = Field(description="the in-process simulated bench (serve --simulated)")

@@ -1,9 +1,12 @@
 """Starting a sweep on the bench, shared by `POST /sweeps` and the inspection-line scheduler: the request
-(`SweepIn`), its checks before anything moves (422 naming the field), and the launch (stored, then run in
-the bench's thread, its end stored by that thread).
+(`SweepIn`), its checks before anything moves (InputError naming the field), and the launch (stored, then
+run in the bench's thread, its end stored by that thread).
 
 A sweep's recording is `sweeps/<id>.h5` in the data directory, its vehicle file `sweeps/<id>.vehicle.toml`
 beside it.
+
+Bench logic, not HTTP: it raises domain errors (InputError, BenchBusyError, the envelope's and the sweep's
+own UserErrors); service.api.errors maps them to statuses.
 """
 
 from __future__ import annotations
@@ -17,11 +20,9 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from daq.sweep.model import DEFAULT_SETTLE_S, StopKind, SweepOutcome, SweepRequest
 from daq.sweep.run import SAMPLE_TIME_S, SweepError
-from drivers.exciter.errors import EnvelopeViolationError
-from drivers.exciter.sweep import SweepLaw, SweepSettings
 from estimator.bandwidth import REFUSE_SAMPLES_PER_PERIOD
+from estimator.sweep import SweepLaw, SweepSettings
 from estimator.vehicle import VehicleParameters
-from service.api.errors import ApiError
 from service.api.intake import parse_vehicle_field
 from service.bench_control import BenchBusyError, BenchController, SweepDone
 from service.jobs.bounds import check_vehicle_bounds
@@ -61,7 +62,7 @@ class SweepSettingsIn(BaseModel):
             return SweepSettings(**{name: getattr(self, name) for name in SETTINGS_FIELDS})
         except ValueError as exc:
             field = next((name for name in SETTINGS_FIELDS if name in str(exc)), None)
-            raise ApiError(422, str(exc), field=field) from None
+            raise InputError(field, str(exc)) from None
 
     def as_submitted(self) -> dict[str, object]:
         """The settings as stored with the sweep (JSON)."""
@@ -77,30 +78,27 @@ class SweepIn(SweepSettingsIn):
 
 
 def check_sweep(bench: BenchController, body: SweepIn) -> tuple[SweepSettings, VehicleParameters]:
-    """Everything checkable without the bench moving (ApiError 422 naming the field): the settings, the
-    vehicle file and its model against the bench's, the safety envelope."""
+    """Everything checkable without the bench moving (a UserError naming the field): the settings, the
+    vehicle file and its model against the bench's, the safety envelope (checked here once, for a clear
+    message before anything is stored; the driver checks it again as the safety net)."""
     settings = body.sweep_settings()
     vehicle = parse_vehicle_field(body.vehicle_toml, "vehicle_toml", "vehicle_toml")
     if vehicle.model != bench.config.model:
-        raise ApiError(
-            422,
+        raise InputError(
+            "vehicle_toml",
             f"vehicle_toml: a {vehicle.model} vehicle cannot be tested on the {bench.config.model} bench",
-            field="vehicle_toml",
         )
     try:
         check_vehicle_bounds(vehicle, field="vehicle_toml")
     except InputError as exc:
-        raise ApiError(422, f"vehicle_toml: {exc}", field=exc.field) from None
-    try:
-        bench.config.safety_envelope().check(settings)
-    except EnvelopeViolationError as exc:
-        raise ApiError(422, str(exc), field=exc.field) from None
+        raise InputError(exc.field, f"vehicle_toml: {exc}") from None
+    bench.config.safety_envelope().check(settings)  # EnvelopeViolationError names the field
     check_recordable(bench, settings)
     return settings, vehicle
 
 
 def check_recordable(bench: BenchController, settings: SweepSettings) -> None:
-    """ApiError 422 (stop_Hz) when the bench's recording could not carry the sweep, by the rule the job
+    """InputError (stop_Hz) when the bench's recording could not carry the sweep, by the rule the job
     on its recording applies (estimator.bandwidth): the grid (1 kHz), or a streaming amplifier's slower
     sampling, must give REFUSE_SAMPLES_PER_PERIOD samples per period of the sweep's top frequency. Polled
     amplifiers' rates are known only once recorded: the job on the recording judges them."""
@@ -111,12 +109,11 @@ def check_recordable(bench: BenchController, settings: SweepSettings) -> None:
     top_Hz = max(settings.start_Hz, settings.stop_Hz)
     if top_Hz > 0 and rate_Hz / top_Hz < REFUSE_SAMPLES_PER_PERIOD:
         field = "stop_Hz" if settings.stop_Hz >= settings.start_Hz else "start_Hz"
-        raise ApiError(
-            422,
+        raise InputError(
+            field,
             f"{field}: the bench records at {rate_Hz:g} Hz, too slow for a sweep up to {top_Hz:g} Hz: "
             f"identification needs {REFUSE_SAMPLES_PER_PERIOD:g} samples per period, so at most "
             f"{rate_Hz / REFUSE_SAMPLES_PER_PERIOD:g} Hz",
-            field=field,
         )
 
 
@@ -161,11 +158,11 @@ def launch_sweep(
     operator: str | None,
     on_end: Callable[[], None] | None = None,
 ) -> SweepRecord:
-    """Check the request (422 naming the field; 409 when busy), store it, start it. Blocking: call it in
-    a thread. `operator` is the key id recorded with the sweep."""
+    """Check the request (a UserError naming the field; BenchBusyError when busy), store it, start it.
+    Blocking: call it in a thread. `operator` is the key id recorded with the sweep."""
     settings, _vehicle = check_sweep(bench, body)
     if bench.busy:
-        raise ApiError(409, f"bench {bench.config.name!r} is running a sweep", code="bench_busy")
+        raise BenchBusyError(f"bench {bench.config.name!r} is running a sweep")
 
     folder = data_dir / "sweeps"
     folder.mkdir(parents=True, exist_ok=True)
@@ -185,11 +182,8 @@ def launch_sweep(
     )
     try:
         bench.start_sweep(str(record.id), request, Path(record.recording_path), sweep_done(store, on_end))
-    except BenchBusyError as exc:
+    except (BenchBusyError, SweepError) as exc:  # the caller sees the error (409, 422); the row its end
         store.finish(record.id, SweepStatus.FAILED, complete=False, reason=str(exc))
-        raise ApiError(409, str(exc), code="bench_busy") from None
-    except SweepError as exc:
-        store.finish(record.id, SweepStatus.FAILED, complete=False, reason=str(exc))
-        raise ApiError(422, str(exc)) from None
+        raise
     store.mark_running(record.id)
     return store.get(record.id) or record

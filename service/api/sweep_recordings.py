@@ -1,6 +1,9 @@
 """A sweep's recording as the input of a job: the HDF5 recording exported once to a recording CSV beside
 it (a finished recording never changes), then taken in like any recording on disk. Shared by
-`POST /sweeps/{id}/jobs` and the inspection-line scheduler. Blocking (files): call it in a thread."""
+`POST /sweeps/{id}/jobs` and the inspection-line scheduler. Blocking (files): call it in a thread.
+
+Sweep logic, not HTTP: it raises domain errors (ConflictError, NotFoundError, RecordingFileError ...), which
+service.api.errors maps to statuses."""
 
 from __future__ import annotations
 
@@ -10,8 +13,8 @@ from pathlib import Path as FilePath
 from pathlib import PurePath
 
 from daq.formats.recording_csv import write_recording_csv
-from daq.storage.hdf5_recording import RecordingFileError, RecordingGapError, export_csv
-from service.api.errors import ApiError
+from daq.storage.hdf5_recording import RecordingFileError, export_csv
+from estimator.errors import ConflictError, NotFoundError
 from service.api.intake import accept_recording
 from service.api.settings import ServiceSettings
 from service.jobs.identify_job import IdentifyJobOptions
@@ -23,12 +26,12 @@ from service.store.sweeps import SweepRecord
 
 def recording_path(record: SweepRecord) -> FilePath:
     if not record.finished:
-        raise ApiError(
-            409, f"sweep {record.id} is {record.status.value}; its recording is ready once it has ended"
+        raise ConflictError(
+            f"sweep {record.id} is {record.status.value}; its recording is ready once it has ended"
         )
     path = FilePath(record.recording_path) if record.recording_path else None
     if path is None or not path.is_file():
-        raise ApiError(404, f"sweep {record.id} has no recording ({record.reason or 'never recorded'})")
+        raise NotFoundError(f"sweep {record.id} has no recording ({record.reason or 'never recorded'})")
     return path
 
 
@@ -47,10 +50,8 @@ def export(h5: FilePath, csv: FilePath) -> None:
             for key, value in recording.metadata.items()
         }
         write_recording_csv(csv, recording)
-    except RecordingGapError as exc:
-        raise ApiError(422, str(exc).replace(str(h5), h5.name), code="recording_gaps") from None
-    except RecordingFileError as exc:
-        raise ApiError(422, str(exc).replace(str(h5), h5.name), code="bad_recording") from None
+    except RecordingFileError as exc:  # the same class (gaps too), naming the file, not its place
+        raise type(exc)(str(exc).replace(str(h5), h5.name)) from None
 
 
 def sweep_csv(record: SweepRecord) -> FilePath:
@@ -74,8 +75,8 @@ def accept_sweep_job(
     options: IdentifyJobOptions,
     submitted_by: str | None,
 ) -> JobRecord:
-    """A queued identification job on the sweep's recording (ApiError 409 until the sweep has ended, 422
-    when its recording cannot be read as one). The caller enqueues it with the job manager."""
+    """A queued identification job on the sweep's recording (ConflictError until the sweep has ended, a
+    UserError when its recording cannot be read as one). The caller enqueues it with the job manager."""
     csv = sweep_csv(record)
     assert record.vehicle_file is not None
     return accept_recording(

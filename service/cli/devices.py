@@ -5,7 +5,7 @@ every device of a bench configuration answers.
                            [--exciter modbus|can] [--lasers tcp|pty|mixed] [--can-url can://socketcan/vcan0]
     shockbench probe --config bench.toml [--json] [--timeout-s 0.5]
 
-sim-devices serves a simulated vehicle bench (simulators/devices/sim_bench.py) on a clock that follows the
+sim-devices serves a simulated vehicle bench (service/simulated_bench.py) on a clock that follows the
 wall clock, writes the bench configuration naming its devices (format: daq/bench_config.py) and runs until
 Ctrl-C or SIGTERM, then closes every device and exits 0. probe prints model/state, status and one reading
 per device (or, with --json, {"devices": [{"name", "kind", "url", "ok", "reading" | "error"}]}) and exits
@@ -27,7 +27,7 @@ from typing import TYPE_CHECKING, Any
 
 from service.cli.errors import EXIT_FAILED, CliError
 
-# simulators.devices.sim_bench.VEHICLE_PRESETS' names and daq.probe.DEFAULT_TIMEOUT_S, named here so that
+# service.simulated_bench.VEHICLE_PRESETS' names and daq.probe.DEFAULT_TIMEOUT_S, named here so that
 # `shockbench --help` does not import the device stack (tests/service/test_cli_lazy_imports.py checks they
 # are the same)
 VEHICLE_PRESET_NAMES = ("quarter-car", "axle")
@@ -113,8 +113,8 @@ def run_sim_devices(args: argparse.Namespace) -> int:
     import can
 
     from daq.bench_config import write_bench_config
-    from daq.probe import one_line
-    from simulators.devices.sim_bench import SimulatedBench, vehicle_preset
+    from estimator.errors import one_line
+    from service.simulated_bench import SimulatedBench, vehicle_preset
 
     can_interface, can_channel = _can_bus(args.can_url, args.exciter)
     if not args.config.parent.is_dir():

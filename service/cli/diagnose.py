@@ -56,14 +56,16 @@ def run_diagnose(args: argparse.Namespace) -> int:
     from daq.formats.recording_csv import read_recording_csv
     from daq.formats.vehicle_file import read_vehicle
     from estimator.doctor.diagnose import DiagnoseOptions, diagnose
+    from estimator.identify import check_curve_points
+    from service.jobs.context import check_recording_fits
 
     report = Path(args.report) if args.report else None
     if report is not None and report.exists() and not report.is_dir():
         raise CliError(f"--report {report}: exists and is not a folder")
     recording = read_recording_csv(args.recording)
     vehicle = read_vehicle(args.vehicle)
-    if args.points is not None and not 3 <= args.points <= 60:
-        raise CliError("--points must lie between 3 and 60")
+    check_recording_fits(recording, vehicle)  # the job's submit check: bad input, one line, exit 2
+    check_curve_points(args.points, "--points")  # identify's limits, as the diagnose job's options
     options = DiagnoseOptions(tyre=TyreModel(args.tyre), points=args.points)
     result = diagnose(recording, vehicle, options, progress=None if args.json else _progress)
     if report is not None:

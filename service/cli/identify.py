@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING
 
 from estimator.vehicle import TyreModel, VehicleConstant, VehicleParameters
 from service.cli.errors import CliError
+from service.cli.simulate import run_demo
 
 SOLVERS = ("exact", "de")
 """estimator.identify.Solver's values, named here so that `shockbench --help` does not import the estimator
@@ -165,12 +166,10 @@ def parse_free(text: str | None, vehicle: VehicleParameters, tyre: TyreModel) ->
 
 
 def options_from_args(args: argparse.Namespace, vehicle: VehicleParameters) -> IdentifyOptions:
-    from estimator.identify import IdentifyOptions, Solver
+    from estimator.identify import IdentifyOptions, Solver, check_curve_points
     from estimator.solvers.differential_evolution import DESettings
-    from estimator.tanh_fit import MIN_POINTS as MIN_TANH_POINTS
 
-    if args.points is not None and not MIN_TANH_POINTS <= args.points <= 60:
-        raise CliError(f"--points must lie between {MIN_TANH_POINTS} (the tanh fit needs as many) and 60")
+    check_curve_points(args.points, "--points")
     de = DESettings(generations=args.generations, seed=args.seed)
     tyre = TyreModel(args.tyre)
     return IdentifyOptions(
@@ -186,15 +185,12 @@ def options_from_args(args: argparse.Namespace, vehicle: VehicleParameters) -> I
 def run_identify(args: argparse.Namespace) -> int:
     from daq.formats.recording_csv import read_recording_csv
     from daq.formats.vehicle_file import read_vehicle
-    from estimator.bandwidth import check_bandwidth
     from estimator.identify import Solver, identify
     from service.jobs.bounds import check_physical_bounds
 
     recording = read_recording_csv(args.recording)
     vehicle = read_vehicle(args.vehicle)
-    for warning in check_bandwidth(recording).warnings:  # refuses (ValueError, one line) when hopeless
-        print(f"shockbench identify: warning: {warning}", file=sys.stderr)
-    check_physical_bounds(recording, vehicle)  # the service's submit check (ValueError, one line)
+    check_physical_bounds(recording, vehicle)  # the service's submit check (InputError, one line)
     options = options_from_args(args, vehicle)
     progress = _ProgressLine() if options.solver is Solver.DE and not args.json else None
     result = identify(recording, vehicle, options, progress=progress)
@@ -256,46 +252,6 @@ def run_fit_tanh(args: argparse.Namespace) -> int:
             f"μ = {c.mu:.4g} s/m, β = {c.beta:.4g}; RMS {fit.rms_N:.3g} N"
         )
         print("outliers (0-based rows): " + (", ".join(map(str, fit.outliers)) if fit.outliers else "none"))
-    return 0
-
-
-def run_demo(args: argparse.Namespace) -> int:
-    """The main job on the embedded default bench: simulate a sweep, identify, print, plot."""
-    import numpy as np
-
-    from daq.formats.recording_csv import write_recording_csv
-    from daq.formats.vehicle_file import write_vehicle
-    from estimator.identify import identify
-    from service.kernel_build import compile_ahead
-    from service.plots import save_curve_plot
-    from simulators.vehicle_sim import SimulationSettings, default_quarter_car, simulate, true_damper
-
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    # once per machine and kernel version (10-30 s): later identify and diagnose runs load it in milliseconds
-    print(f"output-error simulation kernel: {compile_ahead()}")
-    vehicle = default_quarter_car()
-    print(
-        f"simulating a {20:g} s sweep 0-20 Hz ±4 mm on the default quarter car "
-        f"(valve-model damper, Maxwell tyre, 5 µm sensor noise, seed {args.seed}) ..."
-    )
-    sim = simulate(vehicle, SimulationSettings(seed=args.seed))
-    write_recording_csv(out / "demo_recording.csv", sim.recording)
-    write_vehicle(out / "demo_vehicle.toml", vehicle.known)
-    result = identify(sim.recording, vehicle.known)
-    print(summary(result))
-    truth = true_damper(vehicle.dampers[0])
-    curve = result.curves[0].curve
-    dense = np.linspace(curve.velocity_m_s[0], curve.velocity_m_s[-1], 400)
-    error = curve.force(dense) - truth.force(dense)
-    peak = float(np.max(np.abs(truth.force(dense))))
-    print(
-        f"\nagainst the simulator's truth: curve RMS error "
-        f"{100 * np.sqrt(np.mean(error**2)) / peak:.2f}% of peak "
-        f"force, sprung mass error {100 * (result.model.sprung_mass_kg / vehicle.sprung_mass_kg - 1):+.2f}%"
-    )
-    plot = save_curve_plot(result, out / "demo_curve.png", truth={"single": truth})
-    print(f"wrote {out / 'demo_recording.csv'}, {out / 'demo_vehicle.toml'} and the plot {plot}")
     return 0
 
 

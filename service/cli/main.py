@@ -1,8 +1,9 @@
 """Entry point of the `shockbench` console script.
 
 Each subcommand lives in its own module with a `register(subparsers)` function that adds its parser and sets
-`handler` (a function of the parsed arguments returning an exit code). Errors the user can fix (CliError,
-ValueError, OSError, KeyError from input files) become one line on stderr and exit code 2.
+`handler` (a function of the parsed arguments returning an exit code). What a handler raises is mapped in one
+place, service.cli.errors.run_command: bad input (UserError, OSError) is one line on stderr and exit code 2;
+anything else is a bug, exit code 1 with its traceback in a log file the message names.
 """
 
 from __future__ import annotations
@@ -12,7 +13,7 @@ import sys
 from collections.abc import Sequence
 
 from service.cli import devices, diagnose, export, identify, serve, simulate, sweep, validate
-from service.cli.errors import EXIT_BAD_INPUT, CliError
+from service.cli.errors import run_command
 
 MODULES = (simulate, identify, diagnose, validate, devices, sweep, export, serve)
 
@@ -32,15 +33,7 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
-    try:
-        return int(args.handler(args))
-    except KeyboardInterrupt:
-        print("shockbench: interrupted", file=sys.stderr)
-        return 130
-    except (CliError, ValueError, OSError, KeyError) as exc:
-        message = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        print(f"shockbench {args.command}: error: {message}", file=sys.stderr)
-        return EXIT_BAD_INPUT
+    return run_command(args.command, lambda: args.handler(args))
 
 
 if __name__ == "__main__":

@@ -20,7 +20,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from service.access import KeyRing, load_keys
-from service.cli.errors import EXIT_BAD_INPUT, EXIT_FAILED, CliError
+from service.cli.errors import EXIT_FAILED, CliError, run_command
 
 DEFAULT_PORT = 8000
 
@@ -148,14 +148,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="shockbench")
     register(parser.add_subparsers(dest="command", required=True))
     args = parser.parse_args(["serve", *(sys.argv[1:] if argv is None else argv)])
-    try:
-        return int(args.handler(args))
-    except KeyboardInterrupt:
-        return 130
-    except (CliError, ValueError, OSError) as exc:
-        message = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        print(f"shockbench serve: error: {message}", file=sys.stderr)
-        return EXIT_BAD_INPUT
+    return run_command("serve", lambda: args.handler(args), say_interrupted=False)
 
 
 if __name__ == "__main__":

@@ -20,7 +20,7 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from drivers.exciter.sweep import SweepLaw, SweepSettings
+from estimator.sweep import SweepLaw, SweepSettings
 from service.cli.errors import EXIT_FAILED, CliError
 
 SETTLE_S, REST_S = 2.0, 1.0
@@ -86,7 +86,7 @@ def run_sweep_command(args: argparse.Namespace) -> int:
     from daq.sweep.pacing import RealtimePacing, SimulatedPacing
     from daq.sweep.run import SweepError, run_sweep
     from service.cli.progress import SweepProgressBar
-    from simulators.devices.sim_bench import SimulatedBench, vehicle_preset
+    from service.simulated_bench import SimulatedBench, vehicle_preset
 
     request = _request(args)
     vehicle = read_vehicle(args.vehicle)

@@ -6,8 +6,8 @@ from __future__ import annotations
 
 from pydantic import BaseModel, Field
 
+from estimator.identify import IdentifyOptions
 from estimator.recording import Recording
-from estimator.tanh_fit import MIN_POINTS as MIN_TANH_POINTS
 from estimator.vehicle import TyreModel, VehicleParameters
 from service.jobs.bounds import check_physical_bounds
 from service.jobs.context import (
@@ -27,9 +27,10 @@ class DiagnoseJobOptions(BaseModel):
     tyre: TyreModel = Field(TyreModel.MAXWELL, description="tyre of the starting model")
     points: int | None = Field(
         None,
-        ge=MIN_TANH_POINTS,
-        le=60,
-        description=f"damper curve points (default 30; axle 15 per side; at least {MIN_TANH_POINTS})",
+        ge=IdentifyOptions.MIN_POINTS,
+        le=IdentifyOptions.MAX_POINTS,
+        description="damper curve points (default 30; axle 15 per side; at least "
+        f"{IdentifyOptions.MIN_POINTS})",
     )
     max_steps: int = Field(4, ge=1, le=8, description="at most this many effects are added")
 

@@ -10,7 +10,6 @@ from pydantic import BaseModel, BeforeValidator, Field
 from estimator.identify import IdentifyOptions, Solver
 from estimator.recording import Recording
 from estimator.solvers.differential_evolution import DESettings
-from estimator.tanh_fit import MIN_POINTS as MIN_TANH_POINTS
 from estimator.vehicle import ModelKind, TyreModel, VehicleParameters
 from service.jobs.bounds import check_physical_bounds
 from service.jobs.context import (
@@ -50,10 +49,10 @@ class IdentifyJobOptions(BaseModel):
     solver: Solver = Field(Solver.EXACT, description="exact (default) or de (differential evolution)")
     points: int | None = Field(
         None,
-        ge=MIN_TANH_POINTS,
-        le=60,
+        ge=IdentifyOptions.MIN_POINTS,
+        le=IdentifyOptions.MAX_POINTS,
         description="damper curve points (default 20; axle 10 per side); the tanh fit needs at least "
-        f"{MIN_TANH_POINTS}",
+        f"{IdentifyOptions.MIN_POINTS}",
     )
     generations: int = Field(3000, ge=1, le=200_000, description="DE generations (solver de)")
     seed: int = Field(0, ge=0, le=2**31 - 1, description="DE seed (solver de)")

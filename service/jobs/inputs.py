@@ -12,6 +12,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from daq.formats.vehicle_file import parse_vehicle
+from estimator.errors import InvalidValueError
 from estimator.vehicle import VehicleParameters
 
 
@@ -33,7 +34,7 @@ def _read_vehicle(text: str, source: str) -> VehicleParameters:
     try:
         return parse_vehicle(text, source=source)
     except RecursionError:
-        raise ValueError(f"{source}: not valid TOML (nested too deeply)") from None
+        raise InvalidValueError(f"{source}: not valid TOML (nested too deeply)") from None
 
 
 def _read_model(text: str, source: str) -> Any:
@@ -43,11 +44,13 @@ def _read_model(text: str, source: str) -> Any:
     try:
         data = json.loads(text)
     except json.JSONDecodeError as exc:
-        raise ValueError(f"{source}: not JSON ({exc.msg} at line {exc.lineno})") from None
+        raise InvalidValueError(f"{source}: not JSON ({exc.msg} at line {exc.lineno})") from None
     except RecursionError:
-        raise ValueError(f"{source}: not valid JSON (nested too deeply)") from None
+        raise InvalidValueError(f"{source}: not valid JSON (nested too deeply)") from None
     if not isinstance(data, dict):
-        raise ValueError(f"{source}: expected a JSON object (the output of identify or diagnose --json)")
+        raise InvalidValueError(
+            f"{source}: expected a JSON object (the output of identify or diagnose --json)"
+        )
     return model_from_json(data)
 
 

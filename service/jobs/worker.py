@@ -17,6 +17,7 @@ import contextlib
 import importlib
 import os
 import queue
+import secrets
 import signal
 import sys
 import threading
@@ -25,6 +26,7 @@ from collections.abc import Callable
 from multiprocessing.connection import Connection
 from pathlib import Path
 
+from estimator.errors import UserError, one_line
 from service.jobs.messages import (
     CancelJob,
     FromWorker,
@@ -68,11 +70,6 @@ class _Cancellation:
                 self._early.add(job_id)
 
 
-def _one_line(exc: BaseException) -> str:
-    text = str(exc).strip()
-    return text.splitlines()[0] if text else type(exc).__name__
-
-
 def _without_paths(reason: str, job: RunJob) -> str:
     """The reason as viewers may read it: the job's files by their names, not their places on the server."""
     for path in (job.recording_path, job.vehicle_path, job.output_dir):
@@ -97,8 +94,10 @@ def _listen(conn: Connection, jobs: queue.Queue[RunJob], cancellation: _Cancella
 def run_job(
     job: RunJob, send: Callable[[FromWorker], None], cancel: threading.Event, progress_interval_s: float
 ) -> None:
-    """Run one job and send exactly one outcome message. Errors become JobFailed with a one-line reason;
-    only unexpected ones leave a traceback, on the worker's stderr (the service log), never in the reason."""
+    """Run one job and send exactly one outcome message. Bad input (a UserError) and a file gone or
+    unreadable (OSError) become JobFailed with their one-line message. Anything else is a bug: its traceback
+    goes to the worker's stderr (the service log) under a fresh error id, and the reason names that id
+    (never the traceback)."""
     from daq.formats.recording_csv import read_recording_csv
     from service.jobs.context import JobContext, ProgressReporter
     from service.jobs.kinds import kind_spec
@@ -128,11 +127,16 @@ def run_job(
         reporter.stage("done")
     except InterruptedError:
         send(JobCancelled(job.job_id))
-    except (ValueError, OSError, KeyError) as exc:
-        send(JobFailed(job.job_id, _without_paths(_one_line(exc), job)))
+    except (UserError, OSError) as exc:
+        send(JobFailed(job.job_id, _without_paths(one_line(exc), job)))
     except Exception as exc:
+        error_id = secrets.token_hex(6)
+        print(f"error id {error_id}: unexpected error in job {job.job_id}", file=sys.stderr)
         traceback.print_exc(file=sys.stderr)
-        reason = f"internal error in the worker ({type(exc).__name__}: {_one_line(exc)})"
+        reason = (
+            f"internal error in the worker (error id {error_id}; the service log has the details under "
+            f"that id): {type(exc).__name__}: {one_line(exc)}"
+        )
         send(JobFailed(job.job_id, _without_paths(reason, job)))
     else:
         send(JobSucceeded(job.job_id, outcome.result, outcome.artefacts))

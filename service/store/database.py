@@ -17,12 +17,13 @@ from sqlalchemy.engine import URL, Engine, make_url
 from sqlalchemy.exc import ArgumentError, NoSuchModuleError, SQLAlchemyError
 from sqlalchemy.orm import Session, sessionmaker
 
+from estimator.errors import UserError
 from service.store.models import Base
 
 DATABASE_FILE = "shockbench.sqlite3"
 
 
-class DatabaseError(ValueError):
+class DatabaseError(UserError, ValueError):
     """The database URL is unusable or the database cannot be opened; one line, no password."""
 
 

@@ -22,12 +22,12 @@ import can
 from drivers.exciter import can_frames as frames
 from drivers.exciter.can_frames import CanResult, ExciterFrames, Signals
 from drivers.exciter.codes import StateCode
-from simulators.coupling import BenchPhysics
-from simulators.devices.exciter_drive import (
+from simulators.coupling import PlatePhysics
+from simulators.devices.exciter import (
     DEFAULT_WATCHDOG_TIMEOUT_S,
-    DriveRefusalError,
+    ExciterRefusalError,
     RefusalReason,
-    SimulatedDrive,
+    SimulatedExciter,
 )
 
 DEFAULT_HEARTBEAT_PERIOD_S = 0.1
@@ -47,7 +47,7 @@ class SimulatedCanExciter:
 
     def __init__(
         self,
-        bench: BenchPhysics,
+        bench: PlatePhysics,
         *,
         channel: str,
         interface: str = "virtual",
@@ -56,7 +56,7 @@ class SimulatedCanExciter:
         dbc_path: str | Path = frames.DEFAULT_DBC_PATH,
         base_id: int | None = None,
     ) -> None:
-        self.drive = SimulatedDrive(bench, watchdog_timeout_s)
+        self.exciter = SimulatedExciter(bench, watchdog_timeout_s)
         self.clock = bench.clock
         self.channel = channel
         self.interface = interface
@@ -97,12 +97,12 @@ class SimulatedCanExciter:
     def tick(self) -> None:
         """Run the drive's checks and send the heartbeats due at the current simulated time."""
         with self._lock:
-            self.drive.tick()
+            self.exciter.tick()
             now = self.clock.now_s()
             while self._next_heartbeat_s <= now:
                 self._next_heartbeat_s += self.heartbeat_period_s
                 if not self.silent:  # a silent drive skips its heartbeats, it does not queue them
-                    state = StateCode.of(self.drive.status().state)
+                    state = StateCode.of(self.exciter.status().state)
                     self._send(frames.HEARTBEAT, {"Counter": self.heartbeats_sent & 0xFF, "State": state})
                     self.heartbeats_sent += 1
 
@@ -132,7 +132,7 @@ class SimulatedCanExciter:
         self._bus.send(can.Message(is_error_frame=True, is_extended_id=False))
 
     def inject_drive_fault(self, code: int) -> None:
-        self.drive.inject_fault(code)
+        self.exciter.inject_fault(code)
 
     # ---- host frames (python-can reader thread) -----------------------------------------------------
 
@@ -146,31 +146,31 @@ class SimulatedCanExciter:
             if self.silent:
                 return
             if name == frames.HOST_KEEPALIVE:
-                self.drive.keepalive(int(signals["Counter"]))
+                self.exciter.keepalive(int(signals["Counter"]))
                 return
             if name not in (frames.COMMAND, frames.SWEEP_FREQUENCIES, frames.SWEEP_SHAPE):
                 return  # drive -> host frames of another node, or ours echoed
             result = CanResult.OK
             try:
                 self._handle_request(name, signals)
-            except DriveRefusalError as refusal:
+            except ExciterRefusalError as refusal:
                 result = _RESULT_FOR[refusal.reason]
             self._answer(int(signals["Sequence"]), result)
 
     def _handle_request(self, name: str, signals: Signals) -> None:
         if name == frames.COMMAND:
-            self.drive.tick()
+            self.exciter.tick()
             if int(signals["Command"]):
-                self.drive.command(int(signals["Command"]))
+                self.exciter.command(int(signals["Command"]))
         elif name == frames.SWEEP_FREQUENCIES:
-            self.drive.set_sweep_params(
+            self.exciter.set_sweep_params(
                 start_Hz=signals["StartFrequency"], stop_Hz=signals["StopFrequency"], law=signals["Law"]
             )
         else:
-            self.drive.set_sweep_params(amplitude_m=signals["Amplitude"], duration_s=signals["Duration"])
+            self.exciter.set_sweep_params(amplitude_m=signals["Amplitude"], duration_s=signals["Duration"])
 
     def _answer(self, sequence: int, result: CanResult) -> None:
-        status = self.drive.status()
+        status = self.exciter.status()
         self._send(
             frames.STATUS,
             {

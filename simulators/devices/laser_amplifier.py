@@ -52,7 +52,6 @@ from typing import Self
 
 import numpy as np
 
-from drivers.compowayf.amplifier import AmplifierConfig
 from drivers.compowayf.codec import (
     STX,
     CommandFrame,
@@ -72,8 +71,8 @@ from drivers.compowayf.codec import (
     variable_element_width,
 )
 from drivers.compowayf.errors import CompowayFError, EndCodeError
-from drivers.compowayf.layout import COUNTER_MODULUS, MeasuredArea
-from simulators.coupling import BenchPhysics
+from drivers.compowayf.layout import COUNTER_MODULUS, AmplifierConfig, MeasuredArea
+from simulators.coupling import PlatePhysics
 from simulators.devices.sensor_heads import ZX_LD40, HeadModel, SimulatedHead
 
 BUFFER_SIZE_BYTES = 217
@@ -155,7 +154,7 @@ class SimulatedAmplifier:
     @classmethod
     def for_channel(
         cls,
-        bench: BenchPhysics,
+        bench: PlatePhysics,
         channel: str,
         model: HeadModel = ZX_LD40,
         *,

@@ -1,7 +1,7 @@
 """Simulated plate drive speaking Modbus: a pymodbus server on loopback whose registers follow the same
 RegisterMap as the driver (drivers/exciter/register_map.py).
 
-Holding-register writes reach the `SimulatedDrive` (sweep settings, commands, keep-alive); every read of
+Holding-register writes reach the `SimulatedExciter` (sweep settings, commands, keep-alive); every read of
 the input registers is refreshed from the bench first. TCP framing by default; `framer="rtu"` serves RTU
 frames over the TCP socket (pyserial URL socket://127.0.0.1:port) and `attach_pty()` puts the drive on a
 pseudo-terminal, so an RTU client opens a real serial device path.
@@ -29,12 +29,12 @@ from pymodbus.simulator import DataType, SimData, SimDevice
 
 from drivers.exciter.codes import StateCode
 from drivers.exciter.register_map import RegisterMap, RegisterSpec
-from simulators.coupling import BenchPhysics
-from simulators.devices.exciter_drive import (
+from simulators.coupling import PlatePhysics
+from simulators.devices.exciter import (
     DEFAULT_WATCHDOG_TIMEOUT_S,
-    DriveRefusalError,
+    ExciterRefusalError,
     RefusalReason,
-    SimulatedDrive,
+    SimulatedExciter,
 )
 
 _READ_INPUT_REGISTERS = 4
@@ -58,7 +58,7 @@ class SimulatedModbusExciter:
 
     def __init__(
         self,
-        bench: BenchPhysics,
+        bench: PlatePhysics,
         *,
         register_map: RegisterMap | None = None,
         unit: int = 1,
@@ -67,7 +67,7 @@ class SimulatedModbusExciter:
         port: int = 0,
         watchdog_timeout_s: float = DEFAULT_WATCHDOG_TIMEOUT_S,
     ) -> None:
-        self.drive = SimulatedDrive(bench, watchdog_timeout_s)
+        self.exciter = SimulatedExciter(bench, watchdog_timeout_s)
         self.register_map = register_map or RegisterMap.default()
         self.unit = unit
         self.framer = FramerType.RTU if framer == "rtu" else FramerType.SOCKET
@@ -140,12 +140,12 @@ class SimulatedModbusExciter:
 
     def tick(self) -> None:
         """Run the drive's cyclic checks (watchdog) at the current simulated time."""
-        self.drive.tick()
+        self.exciter.tick()
 
     def advance(self, dt_s: float) -> None:
         """Advance the simulated clock by dt_s, then tick."""
-        self.drive.clock.advance(dt_s)
-        self.drive.tick()
+        self.exciter.clock.advance(dt_s)
+        self.exciter.tick()
 
     async def run(self, period_s: float = 0.01) -> None:
         """Tick forever (for a drive served on a wall-clock SimulatedClock)."""
@@ -165,7 +165,7 @@ class SimulatedModbusExciter:
         self._drop_responses += count
 
     def inject_drive_fault(self, code: int) -> None:
-        self.drive.inject_fault(code)
+        self.exciter.inject_fault(code)
 
     # ---- pymodbus hooks -----------------------------------------------------------------------------
 
@@ -203,7 +203,7 @@ class SimulatedModbusExciter:
         """Called by pymodbus for every register access, before the answer is built."""
         self.requests += 1
         self._activity.set()
-        self.drive.tick()
+        self.exciter.tick()
         if self._exceptions:
             return self._exceptions.pop(0)
         if self._drop_connection:
@@ -219,7 +219,7 @@ class SimulatedModbusExciter:
             registers[window] = words  # the new contents, for the drive to act on
             try:
                 self._apply_write(address, len(words), start_address, registers)
-            except DriveRefusalError as refusal:
+            except ExciterRefusalError as refusal:
                 return _EXCEPTION_FOR[refusal.reason]
             finally:
                 set_values[:] = registers[window]  # pymodbus stores set_values: keep the drive's edits
@@ -232,7 +232,7 @@ class SimulatedModbusExciter:
                 connection.transport.abort()  # type: ignore[attr-defined]
 
     def _refresh_inputs(self, start_address: int, registers: list[int]) -> None:
-        status = self.drive.status()
+        status = self.exciter.status()
         values = {
             "state": StateCode.of(status.state),
             "fault_code": status.fault_code,
@@ -256,16 +256,16 @@ class SimulatedModbusExciter:
             field: value(holding[name]) for name, field in _SWEEP_REGISTERS.items() if touched(holding[name])
         }
         if params:
-            self.drive.set_sweep_params(**params)
+            self.exciter.set_sweep_params(**params)
         if touched(holding["keepalive"]):
-            self.drive.keepalive(int(value(holding["keepalive"])))
+            self.exciter.keepalive(int(value(holding["keepalive"])))
         if touched(holding["command"]):
             command = holding["command"]
             code = int(value(command))
             offset = command.address - start_address
             registers[offset : offset + command.words] = command.encode(0)  # the drive clears the command
             if code:
-                self.drive.command(code)
+                self.exciter.command(code)
 
 
 class _PtyBridge:

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from simulators.coupling import BenchPhysics
+from simulators.coupling import PlatePhysics
 
 
 @dataclass(frozen=True)
@@ -56,7 +56,7 @@ class SimulatedHead:
     def __init__(
         self,
         model: HeadModel,
-        bench: BenchPhysics,
+        bench: PlatePhysics,
         channel: str,
         *,
         sign: int = 1,

@@ -20,7 +20,7 @@ from daq.bench_config import (
 )
 from drivers.exciter.envelope import EnvelopeLimits
 from estimator.vehicle import ModelKind
-from simulators.devices.sim_bench import HEAD_MODELS
+from service.simulated_bench import HEAD_MODELS
 
 VALID = """\
 [bench]

@@ -13,10 +13,10 @@ from daq.bench_config import BenchConfigError, dump_bench_config, load_bench_con
 from drivers.exciter.codes import ExciterState
 from drivers.exciter.errors import ExciterDeviceExceptionError
 from drivers.exciter.register_map import DEFAULT_REGISTER_MAP_PATH, RegisterMap
-from drivers.exciter.sweep import SweepSettings
 from drivers.exciter.urls import open_exciter
+from estimator.sweep import SweepSettings
 from simulators.devices.modbus_exciter import SimulatedModbusExciter
-from simulators.plate import PlateOnlyBench
+from simulators.plate import EmptyPlate
 
 HOLDING_SHIFT = 100
 INPUT_SHIFT = 50
@@ -55,7 +55,7 @@ def map_file(tmp_path: Path) -> Path:
 
 def test_the_configured_map_is_the_one_the_drive_is_spoken_to_with(tmp_path: Path, map_file: Path) -> None:
     async def scenario() -> None:
-        bench = PlateOnlyBench()
+        bench = EmptyPlate()
         async with SimulatedModbusExciter(bench, register_map=RegisterMap.load(map_file)) as sim:
             config_path = tmp_path / "bench.toml"
             config_path.write_text(

@@ -14,11 +14,11 @@ from daq.sources.laser_source import LaserSource
 from drivers.compowayf.amplifier import CountUnit, MeasuredArea, MeasuredValueConfig, ZxlAmplifier
 from drivers.compowayf.errors import AreaTypeError, CompowayFError
 from drivers.compowayf.transport import CompowayFPort
-from drivers.exciter.sweep import SweepSettings
+from estimator.sweep import SweepSettings
+from service.simulated_bench import SimulatedBench
 from simulators.devices.laser_amplifier import FaultKind, SimulatedAmplifier, TcpAmplifierServer
-from simulators.devices.sim_bench import SimulatedBench
 from simulators.excitation import sweep_position_m
-from simulators.plate import PlateOnlyBench
+from simulators.plate import EmptyPlate
 
 
 def _source(bench: SimulatedBench, channel: str) -> LaserSource:
@@ -200,7 +200,7 @@ def test_bad_value_location_keys_are_one_located_line(old: str, new: str, messag
 
 def test_a_polled_source_reads_where_the_configuration_says() -> None:
     laser = parse_bench_config(BENCH_TEXT).lasers[0]
-    bench = PlateOnlyBench()
+    bench = EmptyPlate()
     amplifier = SimulatedAmplifier.for_channel(
         bench, "x_r", config=laser.amplifier_config(), noise_sigma_m=0.0, static_offset_m=0.0015
     )

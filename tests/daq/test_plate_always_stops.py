@@ -30,12 +30,12 @@ from daq.sweep.pacing import DEFAULT_POLL_INTERVAL_S, SimulatedPacing
 from daq.sweep.run import DEFAULT_SILENCE_TIMEOUT_S, STEP_S, run_sweep
 from drivers.exciter.codes import ExciterState
 from drivers.exciter.interface import DEFAULT_KEEPALIVE_INTERVAL_S, ExciterStatus
-from drivers.exciter.sweep import SweepSettings
+from estimator.sweep import SweepSettings
+from service.simulated_bench import SimulatedBench
 from simulators.coupling import PlateState
-from simulators.devices.exciter_drive import DEFAULT_WATCHDOG_TIMEOUT_S
+from simulators.devices.exciter import DEFAULT_WATCHDOG_TIMEOUT_S
 from simulators.devices.faulty_link import FaultyLink, LinkMode, modbus_tcp_requests
 from simulators.devices.laser_amplifier import FaultKind
-from simulators.devices.sim_bench import SimulatedBench
 from simulators.plate import CONTROLLED_STOP_RAMP_S
 
 SWEEP = SweepSettings(duration_s=2.0)
@@ -130,7 +130,7 @@ def drive_reports(change: Callable[[ExciterStatus], ExciterStatus]) -> Callable[
     """The simulated drive misreports while running (a runaway drive or a broken encoder)."""
 
     def inject(rig: Rig) -> None:
-        drive = rig.bench.drive
+        drive = rig.bench.exciter
         honest = drive.status
 
         def misreported() -> ExciterStatus:

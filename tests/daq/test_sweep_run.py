@@ -20,10 +20,10 @@ from daq.sweep.model import StopKind, SweepOutcome, SweepProgress, SweepRequest
 from daq.sweep.pacing import SimulatedPacing
 from daq.sweep.run import SweepError, run_sweep
 from drivers.exciter.codes import CommandCode
-from drivers.exciter.sweep import SweepSettings
 from estimator.bandwidth import InsufficientBandwidthError, check_bandwidth
+from estimator.sweep import SweepSettings
+from service.simulated_bench import SimulatedBench
 from simulators.devices.laser_amplifier import FaultKind
-from simulators.devices.sim_bench import SimulatedBench
 from simulators.excitation import sweep_position_m
 from simulators.vehicle_sim import default_axle, default_quarter_car
 
@@ -77,7 +77,7 @@ def test_a_complete_sweep_records_every_channel_without_a_gap(
     assert outcome.complete and outcome.stop is StopKind.END_OF_SWEEP
     assert outcome.gap_rows == 0 and outcome.overrun_samples == 0
     assert all(s.lost_samples == 0 and s.failed_reads == 0 for s in outcome.sources)
-    assert bench.drive.commands == [CommandCode.START, CommandCode.STOP]
+    assert bench.exciter.commands == [CommandCode.START, CommandCode.STOP]
     stored = load_recording(out)
     assert stored.complete and stored.time_s.size == outcome.rows == 2501
     meta = stored.metadata
@@ -102,10 +102,12 @@ def test_exciter_fault_gives_an_emergency_stop_and_keeps_the_recording_so_far(
     bench: SimulatedBench, tmp_path: Path
 ) -> None:
     out = tmp_path / "run.h5"
-    outcome = sweep(bench, out, SweepRequest(SHORT), at(1.0, lambda: bench.drive.inject_fault(EXCITER_FAULT)))
+    outcome = sweep(
+        bench, out, SweepRequest(SHORT), at(1.0, lambda: bench.exciter.inject_fault(EXCITER_FAULT))
+    )
     assert not outcome.complete and outcome.reason == f"exciter fault 0x{EXCITER_FAULT:04X}"
     assert outcome.stop is StopKind.EMERGENCY
-    assert bench.drive.commands[-1] is CommandCode.EMERGENCY_STOP
+    assert bench.exciter.commands[-1] is CommandCode.EMERGENCY_STOP
     assert bench.physics.plate_status().state == "fault"  # halted where it was
     stored = load_recording(out)
     assert stored.metadata["status"] == "incomplete" and "exciter fault" in str(stored.metadata["reason"])
@@ -120,7 +122,7 @@ def test_a_silent_laser_stops_the_plate_and_marks_its_channel_missing_from_then_
     outcome = sweep(bench, out, SweepRequest(SHORT), silence)
     assert not outcome.complete and outcome.reason.startswith("sensor silence: laser 'laser-x_t' (x_t)")
     assert "MalformedFrameError" in outcome.reason
-    assert outcome.stop is StopKind.CONTROLLED and CommandCode.STOP in bench.drive.commands
+    assert outcome.stop is StopKind.CONTROLLED and CommandCode.STOP in bench.exciter.commands
     assert bench.physics.plate_status().state == "idle"  # ramped down and at rest
     stored = load_recording(out)
     missing = np.isnan(stored.channels["x_t"])
@@ -136,7 +138,7 @@ def test_abort_gives_a_controlled_stop_and_the_ramp_down_is_recorded(
     abort = threading.Event()
     outcome = sweep(bench, out, SweepRequest(SHORT), at(0.6, abort.set), abort=abort)
     assert not outcome.complete and outcome.reason == "aborted by the operator"
-    assert outcome.stop is StopKind.CONTROLLED and bench.drive.commands[-1] is CommandCode.STOP
+    assert outcome.stop is StopKind.CONTROLLED and bench.exciter.commands[-1] is CommandCode.STOP
     stored = load_recording(out)
     assert stored.metadata["reason"] == "aborted by the operator"
     assert not stored.gap_runs
@@ -152,7 +154,7 @@ def test_a_host_error_still_stops_the_plate_and_keeps_the_data(bench: SimulatedB
     out = tmp_path / "run.h5"
     outcome = sweep(bench, out, SweepRequest(SHORT), at(0.5, broken_display))
     assert outcome.reason == "host error: RuntimeError: display crashed"
-    assert CommandCode.STOP in bench.drive.commands and bench.physics.plate_status().state == "idle"
+    assert CommandCode.STOP in bench.exciter.commands and bench.physics.plate_status().state == "idle"
     assert load_recording(out).metadata["status"] == "incomplete"
 
 
@@ -199,7 +201,7 @@ def test_problems_found_before_the_start_raise_and_nothing_moves_or_is_written(
         out.write_bytes(b"precious")
     with pytest.raises(SweepError, match=message.replace("(", r"\(").replace(")", r"\)")):
         asyncio.run(run_sweep(config, request, out, pacing=SimulatedPacing(bench)))
-    assert bench.drive.commands == []
+    assert bench.exciter.commands == []
     assert (out.read_bytes() == b"precious") if change == "existing_file" else not out.exists()
 
 
@@ -235,6 +237,6 @@ def test_the_operators_emergency_stop_halts_the_plate_at_once(bench: SimulatedBe
         )
     )
     assert outcome.reason == "emergency stop by the operator" and outcome.stop is StopKind.EMERGENCY
-    assert bench.drive.commands[-1] is CommandCode.EMERGENCY_STOP
+    assert bench.exciter.commands[-1] is CommandCode.EMERGENCY_STOP
     assert bench.physics.plate_status().state == "idle"
     assert load_recording(out).metadata["status"] == "incomplete"

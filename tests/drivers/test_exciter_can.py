@@ -26,10 +26,10 @@ from drivers.exciter.errors import (
     ExciterHeartbeatLostError,
     ExciterTimeoutError,
 )
-from drivers.exciter.sweep import SweepLaw, SweepSettings
 from drivers.exciter.urls import CanTarget, open_exciter, parse_exciter_url
+from estimator.sweep import SweepLaw, SweepSettings
 from simulators.devices.can_exciter import SimulatedCanExciter
-from simulators.plate import PlateOnlyBench
+from simulators.plate import EmptyPlate
 
 SWEEP = SweepSettings(start_Hz=0.0, stop_Hz=20.0, amplitude_m=0.004, duration_s=20.0)
 REPLY_TIMEOUT_S = 0.2
@@ -43,7 +43,7 @@ def fresh_channel() -> str:
 @asynccontextmanager
 async def can_rig(**sim_kwargs: object) -> AsyncIterator[tuple[SimulatedCanExciter, CanExciter]]:
     """Simulated drive and driver on one virtual channel, the driver supervising on the simulated clock."""
-    bench = PlateOnlyBench()
+    bench = EmptyPlate()
     channel = fresh_channel()
     with SimulatedCanExciter(bench, channel=channel, **sim_kwargs) as sim:  # type: ignore[arg-type]
         sim.tick()  # first heartbeat
@@ -144,7 +144,7 @@ def test_can_urls() -> None:
 
 def test_full_cycle_on_the_virtual_bus_opened_from_a_url() -> None:
     async def scenario() -> None:
-        bench = PlateOnlyBench()
+        bench = EmptyPlate()
         channel = fresh_channel()
         with SimulatedCanExciter(bench, channel=channel) as sim:
             sim.tick()
@@ -168,7 +168,7 @@ def test_full_cycle_on_the_virtual_bus_opened_from_a_url() -> None:
                     assert status.state is ExciterState.RUNNING
                     assert status.frequency_Hz == pytest.approx(t_s, abs=0.01)
                     assert status.position_m == pytest.approx(bench.position_m("x_r"), abs=1e-6)
-                assert not sim.drive.watchdog_tripped
+                assert not sim.exciter.watchdog_tripped
                 assert exciter.heartbeat_counter == (sim.heartbeats_sent - 1) & 0xFF
                 assert any(name == "EXC_HostKeepAlive" for name, _ in sim.received)
 
@@ -185,7 +185,7 @@ def test_full_cycle_on_the_virtual_bus_opened_from_a_url() -> None:
                 assert halted.state is ExciterState.IDLE
                 sim.advance(0.3)
                 assert (await exciter.status()).position_m == halted.position_m
-                assert [c.name for c in sim.drive.commands] == ["START", "STOP", "START", "EMERGENCY_STOP"]
+                assert [c.name for c in sim.exciter.commands] == ["START", "STOP", "START", "EMERGENCY_STOP"]
             finally:
                 await exciter.close()
 
@@ -235,7 +235,7 @@ def test_heartbeat_supervision_needs_no_reply_timeout_when_the_drive_still_answe
 
     async def scenario() -> None:
         async with can_rig() as (sim, exciter):
-            sim.drive.clock.advance(0.7)  # time passes, no tick: no heartbeat goes out
+            sim.exciter.clock.advance(0.7)  # time passes, no tick: no heartbeat goes out
             with pytest.raises(ExciterHeartbeatLostError):
                 await exciter.status()
             sim.tick()
@@ -319,7 +319,7 @@ def test_watchdog_over_can() -> None:
 
 def test_moved_frame_set_from_a_url_talks_to_a_drive_on_the_same_base() -> None:
     async def scenario() -> None:
-        bench = PlateOnlyBench()
+        bench = EmptyPlate()
         channel = fresh_channel()
         with SimulatedCanExciter(bench, channel=channel, base_id=0x6C0) as sim:
             sim.tick()
@@ -367,7 +367,7 @@ class _RigExciter(CanExciter):
 @pytest.mark.filterwarnings("ignore::pytest.PytestUnhandledThreadExceptionWarning")
 def test_reader_error_fails_the_call_then_a_new_bus_is_opened() -> None:
     async def scenario() -> None:
-        bench = PlateOnlyBench()
+        bench = EmptyPlate()
         channel = fresh_channel()
         with SimulatedCanExciter(bench, channel=channel) as sim:
             sim.tick()
@@ -394,7 +394,7 @@ def test_reader_error_fails_the_call_then_a_new_bus_is_opened() -> None:
                 await exciter.open()  # an explicit open() after the error makes a new bus too
                 assert len(exciter.buses) == 3 and exciter.buses[1]._open is False
                 await exciter.configure_sweep(SWEEP)
-                assert sim.drive._params["duration_s"] == SWEEP.duration_s
+                assert sim.exciter._params["duration_s"] == SWEEP.duration_s
                 await exciter.open()  # a healthy bus is kept
                 assert len(exciter.buses) == 3
 

@@ -27,10 +27,10 @@ from drivers.exciter.errors import (
     ExciterHeartbeatLostError,
     ExciterTimeoutError,
 )
-from drivers.exciter.sweep import SweepLaw, SweepSettings
 from drivers.exciter.urls import Cia402Target, open_exciter, parse_exciter_url
-from simulators.devices.cia402_drive import SimulatedCia402Drive
-from simulators.plate import PlateOnlyBench
+from estimator.sweep import SweepLaw, SweepSettings
+from simulators.devices.cia402_exciter import SimulatedCia402Exciter
+from simulators.plate import EmptyPlate
 
 SWEEP = SweepSettings(start_Hz=0.0, stop_Hz=20.0, amplitude_m=0.004, duration_s=20.0)
 REPLY_TIMEOUT_S = 0.2
@@ -42,11 +42,11 @@ def fresh_channel() -> str:
 
 
 @asynccontextmanager
-async def rig(**exciter_kwargs: object) -> AsyncIterator[tuple[SimulatedCia402Drive, Cia402Exciter]]:
+async def rig(**exciter_kwargs: object) -> AsyncIterator[tuple[SimulatedCia402Exciter, Cia402Exciter]]:
     """Simulated drive and back end on one virtual channel, supervision on the simulated clock."""
-    bench = PlateOnlyBench()
+    bench = EmptyPlate()
     channel = fresh_channel()
-    with SimulatedCia402Drive(bench, channel=channel, node_id=NODE) as sim:
+    with SimulatedCia402Exciter(bench, channel=channel, node_id=NODE) as sim:
         exciter = Cia402Exciter(
             "virtual",
             channel,
@@ -67,7 +67,7 @@ def wait_until(condition: Callable[[], bool], what: str, timeout_s: float = 2.0)
         time.sleep(0.001)
 
 
-def stored(sim: SimulatedCia402Drive, index: int, subindex: int = 0) -> int:
+def stored(sim: SimulatedCia402Exciter, index: int, subindex: int = 0) -> int:
     """A value the host wrote into the drive's object dictionary."""
     entry = sim.node.sdo[index]
     value = (entry[subindex] if subindex else entry).raw
@@ -427,9 +427,9 @@ def test_bench_config_takes_a_canopen_drive() -> None:
 
 def test_opened_from_a_url() -> None:
     async def scenario() -> None:
-        bench = PlateOnlyBench()
+        bench = EmptyPlate()
         channel = fresh_channel()
-        with SimulatedCia402Drive(bench, channel=channel, node_id=9) as sim:
+        with SimulatedCia402Exciter(bench, channel=channel, node_id=9) as sim:
             exciter = await open_exciter(
                 f"canopen://virtual/{channel}?node=9&timeout=0.2", clock=bench.clock.now_s
             )

@@ -14,10 +14,10 @@ from drivers.exciter.can_bus import CanExciter
 from drivers.exciter.envelope import DEFAULT_HARD_LIMITS, EnvelopeLimits, SafetyEnvelope
 from drivers.exciter.errors import EnvelopeViolationError, ExciterConfigError, ExciterEncodingError
 from drivers.exciter.modbus import ModbusExciter, ModbusTcpLink
-from drivers.exciter.sweep import SweepLaw, SweepSettings
+from estimator.sweep import SweepLaw, SweepSettings
 from simulators.devices.can_exciter import SimulatedCanExciter
 from simulators.devices.modbus_exciter import SimulatedModbusExciter
-from simulators.plate import PlateOnlyBench
+from simulators.plate import EmptyPlate
 
 VIOLATIONS = [
     pytest.param(SweepSettings(amplitude_m=0.0041), "amplitude_m", "max_amplitude_m", id="amplitude"),
@@ -112,7 +112,7 @@ def test_check_is_exactly_the_limits(amplitude_m: float, start_Hz: float, stop_H
 @pytest.mark.parametrize(("settings", "field", "limit_name"), VIOLATIONS)
 def test_modbus_sends_nothing_for_a_violation(settings: SweepSettings, field: str, limit_name: str) -> None:
     async def scenario() -> None:
-        bench = PlateOnlyBench()
+        bench = EmptyPlate()
         async with SimulatedModbusExciter(bench) as sim:
             exciter = ModbusExciter(ModbusTcpLink(sim.host, sim.port), timeout_s=0.5, clock=bench.clock.now_s)
             async with exciter:
@@ -123,14 +123,14 @@ def test_modbus_sends_nothing_for_a_violation(settings: SweepSettings, field: st
                     await exciter.start()
             assert sim.writes == []
             assert sim.requests == 0
-            assert sim.drive.commands == []
+            assert sim.exciter.commands == []
 
     asyncio.run(scenario())
 
 
 def test_modbus_value_that_does_not_fit_a_register_is_refused_before_any_write() -> None:
     async def scenario() -> None:
-        bench = PlateOnlyBench()
+        bench = EmptyPlate()
         async with SimulatedModbusExciter(bench) as sim:
             long_sweeps = EnvelopeLimits(max_duration_s=1e7)  # an installation that allows them
             envelope = SafetyEnvelope(long_sweeps, long_sweeps)
@@ -146,7 +146,7 @@ def test_modbus_value_that_does_not_fit_a_register_is_refused_before_any_write()
 @pytest.mark.parametrize(("settings", "field", "limit_name"), VIOLATIONS)
 def test_can_sends_nothing_for_a_violation(settings: SweepSettings, field: str, limit_name: str) -> None:
     async def scenario() -> None:
-        bench = PlateOnlyBench()
+        bench = EmptyPlate()
         channel = f"envelope-{uuid.uuid4().hex}"
         with SimulatedCanExciter(bench, channel=channel) as sim:
             sim.tick()
@@ -159,7 +159,7 @@ def test_can_sends_nothing_for_a_violation(settings: SweepSettings, field: str, 
             names = [name for name, _ in sim.received]
             assert names == ["EXC_Command"]
             assert sim.received[0][1]["Command"] == 0  # the status request, nothing else
-            assert sim.drive.commands == []
+            assert sim.exciter.commands == []
 
     asyncio.run(scenario())
 

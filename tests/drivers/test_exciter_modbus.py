@@ -32,10 +32,10 @@ from drivers.exciter.register_map import (
     WordOrder,
     contiguous_runs,
 )
-from drivers.exciter.sweep import SweepSettings
 from drivers.exciter.urls import ModbusTarget, open_exciter, parse_exciter_url
+from estimator.sweep import SweepSettings
 from simulators.devices.modbus_exciter import SimulatedModbusExciter
-from simulators.plate import PlateOnlyBench
+from simulators.plate import EmptyPlate
 
 SWEEP = SweepSettings(start_Hz=0.0, stop_Hz=20.0, amplitude_m=0.004, duration_s=20.0)
 TIMEOUT_S = 0.3
@@ -48,7 +48,7 @@ def run(scenario: Callable[[], Awaitable[None]]) -> None:
 @asynccontextmanager
 async def tcp_rig(**sim_kwargs: object) -> AsyncIterator[tuple[SimulatedModbusExciter, ModbusExciter]]:
     """Simulated drive on loopback TCP and a driver connected to it, both on the same simulated clock."""
-    bench = PlateOnlyBench()
+    bench = EmptyPlate()
     async with SimulatedModbusExciter(bench, **sim_kwargs) as sim:  # type: ignore[arg-type]
         exciter = ModbusExciter(
             ModbusTcpLink(sim.host, sim.port), timeout_s=TIMEOUT_S, clock=bench.clock.now_s
@@ -62,8 +62,8 @@ async def run_until(
 ) -> ExciterStatus:
     """Advance simulated time to t_s in steps, polling the status each step as a host would."""
     status = await exciter.status()
-    while sim.drive.clock.now_s() < t_s - 1e-9:
-        sim.advance(min(step_s, t_s - sim.drive.clock.now_s()))
+    while sim.exciter.clock.now_s() < t_s - 1e-9:
+        sim.advance(min(step_s, t_s - sim.exciter.clock.now_s()))
         status = await exciter.status()
     return status
 
@@ -193,8 +193,8 @@ def test_full_cycle_over_tcp() -> None:
                 status = await run_until(sim, exciter, t_s)
                 assert status.state is ExciterState.RUNNING
                 assert status.frequency_Hz == pytest.approx(t_s, abs=0.01)  # 0-20 Hz over 20 s
-                assert status.position_m == pytest.approx(sim.drive.bench.position_m("x_r"), abs=1e-6)
-            assert not sim.drive.watchdog_tripped  # the status polls carried the keep-alive
+                assert status.position_m == pytest.approx(sim.exciter.bench.position_m("x_r"), abs=1e-6)
+            assert not sim.exciter.watchdog_tripped  # the status polls carried the keep-alive
 
             await exciter.stop()
             sim.advance(0.2)
@@ -210,7 +210,7 @@ def test_full_cycle_over_tcp() -> None:
             assert halted.state is ExciterState.IDLE and halted.fault_code == 0
             sim.advance(1.0)
             assert (await exciter.status()).position_m == halted.position_m  # held where it stopped
-            assert [c.name for c in sim.drive.commands] == ["START", "STOP", "START", "EMERGENCY_STOP"]
+            assert [c.name for c in sim.exciter.commands] == ["START", "STOP", "START", "EMERGENCY_STOP"]
 
     run(scenario)
 
@@ -220,7 +220,7 @@ def test_full_cycle_over_rtu_on_a_pty_through_the_url() -> None:
         pytest.skip("no pseudo-terminals on this platform")
 
     async def scenario() -> None:
-        bench = PlateOnlyBench()
+        bench = EmptyPlate()
         async with SimulatedModbusExciter(bench, framer="rtu", unit=7) as sim:
             device = await sim.attach_pty()
             url = f"modbus-rtu://{device}?baudrate=19200&unit=7&timeout={TIMEOUT_S}"
@@ -243,7 +243,7 @@ def test_full_cycle_over_rtu_on_a_pty_through_the_url() -> None:
 
 def test_rtu_framing_over_a_socket_url() -> None:
     async def scenario() -> None:
-        bench = PlateOnlyBench()
+        bench = EmptyPlate()
         async with SimulatedModbusExciter(bench, framer="rtu") as sim:
             link = ModbusRtuLink(sim.serial_url)
             async with ModbusExciter(link, timeout_s=TIMEOUT_S, clock=bench.clock.now_s) as exciter:
@@ -273,7 +273,7 @@ def test_modbus_exception_codes(code: int) -> None:
             with pytest.raises(ExciterDeviceExceptionError) as info:
                 await exciter.configure_sweep(SWEEP)
             assert info.value.exception_code == code
-            assert sim.drive.commands == []
+            assert sim.exciter.commands == []
             await exciter.configure_sweep(SWEEP)
             await exciter.start()
             assert (await exciter.status()).state is ExciterState.RUNNING
@@ -347,7 +347,7 @@ def test_watchdog_stops_the_plate_when_the_host_stops_talking() -> None:
             await exciter.configure_sweep(SWEEP)
             await exciter.start()
             await run_until(sim, exciter, 3.0, step_s=0.3)  # the host talks: no trip
-            assert not sim.drive.watchdog_tripped
+            assert not sim.exciter.watchdog_tripped
 
             sim.advance(0.6)  # the host is silent for longer than the watchdog timeout
             status = await exciter.status()
@@ -374,28 +374,28 @@ def test_keepalive_comes_only_from_supervision_on_a_wall_clock_drive() -> None:
     from simulators.coupling import SimulatedClock
 
     async def scenario() -> None:
-        bench = PlateOnlyBench(SimulatedClock(follow_wall_clock=True))
+        bench = EmptyPlate(SimulatedClock(follow_wall_clock=True))
         async with SimulatedModbusExciter(bench, watchdog_timeout_s=0.25) as sim:
             link = ModbusTcpLink(sim.host, sim.port)
             async with ModbusExciter(link, timeout_s=1.0, keepalive_interval_s=0.02) as exciter:
                 await exciter.configure_sweep(SWEEP)
                 await exciter.start()
                 began_s = bench.clock.now_s()
-                while sim.drive.keepalives_received < 20:  # supervise back to back, as a host cycle would
+                while sim.exciter.keepalives_received < 20:  # supervise back to back, as a host cycle would
                     status = await exciter.supervise()
                     assert status.state is ExciterState.RUNNING
                 assert bench.clock.now_s() - began_s > 0.25  # longer than the watchdog timeout...
                 sim.tick()
-                assert not sim.drive.watchdog_tripped  # ...and yet no trip
-                assert exciter.keepalives_sent == sim.drive.keepalives_received
+                assert not sim.exciter.watchdog_tripped  # ...and yet no trip
+                assert exciter.keepalives_sent == sim.exciter.keepalives_received
 
-                received = sim.drive.keepalives_received
+                received = sim.exciter.keepalives_received
                 unsupervised_s = bench.clock.now_s()
-                while not sim.drive.watchdog_tripped:  # the host stops supervising (bounded wait)
+                while not sim.exciter.watchdog_tripped:  # the host stops supervising (bounded wait)
                     assert bench.clock.now_s() - unsupervised_s < 5.0
                     await asyncio.sleep(0.02)
                     sim.tick()
-                assert sim.drive.keepalives_received == received  # nothing fed it meanwhile
+                assert sim.exciter.keepalives_received == received  # nothing fed it meanwhile
                 assert bench.clock.now_s() - unsupervised_s >= 0.25
                 status = await exciter.status()
                 assert status.fault_code == FAULT_WATCHDOG

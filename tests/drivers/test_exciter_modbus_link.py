@@ -25,7 +25,7 @@ from drivers.exciter.codes import ExciterState, StateCode
 from drivers.exciter.errors import ExciterConnectionLostError, ExciterError, ExciterTimeoutError
 from drivers.exciter.modbus import ModbusExciter, ModbusTcpLink
 from drivers.exciter.register_map import RegisterMap
-from drivers.exciter.sweep import SweepSettings
+from estimator.sweep import SweepSettings
 from simulators.devices.faulty_link import FaultyLink, modbus_tcp_requests
 
 TIMEOUT_S = 0.2

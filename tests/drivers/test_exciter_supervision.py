@@ -18,11 +18,11 @@ from drivers.exciter.codes import CommandCode, ExciterState
 from drivers.exciter.errors import EnvelopeBreachError, ExciterDeviceExceptionError
 from drivers.exciter.interface import ExciterStatus, PlateExciter
 from drivers.exciter.modbus import ModbusExciter, ModbusTcpLink
-from drivers.exciter.sweep import SweepSettings
+from estimator.sweep import SweepSettings
 from simulators.devices.can_exciter import SimulatedCanExciter
-from simulators.devices.exciter_drive import SimulatedDrive
+from simulators.devices.exciter import SimulatedExciter
 from simulators.devices.modbus_exciter import SimulatedModbusExciter
-from simulators.plate import CONTROLLED_STOP_RAMP_S, PlateOnlyBench
+from simulators.plate import CONTROLLED_STOP_RAMP_S, EmptyPlate
 
 SWEEP = SweepSettings(start_Hz=0.0, stop_Hz=20.0, amplitude_m=0.004, duration_s=20.0)
 TIMEOUT_S = 0.3
@@ -32,9 +32,9 @@ BACKENDS: list[Backend] = ["modbus", "can"]
 
 @dataclasses.dataclass
 class Rig:
-    """A simulated drive and a driver on the same simulated clock, whichever protocol."""
+    """A simulated exciter and a driver on the same simulated clock, whichever protocol."""
 
-    drive: SimulatedDrive
+    simulated: SimulatedExciter
     exciter: PlateExciter
     advance: Callable[[float], None]
     modbus: SimulatedModbusExciter | None = None
@@ -42,28 +42,28 @@ class Rig:
 
 @asynccontextmanager
 async def rig(backend: Backend) -> AsyncIterator[Rig]:
-    bench = PlateOnlyBench()
+    bench = EmptyPlate()
     if backend == "modbus":
         async with SimulatedModbusExciter(bench) as sim:
             exciter = ModbusExciter(
                 ModbusTcpLink(sim.host, sim.port), timeout_s=TIMEOUT_S, clock=bench.clock.now_s
             )
             async with exciter:
-                yield Rig(sim.drive, exciter, sim.advance, sim)
+                yield Rig(sim.exciter, exciter, sim.advance, sim)
         return
     channel = f"supervision-{uuid.uuid4().hex}"
     with SimulatedCanExciter(bench, channel=channel) as can_sim:
         can_sim.tick()
         exciter = CanExciter("virtual", channel, reply_timeout_s=TIMEOUT_S, clock=bench.clock.now_s)
         async with exciter:
-            yield Rig(can_sim.drive, exciter, can_sim.advance)
+            yield Rig(can_sim.exciter, exciter, can_sim.advance)
 
 
 async def keepalives_received(r: Rig) -> int:
     """Keep-alives the drive has handled. On CAN the keep-alive is a frame without an answer: one plain
     status exchange first (no supervision step), since the bus delivers frames in order."""
     await r.exciter._read_status()
-    return r.drive.keepalives_received
+    return r.simulated.keepalives_received
 
 
 async def running(r: Rig) -> None:
@@ -95,7 +95,7 @@ def test_keepalive_only_after_a_status_read_that_passed_its_checks(backend: Back
             assert await keepalives_received(r) == 1  # refused: nothing fed the watchdog
             r.advance(0.3)  # 0.55 s since the last feed: the watchdog trips
             status = await r.exciter.status()
-            assert r.drive.watchdog_tripped and status.state is ExciterState.STOPPING
+            assert r.simulated.watchdog_tripped and status.state is ExciterState.STOPPING
 
     asyncio.run(scenario())
 
@@ -122,15 +122,15 @@ def test_a_reported_breach_gets_an_emergency_stop_from_the_driver(backend: Backe
         async with rig(backend) as r:
             await running(r)
             await r.exciter.supervise()
-            honest = r.drive.status
-            r.drive.status = lambda: dataclasses.replace(honest(), position_m=-0.0045)  # type: ignore[method-assign]
+            honest = r.simulated.status
+            r.simulated.status = lambda: dataclasses.replace(honest(), position_m=-0.0045)  # type: ignore[method-assign]
             with pytest.raises(EnvelopeBreachError) as info:
                 await r.exciter.supervise()
             assert info.value.quantity == "position_m" and info.value.stopped
             assert "position_m=0.0045" in str(info.value) and "max_amplitude_m=0.004" in str(info.value)
-            assert r.drive.commands[-1] is CommandCode.EMERGENCY_STOP
+            assert r.simulated.commands[-1] is CommandCode.EMERGENCY_STOP
             assert not r.exciter.supervising
-            r.drive.status = honest  # type: ignore[method-assign]
+            r.simulated.status = honest  # type: ignore[method-assign]
             fed = await keepalives_received(r)
             r.advance(0.25)
             assert (await r.exciter.supervise()).state is ExciterState.IDLE  # halted
@@ -144,9 +144,9 @@ def test_closing_with_the_plate_moving_stops_it(backend: Backend) -> None:
     async def scenario() -> None:
         async with rig(backend) as r:
             await running(r)
-            plate = r.drive.bench
+            plate = r.simulated.bench
             await r.exciter.close()
-            assert r.drive.commands == [CommandCode.START, CommandCode.STOP]
+            assert r.simulated.commands == [CommandCode.START, CommandCode.STOP]
             r.advance(CONTROLLED_STOP_RAMP_S + 0.05)
             assert plate.plate_status().state == "idle"
 
@@ -160,12 +160,12 @@ def test_closing_falls_back_to_an_emergency_stop_and_a_stopped_plate_is_left_alo
             await running(r)
             r.modbus.inject_exception(4)  # the stop command is refused before the drive sees it
             await r.exciter.close()
-            assert r.drive.commands == [CommandCode.START, CommandCode.EMERGENCY_STOP]
-            assert r.drive.bench.plate_status().state == "idle"  # halted at once
+            assert r.simulated.commands == [CommandCode.START, CommandCode.EMERGENCY_STOP]
+            assert r.simulated.bench.plate_status().state == "idle"  # halted at once
         async with rig("modbus") as r:
             await running(r)
             await r.exciter.stop()
             await r.exciter.close()
-            assert r.drive.commands == [CommandCode.START, CommandCode.STOP]  # nothing more on close
+            assert r.simulated.commands == [CommandCode.START, CommandCode.STOP]  # nothing more on close
 
     asyncio.run(scenario())

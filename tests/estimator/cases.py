@@ -8,9 +8,9 @@ from functools import cache
 
 import numpy as np
 
-from drivers.exciter.sweep import SweepSettings
 from estimator.dynamics import ForceCurve
 from estimator.identify import IdentificationResult
+from estimator.sweep import SweepSettings
 from estimator.vehicle import (
     REFERENCE_SAMPLE_TIME_S,
     ModelKind,

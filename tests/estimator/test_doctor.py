@@ -21,10 +21,10 @@ import numpy as np
 import pytest
 from cases import random_axle, random_quarter_car
 
-from drivers.exciter.sweep import SweepSettings
 from estimator.doctor.catalog import CATALOG, EffectName
 from estimator.doctor.diagnose import DiagnoseOptions, DiagnosisResult, diagnose
 from estimator.doctor.residuals import effective_samples, ljung_box, sweep_frequency_Hz
+from estimator.sweep import SweepSettings
 from estimator.vehicle import TyreModel, VehicleParameters
 from simulators.vehicle_sim import (
     SimulatedVehicle,

@@ -15,13 +15,13 @@ from dataclasses import fields
 import numpy as np
 import pytest
 
-from drivers.exciter.sweep import SweepSettings
 from estimator.doctor.catalog import EffectInstance, EffectName
 from estimator.doctor.model import FitSettings, Reference, fit, starting_structure
 from estimator.doctor.result import model_json
 from estimator.doctor.simulation import simulate_models
 from estimator.model_io import ModelFormatError, model_from_json
 from estimator.output_error import IdentifiedModel
+from estimator.sweep import SweepSettings
 from estimator.validation import validate
 from estimator.vehicle import TyreModel
 from simulators.vehicle_sim import SimulationSettings, default_quarter_car, simulate, with_effects

@@ -8,12 +8,12 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from drivers.exciter.sweep import SweepSettings
 from estimator import relaxation
 from estimator.equations import build
 from estimator.newton_refit import newton_refit
 from estimator.relaxation import RELAXATION_TIME_BOUNDS_S
 from estimator.solvers.exact import solve_exact
+from estimator.sweep import SweepSettings
 from estimator.uncertainty import Z_95, confidence_intervals
 from estimator.vehicle import TyreModel, VehicleConstant, coefficient_from_relaxation_time
 from simulators.vehicle_sim import SimulationSettings, default_quarter_car, simulate

@@ -8,11 +8,11 @@ from dataclasses import replace
 
 import numpy as np
 
-from drivers.exciter.sweep import SweepSettings
 from estimator.equations import build
 from estimator.identify import IdentifyOptions, identify
 from estimator.output_error import refine_on_output_error
 from estimator.solvers.differential_evolution import DESettings
+from estimator.sweep import SweepSettings
 from estimator.vehicle import TyreModel
 from simulators.vehicle_sim import SimulationSettings, default_quarter_car, simulate
 

@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from drivers.exciter.sweep import SweepSettings
 from estimator.signals import choose_filters, kinematics
+from estimator.sweep import SweepSettings
 from simulators.excitation import sweep_frequency_Hz, sweep_phase_rad
 
 DT = 0.001

@@ -5,11 +5,11 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+from live_server import SimulatedInputs, simulated_inputs
 
 from daq.formats.recording_csv import write_recording_csv
 from daq.formats.vehicle_file import write_vehicle
-from drivers.exciter.sweep import SweepSettings
-from service.api.testing import SimulatedInputs, simulated_inputs
+from estimator.sweep import SweepSettings
 from simulators.vehicle_sim import (
     SimulationSettings,
     default_axle,

@@ -19,6 +19,8 @@ from typing import Any
 import h5py
 import httpx
 import pytest
+from live_server import LiveServer, SimulatedInputs, wait_until
+from live_server import wait_for_status as wait_for
 
 from daq.bench_config import write_bench_config
 from daq.formats.vehicle_file import format_vehicle
@@ -26,10 +28,8 @@ from drivers.exciter.codes import CommandCode
 from service.access import KeyRing, Role
 from service.api import ServiceSettings, create_app
 from service.api.app import FINGERPRINT_SECRET_FILE
-from service.api.testing import LiveServer, SimulatedInputs, wait_until
-from service.api.testing import wait_for_status as wait_for
 from service.cli.main import main as cli_main
-from simulators.devices.sim_bench import SimulatedBench, vehicle_preset
+from service.simulated_bench import SimulatedBench, vehicle_preset
 from simulators.vehicle_sim import default_quarter_car
 
 OPERATOR = "operator-key-0123456789"
@@ -421,7 +421,7 @@ def test_sweeps_and_schedules_the_bench_cannot_record_fast_enough_are_refused(tm
             assert_refused(test, "stop_Hz", "the bench records at 20 Hz")
             # a sweep it can carry (up to 4 Hz) is taken
             assert c.post("/api/v1/sweeps", json={**body, "stop_Hz": 4}, headers=AUTH).status_code == 201
-            assert slow.drive.commands[0] is CommandCode.STOP  # the start-up stop came first
+            assert slow.exciter.commands[0] is CommandCode.STOP  # the start-up stop came first
     finally:
         slow.close()
 

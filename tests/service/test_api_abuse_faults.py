@@ -28,16 +28,16 @@ from typing import Any
 
 import httpx
 import pytest
+from live_server import wait_for_status as wait_for
+from live_server import wait_until
 
 from daq.bench_config import write_bench_config
 from daq.formats.vehicle_file import format_vehicle
 from daq.storage.hdf5_recording import read_recording
 from drivers.exciter.codes import CommandCode, ExciterState
-from service.api.testing import wait_for_status as wait_for
-from service.api.testing import wait_until
 from service.bench_control import SERVICE_STOPPED
+from service.simulated_bench import SimulatedBench, vehicle_preset
 from service.store.sweeps import RESTART_REASON
-from simulators.devices.sim_bench import SimulatedBench, vehicle_preset
 
 ROOT = Path(__file__).resolve().parents[2]
 OPERATOR = "operator-key-0123456789"
@@ -111,7 +111,7 @@ def stop(service: Service) -> None:
 
 
 def plate(bench: SimulatedBench) -> ExciterState:
-    return bench.drive.status().state
+    return bench.exciter.status().state
 
 
 MIN_ROWS_BEFORE_FAULT = 200
@@ -135,7 +135,7 @@ def sweeping(client: httpx.Client, bench: SimulatedBench, body: dict[str, Any]) 
 
 
 def commands_since(bench: SimulatedBench, count: int) -> list[CommandCode]:
-    return list(bench.drive.commands[count:])
+    return list(bench.exciter.commands[count:])
 
 
 def test_sigterm_mid_sweep_fails_it_as_service_stopped_with_the_plate_stopped_and_data_kept(
@@ -146,7 +146,7 @@ def test_sigterm_mid_sweep_fails_it_as_service_stopped_with_the_plate_stopped_an
         wait_until(lambda: answers(service), STARTUP_TIMEOUT_S, "service ready", 0.2)
         with service.client() as client:
             sweep = sweeping(client, bench, SWEEP)
-        before = len(bench.drive.commands)
+        before = len(bench.exciter.commands)
         service.process.send_signal(signal.SIGTERM)
         signalled_at = time.monotonic()
         wait_until(lambda: plate(bench) is not ExciterState.RUNNING, 60, "the plate stopping", 0.01)
@@ -184,7 +184,7 @@ def test_sigterm_mid_sweep_fails_it_as_service_stopped_with_the_plate_stopped_an
 def test_a_killed_worker_fails_its_job_and_leaves_the_sweep_alone(
     folder: Path, bench: SimulatedBench, tmp_path: Path
 ) -> None:
-    from service.api.testing import simulated_inputs
+    from live_server import simulated_inputs
 
     inputs = simulated_inputs(tmp_path / "inputs", seconds=6.0, seed=1)
     service = serve(folder, "serve")
@@ -231,7 +231,7 @@ def test_sigkill_mid_sweep_the_drive_watchdog_stops_the_plate_and_a_restart_fail
         wait_until(lambda: answers(service), STARTUP_TIMEOUT_S, "service ready", 0.2)
         with service.client() as client:
             sweep = sweeping(client, bench, SWEEP)
-        before = len(bench.drive.commands)
+        before = len(bench.exciter.commands)
         service.process.kill()
         killed_at = time.monotonic()
         service.process.wait(30)
@@ -244,7 +244,7 @@ def test_sigkill_mid_sweep_the_drive_watchdog_stops_the_plate_and_a_restart_fail
     finally:
         stop(service)
     assert commands_since(bench, before) == []  # nobody commanded it: the watchdog stopped the plate
-    assert bench.drive.watchdog_tripped
+    assert bench.exciter.watchdog_tripped
     print(
         f"\nserver killed (SIGKILL): watchdog stop began after {stopping_s:.2f} s, "
         f"plate at rest after {rest_s:.2f} s"
@@ -263,7 +263,7 @@ def test_sigkill_mid_sweep_the_drive_watchdog_stops_the_plate_and_a_restart_fail
 def test_sigkill_with_a_silent_watchdog_the_restarted_service_stops_the_plate_before_it_answers(
     folder: Path, bench: SimulatedBench
 ) -> None:
-    bench.drive.watchdog_timeout_s = 1e9  # a drive whose watchdog does not act (misconfigured, or none)
+    bench.exciter.watchdog_timeout_s = 1e9  # a drive whose watchdog does not act (misconfigured, or none)
     service = serve(folder, "serve")
     try:
         wait_until(lambda: answers(service), STARTUP_TIMEOUT_S, "service ready", 0.2)
@@ -273,7 +273,7 @@ def test_sigkill_with_a_silent_watchdog_the_restarted_service_stops_the_plate_be
         service.process.wait(30)
     finally:
         stop(service)
-    before = len(bench.drive.commands)
+    before = len(bench.exciter.commands)
     assert plate(bench) is ExciterState.RUNNING  # nothing stops it now but the next service
     started_at = time.monotonic()
     restarted = serve(folder, "restarted")

@@ -10,10 +10,10 @@ from pathlib import Path
 
 import httpx
 import pytest
+from live_server import LiveServer
 
 from service.access import MIN_KEY_LENGTH, KeyRing, KeysFileError, Role, load_keys
 from service.api import ServiceSettings, create_app
-from service.api.testing import LiveServer
 
 VIEWER, OPERATOR, ADMIN = "viewer-key-0123456789", "operator-key-0123456789", "admin-key-0123456789"
 RING = KeyRing({VIEWER: Role.VIEWER, OPERATOR: Role.OPERATOR, ADMIN: Role.ADMIN})

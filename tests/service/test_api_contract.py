@@ -16,16 +16,16 @@ from typing import Any
 
 import numpy as np
 import pytest
+from live_server import SimulatedInputs
 from pydantic import BaseModel
 
-from drivers.exciter.sweep import SweepSettings
 from estimator.doctor.result import CandidateScore, DiagnosisResult, DiagnosisStep
 from estimator.identify import IdentifyOptions, identify
+from estimator.sweep import SweepSettings
 from estimator.validation import ValidationResult
 from service.access import KeyRing, Role
 from service.api import ServiceSettings, create_app
 from service.api.results import DiagnoseResult, IdentifyResult, ValidateResult
-from service.api.testing import SimulatedInputs
 from service.jobs.context import finite_json
 from service.jobs.identify_job import IdentifyJobOptions
 from simulators.vehicle_sim import SimulationSettings, default_axle, simulate

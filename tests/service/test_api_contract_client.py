@@ -18,12 +18,12 @@ from typing import Any
 import httpx
 import numpy as np
 import pytest
+from live_server import LiveServer, SimulatedInputs, wait_until
 
 from daq.formats.vehicle_file import format_vehicle
 from estimator.damper import PiecewiseLinearCurve
 from service.access import KeyRing, Role
 from service.api import ServiceSettings, create_app
-from service.api.testing import LiveServer, SimulatedInputs, wait_until
 from simulators.vehicle_sim import default_quarter_car
 
 OPERATOR = "operator-key-0123456789"

@@ -9,10 +9,10 @@ from pathlib import Path
 
 import httpx
 import pytest
+from live_server import LiveServer, wait_for_status
 
 from service.access import KeyRing, Role
 from service.api import ServiceSettings, create_app
-from service.api.testing import LiveServer, wait_for_status
 
 OPERATOR = "operator-key-0123456789"
 VIEWER = "viewer-key-0123456789"

@@ -16,9 +16,9 @@ from pathlib import Path
 import httpx
 import numpy as np
 import pytest
+from live_server import SimulatedInputs, simulated_inputs, wait_until
 
 from estimator.damper import PiecewiseLinearCurve
-from service.api.testing import SimulatedInputs, simulated_inputs, wait_until
 
 CURVE_TOLERANCE_PERCENT = 3.0
 MASS_TOLERANCE_PERCENT = 3.0

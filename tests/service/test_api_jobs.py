@@ -10,15 +10,15 @@ from typing import Any
 
 import httpx
 import pytest
-
-from service.access import KeyRing, Role
-from service.api import ServiceSettings, create_app
-from service.api.testing import (
+from live_server import (
     LiveServer,
     SimulatedInputs,
     wait_for_status,
     wait_until,
 )
+
+from service.access import KeyRing, Role
+from service.api import ServiceSettings, create_app
 
 OPERATOR = "operator-key-0123456789"
 AUTH = {"Authorization": f"Bearer {OPERATOR}"}

@@ -11,11 +11,11 @@ from typing import Any
 
 import httpx
 import pytest
+from live_server import LiveServer, SimulatedInputs, wait_for_status, wait_until
 
 from service.access import KeyRing, Role
 from service.api import ServiceSettings, create_app
 from service.api.server import SHUTDOWN_GRACE_S
-from service.api.testing import LiveServer, SimulatedInputs, wait_for_status, wait_until
 from service.store import Database, JobStatus, JobStore
 from service.store.jobs import RESTART_REASON, JobFiles
 

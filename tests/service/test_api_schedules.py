@@ -12,13 +12,13 @@ from typing import Any
 
 import httpx
 import pytest
+from live_server import LiveServer, wait_until
+from live_server import wait_for_status as wait_for
 
 from daq.formats.vehicle_file import format_vehicle
 from service.access import KeyRing, Role
 from service.api import ServiceSettings, create_app
 from service.api.scheduler import InspectionScheduler
-from service.api.testing import LiveServer, wait_until
-from service.api.testing import wait_for_status as wait_for
 from simulators.vehicle_sim import default_quarter_car
 
 ADMIN = "admin-key-0123456789"

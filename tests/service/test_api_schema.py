@@ -25,6 +25,7 @@ import pytest
 import schemathesis
 from hypothesis import HealthCheck, settings
 from hypothesis import strategies as st
+from live_server import LiveServer, simulated_inputs
 from schemathesis import GenerationMode
 from schemathesis.checks import not_a_server_error
 from schemathesis.specs.openapi.checks import (
@@ -37,7 +38,6 @@ from schemathesis.specs.openapi.checks import (
 from daq.formats.recording_csv import read_recording_csv
 from service.access import KeyRing, Role
 from service.api import ServiceSettings, create_app
-from service.api.testing import LiveServer, simulated_inputs
 
 ADMIN = "admin-key-0123456789abc"
 AUTH = {"Authorization": f"Bearer {ADMIN}"}

@@ -12,13 +12,13 @@ from typing import Any
 import httpx
 import numpy as np
 import pytest
+from live_server import LiveServer, wait_until
+from live_server import wait_for_status as wait_for
 
 from daq.formats.vehicle_file import format_vehicle
 from estimator.damper import PiecewiseLinearCurve
 from service.access import KeyRing, Role
 from service.api import ServiceSettings, create_app
-from service.api.testing import LiveServer, wait_until
-from service.api.testing import wait_for_status as wait_for
 from service.store.database import Database
 from service.store.models import SweepStatus
 from service.store.sweeps import RESTART_REASON, SweepStore

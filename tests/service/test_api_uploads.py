@@ -7,10 +7,10 @@ from collections.abc import Iterator
 
 import httpx
 import pytest
+from live_server import LiveServer, SimulatedInputs
 
 from service.access import KeyRing, Role
 from service.api import ServiceSettings, create_app
-from service.api.testing import LiveServer, SimulatedInputs
 
 OPERATOR = "operator-key-0123456789"
 AUTH = {"Authorization": f"Bearer {OPERATOR}"}

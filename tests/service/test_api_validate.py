@@ -9,13 +9,13 @@ from pathlib import Path
 
 import httpx
 import pytest
+from live_server import LiveServer, wait_for_status
 
 from daq.formats.recording_csv import write_recording_csv
-from drivers.exciter.sweep import SweepSettings
 from estimator.identify import identify
+from estimator.sweep import SweepSettings
 from service.access import KeyRing, Role
 from service.api import ServiceSettings, create_app
-from service.api.testing import LiveServer, wait_for_status
 from simulators.vehicle_sim import SimulationSettings, default_axle, default_quarter_car, simulate
 
 OPERATOR = "operator-key-0123456789"

@@ -10,11 +10,11 @@ from typing import Any
 
 import httpx
 import pytest
+from live_server import LiveServer, SimulatedInputs, wait_until
 
 from estimator.solvers.differential_evolution import DEProgress
 from service.access import KeyRing, Role
 from service.api import ServiceSettings, create_app
-from service.api.testing import LiveServer, SimulatedInputs, wait_until
 from service.jobs.context import ProgressReporter
 from service.jobs.messages import Progress
 from service.jobs.process import describe_exit

@@ -21,8 +21,8 @@ from drivers.exciter.codes import CommandCode, LawCode
 from estimator.recording import AXLE_CHANNELS
 from estimator.vehicle import ModelKind
 from service.cli.main import main
+from service.simulated_bench import HEAD_MODELS, SimulatedBench, vehicle_preset
 from simulators.devices.laser_amplifier import FaultKind, PtyAmplifierServer, SimulatedAmplifier
-from simulators.devices.sim_bench import HEAD_MODELS, SimulatedBench, vehicle_preset
 
 ROOT = Path(__file__).resolve().parents[2]
 STARTUP_TIMEOUT_S = 30.0
@@ -60,10 +60,10 @@ def bench() -> Iterator[SimulatedBench]:
 def test_probe_reads_every_device_during_a_sweep(
     bench: SimulatedBench, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    bench.drive.set_sweep_params(
+    bench.exciter.set_sweep_params(
         start_Hz=2.0, stop_Hz=2.0, amplitude_m=0.003, duration_s=10.0, law=LawCode.LINEAR
     )
-    bench.drive.command(CommandCode.START)
+    bench.exciter.command(CommandCode.START)
     bench.advance(0.125)  # a quarter period at 2 Hz: the plate at its crest, 3 mm up
     path = write_bench_config(bench.config, tmp_path / "bench.toml")
     code, devices = probe_json(capsys, path)
@@ -110,7 +110,7 @@ def test_probe_reports_each_faulty_device(
     config = replace(bench.config, lasers=tuple(lasers))
     path = write_bench_config(config, tmp_path / "bench.toml")
     bench.laser_lines["x_t"].inject_fault(FaultKind.NO_REPLY)  # x_t (on a pty): silent until cleared
-    bench.drive.inject_fault(0x42)
+    bench.exciter.inject_fault(0x42)
 
     code, devices = probe_json(capsys, path, "--timeout-s", 0.1)
     assert code == 1
@@ -128,7 +128,7 @@ def test_probe_reports_each_faulty_device(
     assert [line.split()[0] for line in out.splitlines()] == ["FAILED", "FAILED", "FAILED", "ok", "1"]
 
     bench.laser_lines["x_t"].clear_faults()
-    bench.drive.command(CommandCode.RESET_FAULT)
+    bench.exciter.command(CommandCode.RESET_FAULT)
     code, devices = probe_json(capsys, path)
     assert code == 1 and [d["ok"] for d in devices] == [True, False, True, True]
 

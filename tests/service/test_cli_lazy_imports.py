@@ -65,7 +65,7 @@ def test_the_names_the_parsers_use_equal_the_libraries() -> None:
     from daq.sweep.model import DEFAULT_REST_S, DEFAULT_SETTLE_S
     from estimator.identify import Solver
     from service.cli import devices, identify, sweep
-    from simulators.devices.sim_bench import VEHICLE_PRESETS
+    from service.simulated_bench import VEHICLE_PRESETS
 
     assert tuple(solver.value for solver in Solver) == identify.SOLVERS
     assert tuple(VEHICLE_PRESETS) == devices.VEHICLE_PRESET_NAMES

@@ -11,9 +11,9 @@ import pytest
 
 from daq.formats.recording_csv import read_recording_csv, write_recording_csv
 from daq.formats.vehicle_file import read_vehicle, write_vehicle
-from drivers.exciter.sweep import SweepSettings
 from estimator.identify import identify
 from estimator.recording import Recording
+from estimator.sweep import SweepSettings
 from service.cli.main import main
 from simulators.vehicle_sim import SimulationSettings, default_axle, default_quarter_car, with_effects
 from simulators.vehicle_sim import simulate as simulate_car

@@ -15,9 +15,9 @@ from drivers.exciter.can_frames import CanResult, ExciterFrames
 from drivers.exciter.codes import FAULT_WATCHDOG, CommandCode, ExciterState, LawCode, StateCode
 from drivers.exciter.register_map import RegisterMap
 from simulators.devices.can_exciter import SimulatedCanExciter
-from simulators.devices.exciter_drive import DriveRefusalError, RefusalReason, SimulatedDrive
+from simulators.devices.exciter import ExciterRefusalError, RefusalReason, SimulatedExciter
 from simulators.devices.modbus_exciter import SimulatedModbusExciter
-from simulators.plate import PlateOnlyBench
+from simulators.plate import EmptyPlate
 
 SWEEP_PARAMS = {"start_Hz": 0.0, "stop_Hz": 20.0, "amplitude_m": 0.004, "duration_s": 20.0, "law": 0}
 
@@ -25,8 +25,8 @@ SWEEP_PARAMS = {"start_Hz": 0.0, "stop_Hz": 20.0, "amplitude_m": 0.004, "duratio
 # ---- drive logic ------------------------------------------------------------------------------------------
 
 
-def started_drive(watchdog_timeout_s: float = 0.5) -> SimulatedDrive:
-    drive = SimulatedDrive(PlateOnlyBench(), watchdog_timeout_s)
+def started_drive(watchdog_timeout_s: float = 0.5) -> SimulatedExciter:
+    drive = SimulatedExciter(EmptyPlate(), watchdog_timeout_s)
     drive.set_sweep_params(**SWEEP_PARAMS)
     drive.command(CommandCode.START)
     return drive
@@ -57,7 +57,7 @@ def test_drive_watchdog_trip_is_a_controlled_stop_latched_until_reset() -> None:
     drive.clock.advance(0.4)
     rested = drive.status()
     assert (rested.state, rested.fault_code, rested.position_m) == (ExciterState.FAULT, FAULT_WATCHDOG, 0.0)
-    with pytest.raises(DriveRefusalError) as info:
+    with pytest.raises(ExciterRefusalError) as info:
         drive.command(CommandCode.START)
     assert info.value.reason is RefusalReason.FAULT
     drive.command(CommandCode.RESET_FAULT)
@@ -87,21 +87,21 @@ def test_drive_watchdog_sleeps_when_no_sweep_runs() -> None:
     ],
 )
 def test_drive_refuses_bad_starts(params: dict[str, float], reason: RefusalReason) -> None:
-    drive = SimulatedDrive(PlateOnlyBench())
+    drive = SimulatedExciter(EmptyPlate())
     drive.set_sweep_params(**params)
-    with pytest.raises(DriveRefusalError) as info:
+    with pytest.raises(ExciterRefusalError) as info:
         drive.command(CommandCode.START)
     assert info.value.reason is reason
-    with pytest.raises(DriveRefusalError):
+    with pytest.raises(ExciterRefusalError):
         drive.command(99)
 
 
 def test_drive_fault_injection_needs_a_plate() -> None:
     class NoPlate:
-        clock = PlateOnlyBench().clock
+        clock = EmptyPlate().clock
 
     with pytest.raises(TypeError, match="SimulatedPlate"):
-        SimulatedDrive(NoPlate()).inject_fault(1)  # type: ignore[arg-type]
+        SimulatedExciter(NoPlate()).inject_fault(1)  # type: ignore[arg-type]
 
 
 # ---- Modbus drive seen with a plain pymodbus client --------------------------------------------------------
@@ -110,7 +110,7 @@ def test_drive_fault_injection_needs_a_plate() -> None:
 def test_modbus_sim_registers_follow_the_map() -> None:
     async def scenario() -> None:
         regmap = RegisterMap.default()
-        bench = PlateOnlyBench()
+        bench = EmptyPlate()
         async with SimulatedModbusExciter(bench, watchdog_timeout_s=0.5) as sim:
             client = AsyncModbusTcpClient(sim.host, port=sim.port, timeout=1.0, retries=0, reconnect_delay=0)
             assert await client.connect()
@@ -165,7 +165,7 @@ def test_modbus_sim_registers_follow_the_map() -> None:
 
 def test_can_sim_heartbeats_follow_simulated_time_and_answers_requests() -> None:
     codec = ExciterFrames()
-    bench = PlateOnlyBench()
+    bench = EmptyPlate()
     channel = f"sim-test-{uuid.uuid4().hex}"
     with (
         SimulatedCanExciter(bench, channel=channel) as sim,

@@ -19,7 +19,7 @@ from drivers.compowayf.amplifier import AmplifierConfig, MeasuredArea, MeasuredV
 from drivers.compowayf.codec import build_command, parse_response
 from drivers.compowayf.layout import streaming_measured_config
 from drivers.compowayf.transport import CompowayFPort, LinkSettings
-from drivers.exciter.sweep import SweepSettings
+from estimator.sweep import SweepSettings
 from simulators.devices.laser_amplifier import (
     BUFFER_SIZE_BYTES,
     AmplifierLine,
@@ -29,7 +29,7 @@ from simulators.devices.laser_amplifier import (
     TcpAmplifierServer,
 )
 from simulators.devices.sensor_heads import ZX_LD40, ZX_LD100, SimulatedHead
-from simulators.plate import PlateOnlyBench
+from simulators.plate import EmptyPlate
 
 FAST = LinkSettings(timeout_s=0.2, late_reply_s=0.2, retries=0)
 """The simulated amplifier answers at once or never: no late reply to wait out after a timeout."""
@@ -44,8 +44,8 @@ def _serve(
 
 
 @pytest.fixture
-def bench() -> PlateOnlyBench:
-    return PlateOnlyBench()
+def bench() -> EmptyPlate:
+    return EmptyPlate()
 
 
 @pytest.fixture(params=["pty", "tcp"])
@@ -55,7 +55,7 @@ def transport(request: pytest.FixtureRequest) -> str:
 
 @dataclass
 class Rig:
-    bench: PlateOnlyBench
+    bench: EmptyPlate
     server: PtyAmplifierServer | TcpAmplifierServer
     driver: ZxlAmplifier
 
@@ -63,7 +63,7 @@ class Rig:
 @pytest.fixture(scope="module", params=["pty", "tcp"])
 def shared_rig(request: pytest.FixtureRequest) -> Iterator[Rig]:
     """A sweeping plate watched by one noise-free ZX-LD40 on x_r at node 1, served on the transport."""
-    bench = PlateOnlyBench()
+    bench = EmptyPlate()
     bench.start_sweep(SWEEP)
     server = _serve(str(request.param), {1: SimulatedAmplifier.for_channel(bench, "x_r", noise_sigma_m=0.0)})
     driver = ZxlAmplifier.open(server.device_url(1), link=FAST)
@@ -90,7 +90,7 @@ def test_reading_follows_the_plate_in_simulated_time(rig: Rig) -> None:
         assert driver.read_counts()[0] % 2000 == 0  # quantised to the 2 µm resolution, in nm counts
 
 
-def test_same_simulated_time_gives_the_same_sample(bench: PlateOnlyBench, transport: str) -> None:
+def test_same_simulated_time_gives_the_same_sample(bench: EmptyPlate, transport: str) -> None:
     amplifier = SimulatedAmplifier.for_channel(bench, "x_r", seed=7)  # with noise
     with (
         _serve(transport, {1: amplifier}) as server,
@@ -111,7 +111,7 @@ def test_services_model_status_echo(rig: Rig) -> None:
     assert (status.operating_status, status.related_info) == (0, 0)
 
 
-def test_zero_reset_and_cancel(bench: PlateOnlyBench, transport: str) -> None:
+def test_zero_reset_and_cancel(bench: EmptyPlate, transport: str) -> None:
     amplifier = SimulatedAmplifier.for_channel(bench, "x_r", noise_sigma_m=0.0, static_offset_m=0.003)
     with (
         _serve(transport, {1: amplifier}) as server,
@@ -127,7 +127,7 @@ def test_zero_reset_and_cancel(bench: PlateOnlyBench, transport: str) -> None:
             driver.operation_command(0x7E, 0x00)
 
 
-def test_out_of_range_by_geometry_and_head_choice(bench: PlateOnlyBench, transport: str) -> None:
+def test_out_of_range_by_geometry_and_head_choice(bench: EmptyPlate, transport: str) -> None:
     near = SimulatedAmplifier.for_channel(bench, "x_s", ZX_LD40, noise_sigma_m=0.0, static_offset_m=0.012)
     wide = SimulatedAmplifier.for_channel(bench, "x_s", ZX_LD100, noise_sigma_m=0.0, static_offset_m=0.012)
     with (
@@ -140,7 +140,7 @@ def test_out_of_range_by_geometry_and_head_choice(bench: PlateOnlyBench, transpo
         assert ZxlAmplifier(port, 2).read_position_m() == pytest.approx(0.012)
 
 
-def test_multidrop_nodes_share_one_line(bench: PlateOnlyBench, transport: str) -> None:
+def test_multidrop_nodes_share_one_line(bench: EmptyPlate, transport: str) -> None:
     amplifiers = {
         1: SimulatedAmplifier.for_channel(bench, "x_r", ZX_LD40, noise_sigma_m=0.0),
         7: SimulatedAmplifier.for_channel(bench, "x_s", ZX_LD100, noise_sigma_m=0.0, static_offset_m=-0.02),
@@ -156,7 +156,7 @@ def test_multidrop_nodes_share_one_line(bench: PlateOnlyBench, transport: str) -
         assert x_r.read_model() == "ZX-LDA11-N"
 
 
-def test_plain_device_path_on_the_pty(bench: PlateOnlyBench) -> None:
+def test_plain_device_path_on_the_pty(bench: EmptyPlate) -> None:
     amplifier = SimulatedAmplifier.for_channel(bench, "x_r", noise_sigma_m=0.0)
     with (
         PtyAmplifierServer({4: amplifier}) as server,
@@ -165,7 +165,7 @@ def test_plain_device_path_on_the_pty(bench: PlateOnlyBench) -> None:
         assert driver.read_position_m() == 0.0
 
 
-def test_sample_buffer_read_oldest_first(bench: PlateOnlyBench, transport: str) -> None:
+def test_sample_buffer_read_oldest_first(bench: EmptyPlate, transport: str) -> None:
     measured = MeasuredValueConfig(area=MeasuredArea.VARIABLE, area_type=0xC0, address=0, buffer_length=4)
     config = AmplifierConfig(measured=measured)
     amplifier = SimulatedAmplifier.for_channel(bench, "x_r", config=config, noise_sigma_m=0.0)
@@ -186,9 +186,7 @@ def test_sample_buffer_read_oldest_first(bench: PlateOnlyBench, transport: str) 
             driver.read_variable_area(0xC0, 0x0002, 3)
 
 
-def test_measured_value_in_parameter_area_and_parameter_services(
-    bench: PlateOnlyBench, transport: str
-) -> None:
+def test_measured_value_in_parameter_area_and_parameter_services(bench: EmptyPlate, transport: str) -> None:
     measured = MeasuredValueConfig(area=MeasuredArea.PARAMETER, area_type=0xC100, address=0x0010)
     config = AmplifierConfig(measured=measured)
     amplifier = SimulatedAmplifier.for_channel(
@@ -222,9 +220,7 @@ def test_measured_value_in_parameter_area_and_parameter_services(
         (build_command(1, "0801", "A" * 300), "18"),
     ],
 )
-def test_amplifier_answers_bad_commands_with_end_codes(
-    bench: PlateOnlyBench, text: bytes, end_code: str
-) -> None:
+def test_amplifier_answers_bad_commands_with_end_codes(bench: EmptyPlate, text: bytes, end_code: str) -> None:
     with (
         PtyAmplifierServer({1: SimulatedAmplifier.for_channel(bench, "x_r")}) as server,
         CompowayFPort(server.device_url(1), link=FAST) as port,
@@ -241,7 +237,7 @@ def test_model_reply_carries_the_buffer_size(rig: Rig) -> None:
 
 
 def test_reads_longer_than_one_reply_are_refused_and_the_driver_splits_them(
-    bench: PlateOnlyBench, transport: str
+    bench: EmptyPlate, transport: str
 ) -> None:
     measured = MeasuredValueConfig(area=MeasuredArea.VARIABLE, area_type=0xC0, address=0, buffer_length=60)
     config = AmplifierConfig(measured=measured)
@@ -259,7 +255,7 @@ def test_reads_longer_than_one_reply_are_refused_and_the_driver_splits_them(
         assert server.commands_received - before == 3  # 25 + 25 + 10
 
 
-def test_the_configured_area_type_and_address_are_served(bench: PlateOnlyBench, transport: str) -> None:
+def test_the_configured_area_type_and_address_are_served(bench: EmptyPlate, transport: str) -> None:
     measured = MeasuredValueConfig(area=MeasuredArea.VARIABLE, area_type=0xC1, address=0x0100)
     config = AmplifierConfig(measured=measured)
     amplifier = SimulatedAmplifier.for_channel(
@@ -284,7 +280,7 @@ def test_a_null_byte_before_each_reply_is_skipped(rig: Rig) -> None:
     assert driver.port.counters.skipped_bytes == skipped + 3
 
 
-def test_an_echoing_line_needs_echo_suppression(bench: PlateOnlyBench, transport: str) -> None:
+def test_an_echoing_line_needs_echo_suppression(bench: EmptyPlate, transport: str) -> None:
     """With echo=1 the driver reads back its own frame and every read works. Without it the echoed command
     is taken for a reply: a garbled one for 0503 (a typed error), one that answers nothing for an area read
     (discarded by the request matching)."""
@@ -304,7 +300,7 @@ def test_an_echoing_line_needs_echo_suppression(bench: PlateOnlyBench, transport
             assert driver.port.counters.discarded_frames in (1, 2)
 
 
-def test_a_1000_sample_ring_streams_in_requests_of_25(bench: PlateOnlyBench, transport: str) -> None:
+def test_a_1000_sample_ring_streams_in_requests_of_25(bench: EmptyPlate, transport: str) -> None:
     config = AmplifierConfig(measured=streaming_measured_config(0.001, 1000))
     amplifier = SimulatedAmplifier.for_channel(bench, "x_r", config=config, noise_sigma_m=0.0, origin_s=0.0)
     bench.start_sweep(SWEEP)
@@ -358,7 +354,7 @@ def test_fault_gives_typed_error_then_clean_recovery(
     assert driver.read_position_m() == pytest.approx(bench.position_m("x_r"), abs=1e-6)
 
 
-def test_dropped_tcp_connection_is_port_lost_then_reopened(bench: PlateOnlyBench) -> None:
+def test_dropped_tcp_connection_is_port_lost_then_reopened(bench: EmptyPlate) -> None:
     with (
         TcpAmplifierServer({1: SimulatedAmplifier.for_channel(bench, "x_r", noise_sigma_m=0.0)}) as server,
         ZxlAmplifier.open(server.device_url(1), link=FAST) as driver,
@@ -371,7 +367,7 @@ def test_dropped_tcp_connection_is_port_lost_then_reopened(bench: PlateOnlyBench
         assert driver.port.counters.reopens == 1 and server.connections_accepted == 2
 
 
-def test_server_gone_is_port_lost(bench: PlateOnlyBench) -> None:
+def test_server_gone_is_port_lost(bench: EmptyPlate) -> None:
     server = TcpAmplifierServer({1: SimulatedAmplifier.for_channel(bench, "x_r")}).start()
     driver = ZxlAmplifier.open(server.device_url(1), link=replace(FAST, retries=1))
     driver.read_counts()
@@ -402,7 +398,7 @@ def test_retries_hide_a_one_off_fault(rig: Rig, kind: FaultKind, code: str) -> N
     assert driver.port.counters.retries == retries_before + 1 and driver.read_rate().failures == 0
 
 
-def test_dropped_connection_hidden_by_retry(bench: PlateOnlyBench) -> None:
+def test_dropped_connection_hidden_by_retry(bench: EmptyPlate) -> None:
     with (
         TcpAmplifierServer({1: SimulatedAmplifier.for_channel(bench, "x_r", noise_sigma_m=0.0)}) as server,
         ZxlAmplifier.open(server.device_url(1), link=replace(FAST, retries=1)) as driver,
@@ -425,7 +421,7 @@ def test_refusal_is_not_retried_by_the_link(rig: Rig) -> None:
     driver.read_position_m()
 
 
-def test_fault_for_one_node_only(bench: PlateOnlyBench, transport: str) -> None:
+def test_fault_for_one_node_only(bench: EmptyPlate, transport: str) -> None:
     amplifiers = {n: SimulatedAmplifier.for_channel(bench, "x_r", noise_sigma_m=0.0) for n in (1, 2)}
     with _serve(transport, amplifiers) as server, CompowayFPort(server.device_url(1), link=FAST) as port:
         server.inject_fault(FaultKind.OUT_OF_RANGE, node=2)
@@ -435,7 +431,7 @@ def test_fault_for_one_node_only(bench: PlateOnlyBench, transport: str) -> None:
         assert math.isnan(ZxlAmplifier(port, 2).read_samples_m(1)[0])
 
 
-def test_fault_arguments_are_checked(bench: PlateOnlyBench) -> None:
+def test_fault_arguments_are_checked(bench: EmptyPlate) -> None:
     line = AmplifierLine({1: SimulatedAmplifier.for_channel(bench, "x_r")})
     with pytest.raises(ValueError):
         line.inject_fault(FaultKind.END_CODE)
@@ -464,7 +460,7 @@ def test_read_rate_is_measured_and_sane(rig: Rig) -> None:
 # --- heads ----------------------------------------------------------------------------------------------
 
 
-def test_head_range_resolution_sign_and_noise(bench: PlateOnlyBench) -> None:
+def test_head_range_resolution_sign_and_noise(bench: EmptyPlate) -> None:
     bench.start_sweep(SWEEP)
     bench.clock.advance(0.1)
     up_m = bench.position_m("x_r")

@@ -6,8 +6,8 @@ from dataclasses import replace
 
 import numpy as np
 
-from drivers.exciter.sweep import SweepSettings
-from simulators.vehicle_bench import VehicleBench
+from estimator.sweep import SweepSettings
+from simulators.vehicle_on_plate import VehicleOnPlate
 from simulators.vehicle_sim import (
     SensorModel,
     SimulationSettings,
@@ -64,7 +64,7 @@ def test_axle_without_bar_and_equal_dampers_does_not_roll_when_plates_move_toget
 def test_vehicle_bench_in_simulated_time_agrees_with_the_batch_simulator() -> None:
     """The bench the simulated devices read gives the same corner motion as the batch simulation."""
     vehicle = default_quarter_car()
-    bench = VehicleBench(vehicle, step_s=0.00025)
+    bench = VehicleOnPlate(vehicle, step_s=0.00025)
     bench.start_sweep(SHORT)
     readings = []
     for _ in range(2000):

@@ -1,6 +1,9 @@
 """Running the service in-process, for tests and benchmarks: the real uvicorn server on a free loopback
 port in a background thread (`LiveServer`), a deadline-bounded `wait_until`, and simulated input files
-(`simulated_inputs`) whose truth is known."""
+(`simulated_inputs`) whose truth is known.
+
+It lives under tests/ (it was service/api/testing.py): it needs httpx, which only the test extra installs,
+so it is no part of the installed product. Benchmarks put tests/service on sys.path to use it."""
 
 from __future__ import annotations
 
@@ -91,7 +94,7 @@ class SimulatedInputs:
 def _simulated(seconds: float, seed: int) -> tuple[str, str, Callable, np.ndarray]:
     from daq.formats.recording_csv import write_recording_csv
     from daq.formats.vehicle_file import format_vehicle
-    from drivers.exciter.sweep import SweepSettings
+    from estimator.sweep import SweepSettings
     from simulators.vehicle_sim import SimulationSettings, default_quarter_car, simulate, true_damper
 
     vehicle = default_quarter_car()

@@ -3,12 +3,12 @@ channel (TCP socket or pty), a Modbus or CAN plate drive, and the bench configur
 
     with SimulatedBench(default_quarter_car(), exciter="modbus") as bench:   # start() on entering
         config = bench.config            # daq.bench_config.BenchConfig with the live URLs
-        bench.advance(0.01)              # manual clock: move time, tick the drive, sample the lasers
+        bench.advance(0.01)              # manual clock: move time, tick the exciter, sample the lasers
 
 Time: by default the bench runs on a manual SimulatedClock that only `advance(dt_s)` moves, so a test (or
 `shockbench sweep --simulated`) is deterministic. With `realtime=True` the clock follows the wall clock
 and a background task calls `tick()` every `tick_period_s`: the drive's cyclic checks (watchdog), the CAN
-heartbeat, and the vehicle integration kept up to date (VehicleBench integrates lazily up to the present
+heartbeat, and the vehicle integration kept up to date (VehicleOnPlate integrates lazily up to the present
 on each read; ticking spreads that work instead of doing all of it on the first read after a long idle).
 
 Threads: the Modbus server and the real-time ticker live on an asyncio loop in a thread of their own, so
@@ -33,11 +33,11 @@ from typing import Any, Literal, Self
 import numpy as np
 
 from daq.bench_config import BenchConfig, ExciterConfig, LaserConfig
-from drivers.compowayf.amplifier import AmplifierConfig, streaming_measured_config
+from drivers.compowayf.layout import AmplifierConfig, streaming_measured_config
 from drivers.exciter.envelope import EnvelopeLimits
 from simulators.coupling import SimulatedClock
 from simulators.devices.can_exciter import SimulatedCanExciter
-from simulators.devices.exciter_drive import SimulatedDrive
+from simulators.devices.exciter import SimulatedExciter
 from simulators.devices.laser_amplifier import (
     AmplifierLine,
     PtyAmplifierServer,
@@ -46,7 +46,7 @@ from simulators.devices.laser_amplifier import (
 )
 from simulators.devices.modbus_exciter import SimulatedModbusExciter
 from simulators.devices.sensor_heads import ZX_LD40, ZX_LD100, HeadModel
-from simulators.vehicle_bench import VehicleBench
+from simulators.vehicle_on_plate import VehicleOnPlate
 from simulators.vehicle_sim import SimulatedVehicle, default_axle, default_quarter_car
 
 log = logging.getLogger(__name__)
@@ -62,7 +62,7 @@ HEAD_MODELS: dict[str, HeadModel] = {head.name: head for head in (ZX_LD40, ZX_LD
 
 DEFAULT_TICK_PERIOD_S = 0.01
 BENCH_STEP_S = 0.001
-"""Integration step of the vehicle on a served bench: twice VehicleBench's default (positions a few
+"""Integration step of the vehicle on a served bench: twice VehicleOnPlate's default (positions a few
 micrometres off it during a 20 Hz sweep) for about half the CPU, so that the simulation keeps up with real
 time on a loaded machine (one that falls behind makes every read wait for it) and a manual-clock sweep runs
 about as fast as real time."""
@@ -91,7 +91,8 @@ def vehicle_preset(name: str) -> SimulatedVehicle:
 
 
 class SimulatedBench:
-    """Every simulated device of a bench, started together; `config` says where each one is.
+    """Every simulated device of a bench, started together; `config` says where each one is. Exists so that
+    sim-devices, `sweep --simulated`, `serve --simulated` and the tests start the same bench one way.
 
     vehicle: what stands on the plate (default: the default quarter car).
     exciter: "modbus" (Modbus TCP on 127.0.0.1) or "can" (python-can bus `can_interface`/`can_channel`,
@@ -130,7 +131,7 @@ class SimulatedBench:
         self.vehicle = vehicle or default_quarter_car()
         self.realtime = realtime
         self.clock = SimulatedClock(follow_wall_clock=realtime)
-        self.physics = VehicleBench(self.vehicle, self.clock, step_s=step_s or BENCH_STEP_S)
+        self.physics = VehicleOnPlate(self.vehicle, self.clock, step_s=step_s or BENCH_STEP_S)
         self.exciter_kind: ExciterKind = exciter
         self.laser_transport: LaserTransport = lasers
         self.seed = seed
@@ -216,12 +217,12 @@ class SimulatedBench:
         return self._config
 
     @property
-    def drive(self) -> SimulatedDrive:
-        """The plate drive behind whichever protocol (inject_fault, watchdog state...)."""
+    def exciter(self) -> SimulatedExciter:
+        """The simulated exciter behind whichever protocol (inject_fault, watchdog state...)."""
         sim = self.modbus or self.can
         if sim is None:
             raise RuntimeError("simulated bench not started")
-        return sim.drive
+        return sim.exciter
 
     # ---- time ---------------------------------------------------------------------------------------
 

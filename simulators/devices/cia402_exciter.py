@@ -31,8 +31,8 @@ from canopen.sdo import SdoAbortedError
 from drivers.exciter import cia402_objects as objects
 from drivers.exciter.cia402_objects import DriveState
 from drivers.exciter.codes import LawCode
-from drivers.exciter.sweep import SweepSettings
-from simulators.coupling import BenchPhysics, PlateState
+from estimator.sweep import SweepSettings
+from simulators.coupling import PlatePhysics, PlateState
 
 DEFAULT_NODE_ID = 5
 READER_POLL_S = 0.02
@@ -64,13 +64,13 @@ _SWEEP_UNITS = {
 _POWERED = (DriveState.READY_TO_SWITCH_ON, DriveState.SWITCHED_ON, DriveState.OPERATION_ENABLED)
 
 
-class SimulatedCia402Drive:
+class SimulatedCia402Exciter:
     """A CiA 402 plate drive, node `node_id` on python-can `interface`/`channel`. Use `with` (or
     start()/close()); call tick() or advance() as simulated time passes."""
 
     def __init__(
         self,
-        bench: BenchPhysics,
+        bench: PlatePhysics,
         *,
         channel: str,
         interface: str = "virtual",
@@ -108,7 +108,7 @@ class SimulatedCia402Drive:
     def close(self) -> None:
         self.network.disconnect()
 
-    def __enter__(self) -> SimulatedCia402Drive:
+    def __enter__(self) -> SimulatedCia402Exciter:
         self.start()
         return self
 
@@ -376,7 +376,7 @@ class _SimulatedTimeNetwork(canopen.Network):
     time from tick(), not from a python-can timer thread; a silent drive neither sends nor hears; SDO
     requests are ignored while the node is NMT STOPPED."""
 
-    def __init__(self, drive: SimulatedCia402Drive) -> None:
+    def __init__(self, drive: SimulatedCia402Exciter) -> None:
         super().__init__()
         self.NOTIFIER_CYCLE = READER_POLL_S  # close() waits at most this long for the reader thread
         self._drive = drive

@@ -1,9 +1,12 @@
-"""The plate drive controller as the simulated exciters see it, whatever protocol they speak.
+"""The simulated plate exciter (the drive controller that moves the plate), whatever protocol it speaks.
 
-`SimulatedDrive` holds the protocol-independent behaviour: sweep settings written piecewise, commands
+One name for the plate's drive across the layers: "exciter" (drivers/exciter/, daq's ExciterConfig, this
+module); "plate" is only the moving table itself and its motion (simulators/plate.py).
+
+`SimulatedExciter` holds the protocol-independent behaviour: sweep settings written piecewise, commands
 (start, controlled stop, emergency stop, fault reset), the host watchdog, latched faults and the status
 snapshot. The Modbus (modbus_exciter.py) and CAN (can_exciter.py) simulators translate their frames to
-these calls and `DriveRefusalError` to their own error answers.
+these calls and `ExciterRefusalError` to their own error answers.
 
 Watchdog: a START arms it; from then on, while the plate runs, the host must send a keep-alive with a
 changing counter at least every `watchdog_timeout_s` of simulated time. The check runs on every `tick()`
@@ -18,10 +21,16 @@ import threading
 from enum import Enum
 from typing import Any
 
-from drivers.exciter.codes import FAULT_NONE, FAULT_WATCHDOG, CommandCode, ExciterState, LawCode
-from drivers.exciter.interface import ExciterStatus
-from drivers.exciter.sweep import SweepSettings
-from simulators.coupling import BenchPhysics, PlateState
+from drivers.exciter.codes import (
+    FAULT_NONE,
+    FAULT_WATCHDOG,
+    CommandCode,
+    ExciterState,
+    ExciterStatus,
+    LawCode,
+)
+from estimator.sweep import SweepSettings
+from simulators.coupling import PlatePhysics, PlateState
 
 DEFAULT_WATCHDOG_TIMEOUT_S = 0.5
 
@@ -35,7 +44,7 @@ class RefusalReason(Enum):
     INVALID_VALUE = "invalid value"
 
 
-class DriveRefusalError(Exception):
+class ExciterRefusalError(Exception):
     """The drive refuses a request; each protocol answers with its own code for `reason`."""
 
     def __init__(self, reason: RefusalReason, detail: str = "") -> None:
@@ -43,11 +52,11 @@ class DriveRefusalError(Exception):
         self.reason = reason
 
 
-class SimulatedDrive:
-    """Drive controller logic on top of a BenchPhysics. Thread-safe (CAN frames arrive on a reader
+class SimulatedExciter:
+    """Drive controller logic on top of a PlatePhysics. Thread-safe (CAN frames arrive on a reader
     thread while tests advance the clock)."""
 
-    def __init__(self, bench: BenchPhysics, watchdog_timeout_s: float = DEFAULT_WATCHDOG_TIMEOUT_S) -> None:
+    def __init__(self, bench: PlatePhysics, watchdog_timeout_s: float = DEFAULT_WATCHDOG_TIMEOUT_S) -> None:
         self.bench = bench
         self.clock = bench.clock
         self.watchdog_timeout_s = watchdog_timeout_s
@@ -72,13 +81,15 @@ class SimulatedDrive:
             self._params.update(values)
 
     def command(self, code: int) -> None:
-        """Execute a command code; DriveRefusalError if the drive will not."""
+        """Execute a command code; ExciterRefusalError if the drive will not."""
         with self._lock:
             self.tick()
             try:
                 command = CommandCode(code)
             except ValueError:
-                raise DriveRefusalError(RefusalReason.INVALID_VALUE, f"unknown command code {code}") from None
+                raise ExciterRefusalError(
+                    RefusalReason.INVALID_VALUE, f"unknown command code {code}"
+                ) from None
             self.commands.append(command)
             if command is CommandCode.START:
                 self._start()
@@ -144,15 +155,15 @@ class SimulatedDrive:
 
     def _start(self) -> None:
         if self.status().state is ExciterState.FAULT or self._latched_fault:
-            raise DriveRefusalError(RefusalReason.FAULT)
+            raise ExciterRefusalError(RefusalReason.FAULT)
         missing = [f for f in SWEEP_FIELDS if f not in self._params]
         if missing:
-            raise DriveRefusalError(RefusalReason.NOT_CONFIGURED, f"missing {missing}")
+            raise ExciterRefusalError(RefusalReason.NOT_CONFIGURED, f"missing {missing}")
         settings = self._settings()
         try:
             self.bench.start_sweep(settings)
         except RuntimeError as exc:  # the plate itself refuses (in fault)
-            raise DriveRefusalError(RefusalReason.FAULT, str(exc)) from exc
+            raise ExciterRefusalError(RefusalReason.FAULT, str(exc)) from exc
         self._watchdog_armed = True
         self._last_keepalive_s = self.clock.now_s()
 
@@ -162,4 +173,4 @@ class SimulatedDrive:
             p["law"] = LawCode(int(p["law"])).to_law()
             return SweepSettings(**p)
         except ValueError as exc:
-            raise DriveRefusalError(RefusalReason.INVALID_VALUE, str(exc)) from exc
+            raise ExciterRefusalError(RefusalReason.INVALID_VALUE, str(exc)) from exc

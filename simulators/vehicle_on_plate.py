@@ -1,5 +1,5 @@
 """A simulated bench with a vehicle on the plate, advancing in simulated time: what the simulated devices
-read and drive. Implements simulators.coupling.BenchPhysics.
+read and drive. Implements simulators.coupling.PlatePhysics.
 
 The plate follows the exciter's commands (simulators.plate.SimulatedPlate); the vehicle's equations of motion
 (estimator.dynamics) are integrated with Runge-Kutta in steps of at most `step_s` up to the clock's current
@@ -21,8 +21,8 @@ from collections import deque
 
 import numpy as np
 
-from drivers.exciter.sweep import SweepSettings
 from estimator.dynamics import rk4_step
+from estimator.sweep import SweepSettings
 from simulators.coupling import PlateStatus, SimulatedClock
 from simulators.plate import SimulatedPlate
 from simulators.vehicle_sim import SimulatedVehicle
@@ -34,7 +34,12 @@ rests too, so an idle simulated bench costs nothing."""
 """Half-width of the central difference that gives the plate velocity from its position law."""
 
 
-class VehicleBench:
+class VehicleOnPlate:
+    """The physics of a vehicle standing on the plate, on a simulated clock. Exists beside EmptyPlate because
+    the simulated devices of a whole bench (service.simulated_bench) need the car's motion, not only the
+    plate's; it is the bench's physics, not a bench (the devices and their configuration are
+    SimulatedBench's)."""
+
     def __init__(
         self,
         vehicle: SimulatedVehicle,

@@ -1,9 +1,14 @@
-"""What a plate exciter is told to do: the sine-sweep settings every back end (Modbus, CAN) understands."""
+"""What the plate is told to do: the sine-sweep settings every exciter back end (Modbus, CAN, CiA 402)
+understands, the simulators integrate and the estimator checks a recording against. Pure data with no
+dependency, so every layer may import it (it lived in drivers/exciter/ before, where simulators and
+daq had to reach into a driver for it)."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 from enum import StrEnum
+
+from estimator.errors import InvalidValueError
 
 
 class SweepLaw(StrEnum):
@@ -29,10 +34,10 @@ class SweepSettings:
 
     def __post_init__(self) -> None:
         if self.duration_s <= 0:
-            raise ValueError(f"sweep duration_s must be > 0, got {self.duration_s}")
+            raise InvalidValueError(f"sweep duration_s must be > 0, got {self.duration_s}")
         if self.amplitude_m < 0:
-            raise ValueError(f"sweep amplitude_m must be >= 0, got {self.amplitude_m}")
+            raise InvalidValueError(f"sweep amplitude_m must be >= 0, got {self.amplitude_m}")
         if self.start_Hz < 0 or self.stop_Hz < 0:
-            raise ValueError("sweep frequencies must be >= 0 Hz")
+            raise InvalidValueError("sweep frequencies must be >= 0 Hz")
         if self.law is SweepLaw.LOGARITHMIC and min(self.start_Hz, self.stop_Hz) <= 0:
-            raise ValueError("a logarithmic sweep needs start_Hz and stop_Hz > 0")
+            raise InvalidValueError("a logarithmic sweep needs start_Hz and stop_Hz > 0")
