@@ -120,8 +120,7 @@ class SimulatedVehicle:
 
     @property
     def unsprung_mass_kg(self) -> float:
-        wheels = 2 if self.known.is_axle else 1
-        return (self.known.mass_kg - self.sprung_mass_kg) / wheels
+        return self.known.unsprung_mass_kg(self.sprung_mass_kg)
 
     def corner(self, damper: Damper, sample_time_s: float) -> CornerPhysics:
         e = self.effects

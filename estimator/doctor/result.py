@@ -203,7 +203,7 @@ def model_json(model: FittedModel) -> dict[str, object]:
         ],
         "masses_kg": {
             "sprung": model.sprung_mass_kg,
-            "unsprung": (vehicle.mass_kg - model.sprung_mass_kg) / (2 if axle else 1),
+            "unsprung": vehicle.unsprung_mass_kg(model.sprung_mass_kg),
         },
         "stiffness_N_per_m": stiffness,
         "tyre_model": tyre.value,

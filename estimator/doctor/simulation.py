@@ -126,8 +126,7 @@ def simulate_models(
     rate = np.stack([d[1] for d in drives], axis=axis)
     state0 = np.stack([d[2] for d in drives], axis=1)
     sprung = np.array([m.sprung_mass_kg for m in models])
-    wheels = 2 if vehicle.is_axle else 1
-    unsprung = (vehicle.mass_kg - sprung) / wheels
+    unsprung = vehicle.unsprung_mass_kg(sprung)
     physics: QuarterCarPhysics | AxlePhysics
     if not vehicle.is_axle:
         physics = QuarterCarPhysics(_corner(models, 0, dt), sprung, unsprung)
