@@ -108,12 +108,14 @@ def main() -> None:
             str(cases[0].vehicle), "--mode", "immediate", "--generations", str(args.generations),
         ]  # fmt: skip
         times: dict[str, list[float]] = {name: [] for name in commands}
+        cpu: dict[str, list[float]] = {name: [] for name in commands}
         peaks: dict[str, list[float]] = {name: [] for name in commands}
         verdicts: dict[str, str] = {}
         for round_index in range(args.repeats):
             for name, command in commands.items():
-                seconds, peak_MiB, out = measured_process(command)
+                seconds, peak_MiB, cpu_s, out = measured_process(command)
                 times[name].append(seconds)
+                cpu[name].append(cpu_s)
                 peaks[name].append(peak_MiB)
                 if name != de_name:
                     verdicts[name] = json.loads(out)["conclusion"]
@@ -124,7 +126,11 @@ def main() -> None:
         median = statistics.median(values)
         ratio = "" if name == de_name else f"; DE / diagnose {de / median:.1f}x"
         runs = ", ".join(f"{v:.2f}" for v in values)
-        print(f"{name}: median {median:.2f} s ({runs}){ratio}; peak RSS {max(peaks[name]):.0f} MiB")
+        cpu_s = statistics.median(cpu[name])
+        print(
+            f"{name}: median {median:.2f} s ({runs}){ratio}; CPU {cpu_s:.2f} s (the doctor's fits run in "
+            f"threads); peak RSS {max(peaks[name]):.0f} MiB"
+        )
     for name, verdict in verdicts.items():
         print(f"{name}: {verdict[:120]}")
     print(f"targets: 12 s >= {TARGET_RATIO:.0f}x faster than the DE, 30 s at 500 Hz under {TARGET_LONG_S} s")
