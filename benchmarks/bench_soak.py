@@ -37,6 +37,7 @@ from daq.bench_config import load_bench_config
 from daq.storage.hdf5_recording import load_recording
 from daq.sweep.model import SweepRequest
 from daq.sweep.pacing import RealtimePacing
+from daq.sweep.plan import plan_sweep
 from daq.sweep.run import run_sweep
 from drivers.exciter.envelope import EnvelopeLimits
 from estimator.sweep import SweepSettings
@@ -115,7 +116,8 @@ def main() -> int:
             sim_cpu0 = process_cpu_s(simulator.pid)
             out = Path(folder) / "soak.h5"
             with CpuPerMinute() as per_minute:
-                outcome = asyncio.run(run_sweep(config, request, out, pacing=RealtimePacing()))
+                plan = plan_sweep(config, request)
+                outcome = asyncio.run(run_sweep(config, plan, out, pacing=RealtimePacing()))
             sim_cpu = process_cpu_s(simulator.pid) - sim_cpu0
             stored = load_recording(out)
         finally:

@@ -23,7 +23,8 @@ from pathlib import Path
 from daq.bench_config import BenchConfig
 from daq.sweep.model import SweepOutcome, SweepProgress, SweepRequest
 from daq.sweep.pacing import Pacing, RealtimePacing, SimulatedPacing
-from daq.sweep.run import SweepError, check_request, run_sweep
+from daq.sweep.plan import SweepPlan, plan_sweep
+from daq.sweep.run import SweepError, check_output, run_sweep
 from estimator.errors import ConflictError, one_line
 from service.simulated_bench import SimulatedBench, vehicle_preset
 
@@ -174,24 +175,25 @@ class BenchController:
 
     # ---- sweeps ---------------------------------------------------------------------------------------
 
-    def check(self, request: SweepRequest, out_path: Path) -> None:
-        """Everything checkable before starting (SweepError, one line), e.g. the envelope."""
-        check_request(self.config, request, out_path)
+    def plan(self, request: SweepRequest, *, vehicle_field: str = "vehicle") -> SweepPlan:
+        """The request checked against this bench, once (daq.sweep.plan; SweepError naming the field)."""
+        return plan_sweep(self.config, request, vehicle_field=vehicle_field)
 
-    def start_sweep(self, sweep_id: str, request: SweepRequest, out_path: Path, done: SweepDone) -> None:
-        """Start a sweep in its own thread; BenchBusyError if one runs, SweepError if it cannot begin."""
+    def start_sweep(self, sweep_id: str, plan: SweepPlan, out_path: Path, done: SweepDone) -> None:
+        """Start a planned sweep in its own thread; BenchBusyError if one runs, SweepError if it cannot
+        begin (the service stopping, the recording's place taken)."""
         with self._lock:
             if self._thread is not None:
                 raise BenchBusyError(f"bench {self.config.name!r} is running sweep {self._sweep_id}")
             if self._service_stopping:
                 raise SweepError("the service is stopping")
-            check_request(self.config, request, out_path)
+            check_output(out_path)
             self._abort.clear()
             self._emergency.clear()
             self._sweep_id, self._progress = sweep_id, None
             self._thread = threading.Thread(
                 target=self._run,
-                args=(sweep_id, request, out_path, done),
+                args=(sweep_id, plan, out_path, done),
                 name=f"sweep {sweep_id}",
                 daemon=True,
             )
@@ -204,14 +206,14 @@ class BenchController:
         with self._lock:
             self._progress = progress
 
-    def _run(self, sweep_id: str, request: SweepRequest, out_path: Path, done: SweepDone) -> None:
+    def _run(self, sweep_id: str, plan: SweepPlan, out_path: Path, done: SweepDone) -> None:
         outcome: SweepOutcome | None = None
         error = ""
         try:
             outcome = asyncio.run(
                 run_sweep(
                     self.config,
-                    request,
+                    plan,
                     out_path,
                     pacing=self._pacing(),
                     progress=self._on_progress,

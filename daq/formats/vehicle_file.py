@@ -20,6 +20,7 @@ required key is an error that names it. ϑ is referred to 1 ms whatever the reco
 from __future__ import annotations
 
 import tomllib
+from dataclasses import dataclass
 from pathlib import Path
 
 from daq.formats.atomic import atomic_write
@@ -93,11 +94,40 @@ def parse_vehicle(text: str, source: str = "vehicle file") -> VehicleParameters:
     return vehicle.with_relaxation_time(relaxation_time_s) if relaxation_time_s is not None else vehicle
 
 
-def read_vehicle(path: Path | str) -> VehicleParameters:
+@dataclass(frozen=True)
+class VehicleFile:
+    """A vehicle file as read once at the edge: its parameters, its text verbatim (a recording keeps it),
+    and the name it was read under (quoted in messages, stored with the recording)."""
+
+    parameters: VehicleParameters
+    text: str
+    source: str
+
+
+def parse_vehicle_file(text: str, source: str = "vehicle file") -> VehicleFile:
+    """The text as a VehicleFile (VehicleFileError naming the key, or "nested too deeply" for a TOML the
+    parser cannot descend)."""
+    try:
+        return VehicleFile(parse_vehicle(text, source), text, source)
+    except RecursionError:
+        raise VehicleFileError(f"{source}: not valid TOML (nested too deeply)") from None
+
+
+def load_vehicle_file(path: Path | str) -> VehicleFile:
+    """Read and parse the file at `path` (VehicleFileError when missing, not UTF-8 or invalid)."""
     path = Path(path)
     if not path.is_file():
         raise VehicleFileError(f"{path}: no such file")
-    return parse_vehicle(path.read_text(), str(path))
+    try:
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError:
+        raise VehicleFileError(f"{path}: not a text file (UTF-8 expected)") from None
+    return parse_vehicle_file(text, str(path))
+
+
+def read_vehicle(path: Path | str) -> VehicleParameters:
+    """The parameters of the vehicle file at `path` (VehicleFileError naming the problem)."""
+    return load_vehicle_file(path).parameters
 
 
 def format_vehicle(vehicle: VehicleParameters) -> str:

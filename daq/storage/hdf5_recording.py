@@ -52,6 +52,7 @@ import h5py
 import numpy as np
 
 from daq.formats.recording_csv import write_recording_csv
+from daq.formats.vehicle_file import VehicleFile
 from estimator.errors import UserError, one_line
 from estimator.recording import Recording
 
@@ -123,7 +124,8 @@ class RecordingWriter:
     sample_time_s: the grid period, s (0.001).
     metadata: root attributes (str/int/float), e.g. bench, sweep, device models and firmware, operator;
     start_time (ISO 8601, UTC) and software_version default to now and the installed shockbench version.
-    vehicle_file: stored as its path (vehicle_file) and its text (vehicle_text). rates_Hz: the sources whose
+    vehicle: the vehicle file as read at the edge, stored as its source name (vehicle_file) and its text
+    verbatim (vehicle_text); the file is not read again here. rates_Hz: the sources whose
     achieved rate close() will record (values here are the nominal rates, NaN if unknown), stored as
     attributes "rate_Hz.<source>". flush_interval_s: recorded time between flushes, s (at most this much
     is lost in a crash).
@@ -139,7 +141,7 @@ class RecordingWriter:
         sample_time_s: float,
         metadata: Mapping[str, MetadataValue] | None = None,
         *,
-        vehicle_file: Path | str | None = None,
+        vehicle: VehicleFile | None = None,
         rates_Hz: Mapping[str, float] | None = None,
         flush_interval_s: float = 1.0,
     ) -> None:
@@ -157,7 +159,7 @@ class RecordingWriter:
             raise ValueError("flush_interval_s must be positive")
         self.sample_time_s = float(sample_time_s)
         self.flush_interval_s = float(flush_interval_s)
-        attrs = self._metadata_attrs(metadata or {}, vehicle_file)
+        attrs = self._metadata_attrs(metadata or {}, vehicle)
         self._rate_sources = tuple(rates_Hz or {})
         self._n = 0
         self._flushed = 0
@@ -203,7 +205,7 @@ class RecordingWriter:
             raise
 
     def _metadata_attrs(
-        self, metadata: Mapping[str, MetadataValue], vehicle_file: Path | str | None
+        self, metadata: Mapping[str, MetadataValue], vehicle: VehicleFile | None
     ) -> dict[str, Any]:
         attrs: dict[str, Any] = {
             "format": FORMAT_NAME,
@@ -219,10 +221,9 @@ class RecordingWriter:
             if isinstance(value, bool) or not isinstance(value, str | int | float | np.integer | np.floating):
                 raise ValueError(f"metadata {key!r}: {type(value).__name__} is not str, int or float")
             attrs[key] = value
-        if vehicle_file is not None:
-            vehicle = Path(vehicle_file)
-            attrs["vehicle_file"] = str(vehicle)
-            attrs["vehicle_text"] = vehicle.read_text(encoding="utf-8")
+        if vehicle is not None:
+            attrs["vehicle_file"] = vehicle.source
+            attrs["vehicle_text"] = vehicle.text
         return attrs
 
     @property

@@ -7,14 +7,22 @@ from dataclasses import dataclass, field
 from enum import StrEnum
 from pathlib import Path
 
+from daq.formats.vehicle_file import VehicleFile
 from daq.sources.laser_source import SourceStatistics
-from estimator.errors import InvalidValueError
+from estimator.errors import InvalidValueError, UserError
 from estimator.sweep import SweepSettings
 
+SAMPLE_TIME_S = 0.001
+"""The recording's grid: 1 ms."""
 DEFAULT_SETTLE_S = 2.0
 """Recorded after the sweep's end, while the vehicle comes to rest."""
 DEFAULT_REST_S = 1.0
 """Sensors read at rest before the sweep: their mean is the channel's zero; the clocks are mapped."""
+
+
+class SweepError(UserError):
+    """The sweep could not begin; the plate did not move and nothing was written. One line; `field` names
+    the request's field to blame when there is one."""
 
 
 @dataclass(frozen=True)
@@ -22,11 +30,13 @@ class SweepRequest:
     """One sweep: the plate's settings, the vehicle on the bench, who runs it.
 
     settle_s: recorded after the sweep ends (s). rest_s: read at rest beforehand (s) to zero the channels
-    and map the amplifiers' clocks. vehicle_file: the vehicle TOML, copied into the recording.
+    and map the amplifiers' clocks. vehicle: the vehicle file as read at the edge (its text goes into the
+    recording verbatim); None records a sweep without one (a soak test of an empty plate).
+    A request is what was asked; daq.sweep.plan checks it against a bench once, and a sweep runs a plan.
     """
 
     sweep: SweepSettings = field(default_factory=SweepSettings)
-    vehicle_file: Path | None = None
+    vehicle: VehicleFile | None = None
     operator: str = ""
     settle_s: float = DEFAULT_SETTLE_S
     rest_s: float = DEFAULT_REST_S

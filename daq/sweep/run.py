@@ -1,11 +1,13 @@
 """One sweep, end to end: connect, zero the sensors at rest, start the plate's sweep, record the sweep and
 the settling, stop the plate, close the recording.
 
-    outcome = await run_sweep(config, SweepRequest(sweep, vehicle_file=...), Path("run.h5"), pacing=...)
+    plan = plan_sweep(config, SweepRequest(sweep, vehicle=load_vehicle_file("car.toml")))
+    outcome = await run_sweep(config, plan, Path("run.h5"), pacing=...)
 
-Before the plate moves, any problem (a channel without a laser, a vehicle of the wrong model, a sweep
-outside the envelope, a laser that does not answer or reads out of range at rest, an exciter in fault, an
-existing output file) raises `SweepError` with one line naming it, and nothing is written.
+The request was judged once, at the edge, by daq.sweep.plan (lasers, the vehicle's model, the envelope, the
+bandwidth); the driver checks the envelope again as the safety net. Before the plate moves, any problem
+found here (an existing output file, a laser that does not answer or reads out of range at rest, an exciter
+in fault) raises `SweepError` with one line naming it, and nothing is written.
 
 Once the plate has been told to start, nothing raises: every ending comes back as a `SweepOutcome`, and the
 recording is kept, closed as complete or as incomplete with the reason:
@@ -47,23 +49,28 @@ from pathlib import Path
 import numpy as np
 
 from daq.bench_config import BenchConfig
-from daq.formats.vehicle_file import read_vehicle
 from daq.recorder import Recorder, max_interval_s
 from daq.sources.laser_source import LaserSource
 from daq.storage.hdf5_recording import MetadataValue, RecordingWriter
-from daq.sweep.model import StopKind, SweepOutcome, SweepPhase, SweepProgress, SweepRequest
+from daq.sweep.model import (
+    SAMPLE_TIME_S,
+    StopKind,
+    SweepError,
+    SweepOutcome,
+    SweepPhase,
+    SweepProgress,
+    SweepRequest,
+)
 from daq.sweep.pacing import Pacing, RealtimePacing
+from daq.sweep.plan import SweepPlan
 from drivers.compowayf.amplifier import ZxlAmplifier
 from drivers.compowayf.transport import CompowayFPort
 from drivers.exciter.codes import ExciterState
 from drivers.exciter.errors import EnvelopeBreachError, ExciterDeviceExceptionError
 from drivers.exciter.interface import ExciterStatus, PlateExciter
-from estimator.errors import UserError, one_line
 
 log = logging.getLogger(__name__)
 
-SAMPLE_TIME_S = 0.001
-"""The recording's grid: 1 ms."""
 STEP_S = 0.05
 """The orchestration's cycle: recorder step, exciter status, silence check, progress (s)."""
 DEFAULT_SILENCE_TIMEOUT_S = 0.5
@@ -74,10 +81,6 @@ STOP_RECORD_LIMIT_S = 3.0
 REST_MIN_SAMPLES = 5
 REST_MAX_STD_M = 0.5e-3
 """A channel moving more than this (standard deviation at rest) means the vehicle is not at rest."""
-
-
-class SweepError(UserError):
-    """The sweep could not begin; the plate did not move and nothing was written. One line."""
 
 
 class SweepFaultError(Exception):
@@ -96,7 +99,7 @@ class SweepAbortedError(Exception):
 
 async def run_sweep(
     config: BenchConfig,
-    request: SweepRequest,
+    plan: SweepPlan,
     out_path: Path | str,
     *,
     pacing: Pacing | None = None,
@@ -106,12 +109,15 @@ async def run_sweep(
     silence_timeout_s: float = DEFAULT_SILENCE_TIMEOUT_S,
     abort_reason: Callable[[], str] | None = None,
 ) -> SweepOutcome:
-    """Run one sweep on the bench `config` describes and record it at out_path (HDF5). See the module.
+    """Run one planned sweep (daq.sweep.plan.plan_sweep on this `config`) on the bench `config` describes
+    and record it at out_path (HDF5). See the module.
 
     abort: set it to end the sweep with a controlled stop; emergency: set it for an emergency stop (both
     are looked at every orchestration cycle, STEP_S). abort_reason: what an abort is recorded as (default
     "aborted by the operator"; the service says "service stopped" when its own stop aborts the sweep)."""
-    run = _SweepRun(config, request, Path(out_path), pacing or RealtimePacing(), progress, abort)
+    if plan.bench != config.name:  # a programming error, not an input: plans are made for one bench
+        raise ValueError(f"a sweep planned for bench {plan.bench!r} cannot run on bench {config.name!r}")
+    run = _SweepRun(config, plan.request, Path(out_path), pacing or RealtimePacing(), progress, abort)
     if abort_reason is not None:
         run.abort_reason = abort_reason
     run.emergency = emergency or threading.Event()
@@ -119,25 +125,8 @@ async def run_sweep(
     return await run.run()
 
 
-def check_request(config: BenchConfig, request: SweepRequest, out_path: Path) -> None:
-    """Everything that can be checked before touching a device (SweepError, one line)."""
-    missing = [channel for channel in config.channels if config.laser_for(channel) is None]
-    if missing:
-        raise SweepError(f"bench {config.name!r} has no laser for channel(s) {', '.join(missing)}")
-    if request.vehicle_file is not None:
-        try:
-            vehicle = read_vehicle(request.vehicle_file)
-        except (OSError, ValueError) as exc:
-            raise SweepError(one_line(exc)) from None
-        if vehicle.model != config.model:
-            raise SweepError(
-                f"{request.vehicle_file}: a {vehicle.model} vehicle cannot be tested on the {config.model} "
-                f"bench {config.name!r}"
-            )
-    try:
-        config.safety_envelope().check(request.sweep)
-    except ValueError as exc:
-        raise SweepError(str(exc)) from None
+def check_output(out_path: Path) -> None:
+    """The recording's place (SweepError, one line): never over an existing file, in an existing folder."""
     if out_path.exists():
         raise SweepError(f"{out_path}: already exists; a recording is never overwritten")
     if not out_path.parent.is_dir():
@@ -177,7 +166,7 @@ class _SweepRun:
     # ---- the run ----------------------------------------------------------------------------------------
 
     async def run(self) -> SweepOutcome:
-        check_request(self.config, self.request, self.out_path)
+        check_output(self.out_path)
         cpu0, wall0 = time.process_time(), time.perf_counter()
         complete, reason, stop = False, "", StopKind.NOT_STARTED
         cancelled: BaseException | None = None
@@ -306,7 +295,7 @@ class _SweepRun:
             self.config.channels,
             SAMPLE_TIME_S,
             metadata,
-            vehicle_file=self.request.vehicle_file,
+            vehicle=self.request.vehicle,
             rates_Hz=nominal,
         )
 

@@ -26,8 +26,9 @@ from service.jobs.context import InputError
 
 log = logging.getLogger("shockbench.api")
 
-Refusal = tuple[str, str | None]
-"""(message, field) of an input the checks refuse (an InputError in the caller's process)."""
+Refusal = tuple[str, str | None, str | None]
+"""(message, field, recording error class) of an input the checks refuse: an InputError in the caller's
+process, or the HDF5 recording's own error class named (RecordingGapError ...) so its status code stays."""
 
 
 def inspect_inputs(
@@ -39,6 +40,7 @@ def inspect_inputs(
     vehicle_name: str,
 ) -> Refusal | None:
     """Runs in the helper process: read both files and run the kind's checks; None when the job can run."""
+    from daq.storage.hdf5_recording import RecordingFileError
     from estimator.errors import UserError, one_line
     from service.api.intake import check_files
     from service.jobs.kinds import kind_spec
@@ -53,8 +55,10 @@ def inspect_inputs(
             Path(vehicle_path),
             vehicle_name,
         )
+    except RecordingFileError as exc:
+        return one_line(exc), exc.field, type(exc).__name__
     except UserError as exc:  # InputError mostly; any bad input is refused alike
-        return one_line(exc), exc.field
+        return one_line(exc), exc.field, None
     return None
 
 
@@ -121,7 +125,11 @@ class InputChecker:
                 self._pool = None
             refusal = self._submit(*args).result()
         if refusal is not None:
-            message, field = refusal
+            message, field, recording_error = refusal
+            if recording_error is not None:
+                from daq.storage import hdf5_recording
+
+                raise getattr(hdf5_recording, recording_error)(message, field=field)
             raise InputError(field, message)
 
 

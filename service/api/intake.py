@@ -20,15 +20,14 @@ from typing import Any, BinaryIO
 
 from pydantic import BaseModel
 
-from daq.formats.recording_csv import read_recording_csv
-from daq.formats.vehicle_file import parse_vehicle
+from daq.formats.recording_file import read_recording_file
+from daq.formats.vehicle_file import VehicleFile, VehicleFileError, parse_vehicle_file
+from daq.storage.hdf5_recording import RecordingFileError
 from estimator.errors import one_line
 from estimator.recording import Recording
-from estimator.vehicle import VehicleParameters
 from service.access import Principal
 from service.api.settings import ServiceSettings
 from service.jobs.context import InputError
-from service.jobs.inputs import VEHICLE_FILE
 from service.jobs.kinds import JobKindSpec
 from service.store.jobs import JobFiles, JobRecord, JobStore
 
@@ -40,7 +39,9 @@ def _read_inputs(
 ) -> tuple[Recording, Any]:
     """The recording and the kind's companion file (the vehicle file, or a validation's model) as read."""
     try:
-        recording = read_recording_csv(recording_path)
+        recording = read_recording_file(recording_path)
+    except RecordingFileError as exc:  # HDF5 (a sweep's recording): its class kept (gaps: recording_gaps)
+        raise type(exc)(str(exc).replace(str(recording_path), recording_name), field="recording") from None
     except (ValueError, csv.Error) as exc:  # RecordingFormatError, bad text encoding, NUL bytes ...
         message = str(exc).replace(str(recording_path), recording_name) or "not a recording CSV"
         if isinstance(exc, UnicodeDecodeError):
@@ -51,23 +52,19 @@ def _read_inputs(
         text = vehicle_path.read_text(encoding="utf-8")
     except UnicodeDecodeError:
         raise InputError(field, f"{vehicle_name}: not a text file (UTF-8 expected)") from None
-    if spec.companion is VEHICLE_FILE:
-        return recording, parse_vehicle_field(text, vehicle_name, field)
     try:
         return recording, spec.companion.read(text, vehicle_name)
     except ValueError as exc:
         raise InputError(field, one_line(exc)) from None
 
 
-def parse_vehicle_field(text: str, source: str, field: str) -> VehicleParameters:
-    """The vehicle file's text as parameters, or InputError naming `field`: not TOML, wrong keys, or
-    nested so deep that the TOML parser runs out of stack (RecursionError, not a TOMLDecodeError)."""
+def parse_vehicle_field(text: str, source: str, field: str) -> VehicleFile:
+    """The vehicle file's text as read, or InputError naming `field`: not TOML, wrong keys, or nested so
+    deep that the TOML parser runs out of stack."""
     try:
-        return parse_vehicle(text, source=source)
-    except ValueError as exc:  # VehicleFileError
+        return parse_vehicle_file(text, source=source)
+    except VehicleFileError as exc:
         raise InputError(field, str(exc)) from None
-    except RecursionError:
-        raise InputError(field, f"{source}: not valid TOML (nested too deeply)") from None
 
 
 def check_files(

@@ -18,11 +18,9 @@ from pathlib import Path
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from daq.sweep.model import DEFAULT_SETTLE_S, StopKind, SweepOutcome, SweepRequest
-from daq.sweep.run import SAMPLE_TIME_S, SweepError
-from estimator.bandwidth import REFUSE_SAMPLES_PER_PERIOD
+from daq.sweep.model import DEFAULT_SETTLE_S, StopKind, SweepError, SweepOutcome, SweepRequest
+from daq.sweep.plan import SweepPlan
 from estimator.sweep import SweepLaw, SweepSettings
-from estimator.vehicle import VehicleParameters
 from service.api.intake import parse_vehicle_field
 from service.bench_control import BenchBusyError, BenchController, SweepDone
 from service.jobs.bounds import check_vehicle_bounds
@@ -77,44 +75,18 @@ class SweepIn(SweepSettingsIn):
     )
 
 
-def check_sweep(bench: BenchController, body: SweepIn) -> tuple[SweepSettings, VehicleParameters]:
-    """Everything checkable without the bench moving (a UserError naming the field): the settings, the
-    vehicle file and its model against the bench's, the safety envelope (checked here once, for a clear
-    message before anything is stored; the driver checks it again as the safety net)."""
+def plan_request(bench: BenchController, body: SweepIn, operator: str | None = None) -> SweepPlan:
+    """The request as one checked plan (a UserError naming the field): the settings, the vehicle file
+    (parsed here, once; its bounds), then daq.sweep.plan against the bench (its model, the safety
+    envelope, the bandwidth). The driver checks the envelope again as the safety net; nothing else does."""
     settings = body.sweep_settings()
     vehicle = parse_vehicle_field(body.vehicle_toml, "vehicle_toml", "vehicle_toml")
-    if vehicle.model != bench.config.model:
-        raise InputError(
-            "vehicle_toml",
-            f"vehicle_toml: a {vehicle.model} vehicle cannot be tested on the {bench.config.model} bench",
-        )
     try:
-        check_vehicle_bounds(vehicle, field="vehicle_toml")
+        check_vehicle_bounds(vehicle.parameters, field="vehicle_toml")
     except InputError as exc:
         raise InputError(exc.field, f"vehicle_toml: {exc}") from None
-    bench.config.safety_envelope().check(settings)  # EnvelopeViolationError names the field
-    check_recordable(bench, settings)
-    return settings, vehicle
-
-
-def check_recordable(bench: BenchController, settings: SweepSettings) -> None:
-    """InputError (stop_Hz) when the bench's recording could not carry the sweep, by the rule the job
-    on its recording applies (estimator.bandwidth): the grid (1 kHz), or a streaming amplifier's slower
-    sampling, must give REFUSE_SAMPLES_PER_PERIOD samples per period of the sweep's top frequency. Polled
-    amplifiers' rates are known only once recorded: the job on the recording judges them."""
-    periods = [SAMPLE_TIME_S] + [
-        laser.sample_period_s for laser in bench.config.lasers if laser.sample_period_s is not None
-    ]
-    rate_Hz = 1.0 / max(periods)
-    top_Hz = max(settings.start_Hz, settings.stop_Hz)
-    if top_Hz > 0 and rate_Hz / top_Hz < REFUSE_SAMPLES_PER_PERIOD:
-        field = "stop_Hz" if settings.stop_Hz >= settings.start_Hz else "start_Hz"
-        raise InputError(
-            field,
-            f"{field}: the bench records at {rate_Hz:g} Hz, too slow for a sweep up to {top_Hz:g} Hz: "
-            f"identification needs {REFUSE_SAMPLES_PER_PERIOD:g} samples per period, so at most "
-            f"{rate_Hz / REFUSE_SAMPLES_PER_PERIOD:g} Hz",
-        )
+    request = SweepRequest(settings, vehicle=vehicle, operator=operator or "", settle_s=body.settle_s)
+    return bench.plan(request, vehicle_field="vehicle_toml")
 
 
 def outcome_status(outcome: SweepOutcome) -> SweepStatus:
@@ -160,7 +132,7 @@ def launch_sweep(
 ) -> SweepRecord:
     """Check the request (a UserError naming the field; BenchBusyError when busy), store it, start it.
     Blocking: call it in a thread. `operator` is the key id recorded with the sweep."""
-    settings, _vehicle = check_sweep(bench, body)
+    plan = plan_request(bench, body, operator)
     if bench.busy:
         raise BenchBusyError(f"bench {bench.config.name!r} is running a sweep")
 
@@ -177,11 +149,9 @@ def launch_sweep(
 
     record = store.create(bench.config.name, body.as_submitted(), place, operator=operator)
     assert record.recording_path is not None and record.vehicle_file is not None
-    request = SweepRequest(
-        settings, vehicle_file=Path(record.vehicle_file), operator=operator, settle_s=body.settle_s
-    )
+    plan = plan.vehicle_stored_as(record.vehicle_file)
     try:
-        bench.start_sweep(str(record.id), request, Path(record.recording_path), sweep_done(store, on_end))
+        bench.start_sweep(str(record.id), plan, Path(record.recording_path), sweep_done(store, on_end))
     except (BenchBusyError, SweepError) as exc:  # the caller sees the error (409, 422); the row its end
         store.finish(record.id, SweepStatus.FAILED, complete=False, reason=str(exc))
         raise

@@ -1,14 +1,13 @@
-"""A sweep's recording as the input of a job: the HDF5 recording exported once to a recording CSV beside
-it (a finished recording never changes), then taken in like any recording on disk. Shared by
-`POST /sweeps/{id}/jobs` and the inspection-line scheduler. Blocking (files): call it in a thread.
+"""A sweep's recording as the input of a job, read where acquisition wrote it (the HDF5 file; the job's
+check and the worker read it with daq.formats.recording_file), and as a CSV for download (exported on
+request, the server's paths left out). Shared by `POST /sweeps/{id}/jobs`, `GET /sweeps/{id}/recording` and
+the inspection-line scheduler. Blocking (files): call it in a thread.
 
 Sweep logic, not HTTP: it raises domain errors (ConflictError, NotFoundError, RecordingFileError ...), which
 service.api.errors maps to statuses."""
 
 from __future__ import annotations
 
-import os
-import secrets
 from pathlib import Path as FilePath
 from pathlib import PurePath
 
@@ -38,8 +37,6 @@ def recording_path(record: SweepRecord) -> FilePath:
 PATH_METADATA = ("source", "vehicle_file")
 """Metadata lines of an exported CSV that hold a path: written with the file name only, since viewers
 download the CSV and the data directory's place on the server is none of theirs."""
-EXPORT_VERSION = 2
-"""Part of the CSV's name: a CSV exported before paths were stripped is exported again, not served."""
 
 
 def export(h5: FilePath, csv: FilePath) -> None:
@@ -54,20 +51,6 @@ def export(h5: FilePath, csv: FilePath) -> None:
         raise type(exc)(str(exc).replace(str(h5), h5.name)) from None
 
 
-def sweep_csv(record: SweepRecord) -> FilePath:
-    """The recording as CSV beside the HDF5 file (exported once; a finished recording never changes)."""
-    h5 = recording_path(record)
-    csv = h5.with_suffix(f".v{EXPORT_VERSION}.csv")
-    if not csv.is_file():
-        partial = csv.with_name(f".{csv.name}.{secrets.token_hex(4)}.part")
-        try:
-            export(h5, partial)
-            os.replace(partial, csv)
-        finally:
-            partial.unlink(missing_ok=True)
-    return csv
-
-
 def accept_sweep_job(
     settings: ServiceSettings,
     jobs: JobStore,
@@ -77,14 +60,14 @@ def accept_sweep_job(
 ) -> JobRecord:
     """A queued identification job on the sweep's recording (ConflictError until the sweep has ended, a
     UserError when its recording cannot be read as one). The caller enqueues it with the job manager."""
-    csv = sweep_csv(record)
+    h5 = recording_path(record)
     assert record.vehicle_file is not None
     return accept_recording(
         settings,
         jobs,
         KINDS[JobKind.IDENTIFY.value],
         options,
-        csv,
+        h5,
         FilePath(record.vehicle_file),
         submitted_by,
         sweep_id=record.id,

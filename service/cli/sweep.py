@@ -28,6 +28,7 @@ SETTLE_S, REST_S = 2.0, 1.0
 import the acquisition stack (tests/service/test_cli_lazy_imports.py checks they are the same)."""
 
 if TYPE_CHECKING:
+    from daq.formats.vehicle_file import VehicleFile
     from daq.sweep.model import SweepOutcome, SweepRequest
     from daq.sweep.pacing import Pacing
 
@@ -63,7 +64,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser.set_defaults(handler=run_sweep_command)
 
 
-def _request(args: argparse.Namespace) -> SweepRequest:
+def _request(args: argparse.Namespace, vehicle: VehicleFile) -> SweepRequest:
     from daq.sweep.model import SweepRequest
 
     sweep = SweepSettings(
@@ -74,7 +75,7 @@ def _request(args: argparse.Namespace) -> SweepRequest:
         law=SweepLaw(args.law),
     )
     return SweepRequest(
-        sweep, vehicle_file=args.vehicle, operator=args.operator, settle_s=args.settle_s, rest_s=args.rest_s
+        sweep, vehicle=vehicle, operator=args.operator, settle_s=args.settle_s, rest_s=args.rest_s
     )
 
 
@@ -82,14 +83,15 @@ def run_sweep_command(args: argparse.Namespace) -> int:
     import asyncio
 
     from daq.bench_config import load_bench_config
-    from daq.formats.vehicle_file import read_vehicle
+    from daq.formats.vehicle_file import load_vehicle_file
     from daq.sweep.pacing import RealtimePacing, SimulatedPacing
-    from daq.sweep.run import SweepError, run_sweep
+    from daq.sweep.plan import plan_sweep
+    from daq.sweep.run import run_sweep
     from service.cli.progress import SweepProgressBar
     from service.simulated_bench import SimulatedBench, vehicle_preset
 
-    request = _request(args)
-    vehicle = read_vehicle(args.vehicle)
+    vehicle = load_vehicle_file(args.vehicle)  # read once, here; the plan carries it to the recording
+    request = _request(args, vehicle)
     bar = None if args.quiet else SweepProgressBar()
     bench: SimulatedBench | None = None
     pacing: Pacing
@@ -97,15 +99,14 @@ def run_sweep_command(args: argparse.Namespace) -> int:
         config = load_bench_config(args.config)
         pacing = RealtimePacing()
     elif args.simulated:
-        bench = SimulatedBench(vehicle_preset(str(vehicle.model)), seed=args.seed)
+        bench = SimulatedBench(vehicle_preset(str(vehicle.parameters.model)), seed=args.seed)
         config = bench.start()
         pacing = SimulatedPacing(bench)
     else:
         raise CliError("give --config BENCH.toml, or --simulated to sweep a simulated bench")
     try:
-        outcome = asyncio.run(run_sweep(config, request, args.out, pacing=pacing, progress=bar))
-    except SweepError as exc:
-        raise CliError(str(exc)) from None
+        plan = plan_sweep(config, request, vehicle_field="--vehicle")
+        outcome = asyncio.run(run_sweep(config, plan, args.out, pacing=pacing, progress=bar))
     finally:
         if bar is not None:
             bar.close()

@@ -11,7 +11,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from daq.formats.vehicle_file import parse_vehicle
+from daq.formats.vehicle_file import parse_vehicle_file
 from estimator.errors import InvalidValueError
 from estimator.vehicle import VehicleParameters
 
@@ -31,10 +31,7 @@ class CompanionFile:
 
 
 def _read_vehicle(text: str, source: str) -> VehicleParameters:
-    try:
-        return parse_vehicle(text, source=source)
-    except RecursionError:
-        raise InvalidValueError(f"{source}: not valid TOML (nested too deeply)") from None
+    return parse_vehicle_file(text, source=source).parameters
 
 
 def _read_model(text: str, source: str) -> Any:

@@ -98,7 +98,7 @@ def run_job(
     unreadable (OSError) become JobFailed with their one-line message. Anything else is a bug: its traceback
     goes to the worker's stderr (the service log) under a fresh error id, and the reason names that id
     (never the traceback)."""
-    from daq.formats.recording_csv import read_recording_csv
+    from daq.formats.recording_file import read_recording_file
     from service.jobs.context import JobContext, ProgressReporter
     from service.jobs.kinds import kind_spec
 
@@ -109,7 +109,7 @@ def run_job(
         spec = kind_spec(job.kind)
         module, _, function = spec.runner.partition(":")
         runner = getattr(importlib.import_module(module), function)
-        recording = read_recording_csv(job.recording_path)
+        recording = read_recording_file(job.recording_path)  # a sweep's HDF5 where acquisition wrote it
         companion_path = Path(job.vehicle_path)
         companion = spec.companion.read(companion_path.read_text(encoding="utf-8"), companion_path.name)
         vehicle = spec.companion.vehicle_of(companion)

@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from daq.formats.recording_csv import read_recording_csv
+from daq.formats.vehicle_file import load_vehicle_file
 from daq.storage.hdf5_recording import (
     FLAG_GAP,
     NOT_CLOSED_REASON,
@@ -77,7 +78,7 @@ def test_axle_channels_round_trip(tmp_path: Path) -> None:
 
 def test_metadata_round_trip(tmp_path: Path) -> None:
     vehicle = tmp_path / "car.toml"
-    vehicle.write_text('[vehicle]\nname = "test car"\nmass_kg = 350.0\n', encoding="utf-8")
+    vehicle.write_text('[vehicle]\nmodel = "quarter-car"  # test car\nmass_kg = 350.0\n', encoding="utf-8")
     path = tmp_path / "rec.h5"
     metadata = {
         "bench": "bench-2",
@@ -96,7 +97,7 @@ def test_metadata_round_trip(tmp_path: Path) -> None:
         QUARTER_CAR_CHANNELS,
         DT,
         metadata,
-        vehicle_file=vehicle,
+        vehicle=load_vehicle_file(vehicle),
         rates_Hz={"laser": 1000.0, "exciter": 500},
     )
     write_blocks(writer, signals(10), block=10)
@@ -253,11 +254,11 @@ def test_leaving_the_with_block_by_an_exception_marks_the_file_incomplete(tmp_pa
 
 def test_export_csv_equals_the_data(tmp_path: Path) -> None:
     vehicle = tmp_path / "car.toml"
-    vehicle.write_text("[vehicle]\nmass_kg = 350.0\n", encoding="utf-8")
+    vehicle.write_text('[vehicle]\nmodel = "quarter-car"\nmass_kg = 350.0\n', encoding="utf-8")
     path = tmp_path / "rec.h5"
     data = signals(1200)
     with RecordingWriter(
-        path, QUARTER_CAR_CHANNELS, DT, {"bench": "b1\nsecond line"}, vehicle_file=vehicle
+        path, QUARTER_CAR_CHANNELS, DT, {"bench": "b1\nsecond line"}, vehicle=load_vehicle_file(vehicle)
     ) as w:
         t = write_blocks(w, data, block=500)
         w.close(True)

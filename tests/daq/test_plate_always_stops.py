@@ -27,6 +27,7 @@ from daq.bench_config import BenchConfig
 from daq.storage.hdf5_recording import load_recording
 from daq.sweep.model import StopKind, SweepOutcome, SweepProgress, SweepRequest
 from daq.sweep.pacing import DEFAULT_POLL_INTERVAL_S, SimulatedPacing
+from daq.sweep.plan import plan_sweep
 from daq.sweep.run import DEFAULT_SILENCE_TIMEOUT_S, STEP_S, run_sweep
 from drivers.exciter.codes import ExciterState
 from drivers.exciter.interface import DEFAULT_KEEPALIVE_INTERVAL_S, ExciterStatus
@@ -295,9 +296,10 @@ def run_with(fault: Fault, out: Path) -> tuple[SweepOutcome, WatchedPacing, floa
                 await link.start()
             rig = Rig(bench, pacing, link)
             try:
+                config = configure(bench.config, fault, link)
                 outcome = await run_sweep(
-                    configure(bench.config, fault, link),
-                    SweepRequest(SWEEP),
+                    config,
+                    plan_sweep(config, SweepRequest(SWEEP)),
                     out,
                     pacing=pacing,
                     progress=at_fault_time(pacing, lambda: fault.inject(rig)),
@@ -354,7 +356,13 @@ def test_a_sweep_the_drive_runs_past_its_end_is_stopped_by_the_overrun_check(tmp
                 pacing.inject(lambda: None)
 
         outcome = asyncio.run(
-            run_sweep(bench.config, SweepRequest(SWEEP, settle_s=2.0), out, pacing=pacing, progress=at_end)
+            run_sweep(
+                bench.config,
+                plan_sweep(bench.config, SweepRequest(SWEEP, settle_s=2.0)),
+                out,
+                pacing=pacing,
+                progress=at_end,
+            )
         )
         pacing.run_out()
     assert outcome.reason.startswith("envelope breach: drive reported running_s=")

@@ -14,10 +14,11 @@ import numpy as np
 import pytest
 
 from daq.formats.recording_csv import read_recording_csv
-from daq.formats.vehicle_file import write_vehicle
+from daq.formats.vehicle_file import load_vehicle_file, write_vehicle
 from daq.storage.hdf5_recording import export_csv, load_recording
 from daq.sweep.model import StopKind, SweepOutcome, SweepProgress, SweepRequest
 from daq.sweep.pacing import SimulatedPacing
+from daq.sweep.plan import plan_sweep
 from daq.sweep.run import SweepError, run_sweep
 from drivers.exciter.codes import CommandCode
 from estimator.bandwidth import InsufficientBandwidthError, check_bandwidth
@@ -52,7 +53,14 @@ def sweep(
     abort: threading.Event | None = None,
 ) -> SweepOutcome:
     return asyncio.run(
-        run_sweep(bench.config, request, out, pacing=SimulatedPacing(bench), progress=when, abort=abort)
+        run_sweep(
+            bench.config,
+            plan_sweep(bench.config, request),
+            out,
+            pacing=SimulatedPacing(bench),
+            progress=when,
+            abort=abort,
+        )
     )
 
 
@@ -72,7 +80,7 @@ def test_a_complete_sweep_records_every_channel_without_a_gap(
     bench: SimulatedBench, vehicle_file: Path, tmp_path: Path
 ) -> None:
     out = tmp_path / "run.h5"
-    request = SweepRequest(SHORT, vehicle_file=vehicle_file, operator="ada", settle_s=0.5)
+    request = SweepRequest(SHORT, vehicle=load_vehicle_file(vehicle_file), operator="ada", settle_s=0.5)
     outcome = sweep(bench, out, request)
     assert outcome.complete and outcome.stop is StopKind.END_OF_SWEEP
     assert outcome.gap_rows == 0 and outcome.overrun_samples == 0
@@ -194,13 +202,13 @@ def test_problems_found_before_the_start_raise_and_nothing_moves_or_is_written(
         )
     elif change == "axle_vehicle":
         write_vehicle(tmp_path / "axle.toml", default_axle().known)
-        request = SweepRequest(SHORT, vehicle_file=tmp_path / "axle.toml")
+        request = SweepRequest(SHORT, vehicle=load_vehicle_file(tmp_path / "axle.toml"))
     elif change == "too_big":
         request = SweepRequest(dataclasses.replace(SHORT, amplitude_m=0.01))
     else:
         out.write_bytes(b"precious")
     with pytest.raises(SweepError, match=message.replace("(", r"\(").replace(")", r"\)")):
-        asyncio.run(run_sweep(config, request, out, pacing=SimulatedPacing(bench)))
+        asyncio.run(run_sweep(config, plan_sweep(config, request), out, pacing=SimulatedPacing(bench)))
     assert bench.exciter.commands == []
     assert (out.read_bytes() == b"precious") if change == "existing_file" else not out.exists()
 
@@ -229,7 +237,7 @@ def test_the_operators_emergency_stop_halts_the_plate_at_once(bench: SimulatedBe
     outcome = asyncio.run(
         run_sweep(
             bench.config,
-            SweepRequest(SHORT),
+            plan_sweep(bench.config, SweepRequest(SHORT)),
             out,
             pacing=SimulatedPacing(bench),
             progress=at(0.5, emergency.set),

@@ -15,8 +15,10 @@ import pytest
 from live_server import LiveServer, wait_until
 from live_server import wait_for_status as wait_for
 
+from daq.formats import vehicle_file
 from daq.formats.vehicle_file import format_vehicle
 from estimator.damper import PiecewiseLinearCurve
+from estimator.vehicle import VehicleParameters
 from service.access import KeyRing, Role
 from service.api import ServiceSettings, create_app
 from service.store.database import Database
@@ -104,7 +106,17 @@ def test_envelope_and_vehicle_file_are_checked_before_anything_moves(client: htt
     assert client.get("/api/v1/bench").json()["busy"] is False
 
 
-def test_short_sweep_completes_and_its_recording_downloads(client: httpx.Client) -> None:
+def test_short_sweep_completes_and_its_recording_downloads(
+    client: httpx.Client, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    parsed: list[str] = []  # the vehicle file is parsed once, at the edge; the plan carries it down
+    real_parse = vehicle_file.parse_vehicle
+
+    def counting_parse(text: str, source: str = "vehicle file") -> VehicleParameters:
+        parsed.append(source)
+        return real_parse(text, source)
+
+    monkeypatch.setattr(vehicle_file, "parse_vehicle", counting_parse)
     response = client.post("/api/v1/sweeps", json=SHORT)
     assert response.status_code == 201, response.text
     sweep = response.json()
@@ -116,6 +128,7 @@ def test_short_sweep_completes_and_its_recording_downloads(client: httpx.Client)
     done = wait_for(client, sweep["links"]["self"], "complete", "failed", "aborted")
     assert done["status"] == "complete" and done["complete"] is True, done
     assert done["reason"] is None and done["finished_at"] is not None
+    assert parsed == ["vehicle_toml"]
 
     csv = client.get(done["links"]["recording_csv"])
     assert csv.status_code == 200, csv.text
@@ -164,7 +177,7 @@ def test_emergency_stop_ends_the_running_sweep(client: httpx.Client) -> None:
     assert idle.json()["done"] == "emergency stop sent to the drive", idle.text
 
 
-def test_sweep_then_identification_job_finds_the_true_curve(client: httpx.Client) -> None:
+def test_sweep_then_identification_job_finds_the_true_curve(server: LiveServer, client: httpx.Client) -> None:
     body = {"start_Hz": 0, "stop_Hz": 20, "amplitude_m": 0.004, "duration_s": 12, "settle_s": 1}
     response = client.post("/api/v1/sweeps", json={**body, "vehicle_toml": VEHICLE_TOML})
     assert response.status_code == 201, response.text
@@ -178,6 +191,10 @@ def test_sweep_then_identification_job_finds_the_true_curve(client: httpx.Client
     assert job["input_source"] == "sweep" and job["sweep_id"] == sweep["id"]
     done = wait_for(client, response.headers["location"], "succeeded", "failed", "cancelled", timeout_s=300)
     assert done["status"] == "succeeded", done["error"]
+    # the job read the recording where acquisition wrote it: the sweep's HDF5 file, no CSV copy beside it
+    record = server.app.state.services.jobs.get(job["id"])
+    assert record is not None and record.recording_path.endswith(f"{sweep['id']}.h5")
+    assert list(Path(record.recording_path).parent.glob("*.csv")) == []
 
     curve = done["result"]["curves"][0]
     identified = PiecewiseLinearCurve(np.array(curve["velocity_m_s"]), np.array(curve["force_N"]))

@@ -265,12 +265,12 @@ def test_worker_bad_input_fails_the_job_with_its_one_line(tmp_path: Path) -> Non
 def test_worker_bug_fails_the_job_naming_an_error_id_its_log_holds(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    import daq.formats.recording_csv
+    import daq.formats.recording_file
 
     def broken(_path: object) -> None:
         raise TypeError("a programming error")
 
-    monkeypatch.setattr(daq.formats.recording_csv, "read_recording_csv", broken)
+    monkeypatch.setattr(daq.formats.recording_file, "read_recording_file", broken)
     failed = run_in_worker(tmp_path, "unused")
     match = re.search(r"error id ([0-9a-f]{12})", failed.reason)
     assert match is not None and "internal error in the worker" in failed.reason, failed.reason

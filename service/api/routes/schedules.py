@@ -22,7 +22,7 @@ from service.api.errors import ApiError, responses
 from service.api.routes.bench import require_bench
 from service.api.schemas import API_PREFIX, IdentifyOptionsOut, PageLimit, PageOffset, SweepSettingsOut
 from service.api.settings import ServiceSettings
-from service.api.sweep_launch import SweepIn, check_sweep
+from service.api.sweep_launch import SweepIn, plan_request
 from service.bench_control import BenchController
 from service.jobs.identify_job import IdentifyJobOptions
 from service.store.models import ScheduleStatus
@@ -123,11 +123,13 @@ def _create(
     bench: BenchController, store: ScheduleStore, settings: ServiceSettings, body: ScheduleIn, key_id: str
 ) -> ScheduleRecord:
     """Check as a sweep is checked (422 naming the field), then store the test. Blocking."""
-    _settings, vehicle = check_sweep(bench, body)
-    if body.job.model is not None and body.job.model is not vehicle.model:
+    vehicle = plan_request(bench, body).request.vehicle
+    assert vehicle is not None  # a scheduled test's request always names its vehicle
+    model = vehicle.parameters.model
+    if body.job.model is not None and body.job.model is not model:
         raise ApiError(
             422,
-            f"job.model is {body.job.model.value} but the vehicle file says {vehicle.model.value}",
+            f"job.model is {body.job.model.value} but the vehicle file says {model.value}",
             field="job.model",
         )
     folder = settings.data_dir / "schedules"
