@@ -15,6 +15,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import multiprocessing
+import multiprocessing.connection
 import os
 import threading
 from concurrent.futures import Future, ProcessPoolExecutor
@@ -66,9 +67,23 @@ CHECKER_NICE = 5
 """Added to the helper's nice value, as to the worker's: the event loop keeps priority over parsing."""
 
 
-def _lower_priority() -> None:
+def _start_helper() -> None:
+    """The helper process's initializer: a lower priority, and an end with the service. A service killed
+    outright (SIGKILL, out of memory) cannot shut its pool down; without this the helper would stay behind
+    as an orphan holding its memory, one more at every restart."""
     with contextlib.suppress(OSError):
         os.nice(CHECKER_NICE)
+    parent = multiprocessing.parent_process()
+    if parent is not None:
+        threading.Thread(
+            target=_exit_with, args=(parent.sentinel,), name="service-watch", daemon=True
+        ).start()
+
+
+def _exit_with(parent_sentinel: int) -> None:
+    """Wait until the service process has ended, then end this one (the sentinel turns ready then)."""
+    multiprocessing.connection.wait([parent_sentinel])
+    os._exit(0)
 
 
 def _warm_up() -> None:
@@ -100,7 +115,7 @@ class InputChecker:
     def _ensure_pool(self) -> ProcessPoolExecutor:
         if self._pool is None:
             self._pool = ProcessPoolExecutor(
-                max_workers=1, mp_context=multiprocessing.get_context("spawn"), initializer=_lower_priority
+                max_workers=1, mp_context=multiprocessing.get_context("spawn"), initializer=_start_helper
             )
         return self._pool
 
