@@ -20,9 +20,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.linalg
 
 from estimator.equations import TYRE_DAMPING, LinearResiduals, maxwell_regressor
+from estimator.linear_algebra import cholesky_factor, cholesky_solve
 from estimator.vehicle import coefficient_from_relaxation_time, relaxation_time_from_coefficient
 
 LOG_TAU_STEP = 1e-3
@@ -119,7 +119,7 @@ class _Problem:
             if i != j:
                 hessian[j, i] += value
         try:
-            return -scipy.linalg.cho_solve(scipy.linalg.cho_factor(hessian), gradient)
+            return -cholesky_solve(cholesky_factor(hessian), gradient)
         except np.linalg.LinAlgError:
             return -np.linalg.lstsq(hessian, gradient, rcond=None)[0]
 

@@ -34,10 +34,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.linalg
-from scipy.optimize import minimize_scalar
 
 from estimator.equations import TYRE_DAMPING, LinearResiduals, maxwell_regressor
+from estimator.linear_algebra import cholesky_factor, cholesky_solve
 from estimator.newton_refit import newton_refit
 from estimator.solvers.exact import ExactSolution, solve_exact
 from estimator.vehicle import coefficient_from_relaxation_time, relaxation_time_from_coefficient
@@ -111,9 +110,9 @@ class _WeightedStep:
         self.weighted_fixed = problem.fixed * self.root_w[:, None]
         self.weighted_offset = self.root_w * problem.offset
         gram = self.weighted_fixed.T @ self.weighted_fixed
-        self.factor = scipy.linalg.cho_factor(gram, check_finite=False)
+        self.factor = cholesky_factor(gram)
         self.cross = self.weighted_fixed.T @ self.weighted_offset
-        self.fixed_solution = scipy.linalg.cho_solve(self.factor, self.cross, check_finite=False)
+        self.fixed_solution = cholesky_solve(self.factor, self.cross)
         offset_square = float(self.weighted_offset @ self.weighted_offset)
         self.base_value = offset_square - float(self.cross @ self.fixed_solution)
         self.solutions: dict[float, np.ndarray] = {}
@@ -125,7 +124,7 @@ class _WeightedStep:
         norm = float(np.linalg.norm(wc)) or 1.0
         wc /= norm
         coupling = self.weighted_fixed.T @ wc
-        through = scipy.linalg.cho_solve(self.factor, coupling, check_finite=False)
+        through = cholesky_solve(self.factor, coupling)
         schur = float(wc @ wc - coupling @ through)
         projected = float(wc @ self.weighted_offset - coupling @ self.fixed_solution)
         tyre = -projected / schur if schur > 0 else 0.0
@@ -171,6 +170,8 @@ def fit_relaxation_time(
         before = log_tau
         if iterations == 1:  # the whole range once: Brent, the current τ kept if it is better
             current = step(log_tau)
+            from scipy.optimize import minimize_scalar  # here: identify with ϑ known never imports it
+
             found = minimize_scalar(step, bounds=bounds, method="bounded", options={"xatol": FIRST_TOLERANCE})
             log_tau = float(found.x) if found.fun < current else log_tau
         else:

@@ -30,6 +30,9 @@ def read_recording_csv(path: Path | str) -> Recording:
     path = Path(path)
     if not path.is_file():
         raise RecordingFormatError(f"{path}: no such file")
+    fast = _read_well_formed(path)
+    if fast is not None:
+        return fast
     metadata: dict[str, str] = {}
     rows: list[list[float]] = []
     header: list[str] | None = None
@@ -71,6 +74,48 @@ def read_recording_csv(path: Path | str) -> Recording:
     _check_uniform(path, t, first_data_line=_first_data_line(path))
     channels = {name: data[:, i] for i, name in enumerate(header) if name != "t"}
     return Recording(t, channels, metadata)
+
+
+def _read_well_formed(path: Path) -> Recording | None:
+    """The recording, parsed by numpy's C reader, when the file is well formed; None otherwise, and the
+    line-by-line reader above then finds and names the first bad line. Why: that reader spends some 0.1 s
+    per 10 000 rows in Python, a tenth of a whole `shockbench identify`."""
+    try:
+        lines = path.read_text().splitlines()
+    except (OSError, UnicodeDecodeError):
+        return None
+    metadata: dict[str, str] = {}
+    header: list[str] | None = None
+    first_data_line = 0
+    data_lines: list[str] = []
+    for line_no, raw in enumerate(lines, start=1):
+        line = raw.strip()
+        if not line:
+            continue
+        if line.startswith("#"):
+            if header is None and ":" in line:
+                key, _, value = line[1:].partition(":")
+                metadata[key.strip()] = value.strip()
+            continue
+        if header is None:
+            header = [c.strip() for c in next(csv.reader([line]))]
+            continue
+        if not first_data_line:
+            first_data_line = line_no
+        data_lines.append(line)
+    if header is None or len(data_lines) < 3:
+        return None
+    try:
+        _check_header(path, header, 0)
+        data = np.loadtxt(data_lines, delimiter=",", comments=None, dtype=float, ndmin=2)
+    except (RecordingFormatError, ValueError):
+        return None
+    if data.shape != (len(data_lines), len(header)) or not np.all(np.isfinite(data)):
+        return None
+    t = data[:, header.index("t")]
+    _check_uniform(path, t, first_data_line=first_data_line)
+    channels = {name: np.ascontiguousarray(data[:, i]) for i, name in enumerate(header) if name != "t"}
+    return Recording(np.ascontiguousarray(t), channels, metadata)
 
 
 def _check_header(path: Path, header: list[str], line_no: int) -> None:

@@ -435,7 +435,13 @@ def _base_system(
     """The paper's system (no effect columns) on the recording as `corrections` correct it, with the
     friction grids or not; built once per Reference and reused (the low-pass filters and the damper basis
     are most of a fit's time otherwise). The key identifies it for the effect columns' cache."""
-    key = (tuple(sorted(corrections.delay_s.items())), tuple(sorted(corrections.offset_m.items())), friction)
+    # a zero delay or offset leaves the channel as it is (ChannelCorrections.correct), so it is left out of
+    # the key: the candidates' first trial at zero then reuses the uncorrected build (bit for bit the same)
+    key = (
+        tuple(sorted((name, value) for name, value in corrections.delay_s.items() if value)),
+        tuple(sorted((name, value) for name, value in corrections.offset_m.items() if value)),
+        friction,
+    )
 
     def make() -> tuple[LinearResiduals, EquationSignals]:
         recording = corrections.apply(reference.recording)

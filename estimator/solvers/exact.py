@@ -15,9 +15,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.linalg
 
 from estimator.equations import LinearResiduals
+from estimator.linear_algebra import cholesky_factor, cholesky_solve
 
 
 @dataclass(frozen=True)
@@ -62,7 +62,7 @@ def _weighted_least_squares(a: np.ndarray, c: np.ndarray, weights: np.ndarray) -
     weighted = a * root[:, None]  # the normal matrix as BᵀB of one array: numpy uses the symmetric product
     try:
         normal = weighted.T @ weighted
-        return scipy.linalg.cho_solve(scipy.linalg.cho_factor(normal), -(weighted.T @ (c * root)))
+        return cholesky_solve(cholesky_factor(normal), -(weighted.T @ (c * root)))
     except np.linalg.LinAlgError:
         return np.linalg.lstsq(weighted, -c * root, rcond=None)[0]
 
