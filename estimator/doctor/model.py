@@ -467,8 +467,9 @@ def _build(
     corrections: ChannelCorrections,
     airborne: list[np.ndarray] | None,
     tyre: tuple[float, float, float],
+    friction_grid: bool = False,
 ) -> tuple[LinearResiduals, EquationSignals, list[np.ndarray]]:
-    friction = structure.has(EffectName.COULOMB_FRICTION)
+    friction = friction_grid or structure.has(EffectName.COULOMB_FRICTION)
     key, base, signals = _base_system(reference, corrections, friction)
     corners = len(signals.corners)
     liftoff = structure.has(EffectName.TYRE_LIFTOFF)
@@ -531,10 +532,15 @@ def fit(
     rows: np.ndarray | None = None,
     warm: FittedModel | None = None,
     iterations: int = GAUSS_NEWTON_ITERATIONS,
+    friction_grid: bool = False,
 ) -> FittedModel:
     """Identify `structure` on the reference recording, using only the selected samples where `rows` is
     True (all when None). warm: a fitted model of a similar structure to start from (its unknowns and
-    channel parameters; new ones start at zero). iterations: Gauss-Newton steps at most (channel effects)."""
+    channel parameters; new ones start at zero). iterations: Gauss-Newton steps at most (channel effects).
+    friction_grid: the damper curve on the grid and under the constraint a model with coulomb_friction has
+    (friction_grids, friction_constraints) even without the friction term: the base a friction candidate is
+    compared with, so that the comparison measures the friction term and not the coarser curve near zero."""
+    friction = friction_grid or structure.has(EffectName.COULOMB_FRICTION)
     channel_effects = structure.channel_effects
     kinds = [CATALOG[e.name].channel_kind for e in channel_effects]
     start = warm.channel_values if warm is not None else {}
@@ -545,9 +551,9 @@ def fit(
     previous = warm
     for iteration in range(iterations + 1):
         corrections = _corrections(channel_effects, values)
-        system, signals, airborne = _build(reference, structure, corrections, None, tyre)
+        system, signals, airborne = _build(reference, structure, corrections, None, tyre, friction)
         used = restrict(system, rows) if rows is not None else system
-        constraints = friction_constraints(used) if structure.has(EffectName.COULOMB_FRICTION) else None
+        constraints = friction_constraints(used) if friction else None
         if constraints is None:
             constraints = np.zeros((0, used.n_params))
         theta, objective = _solve(used, constraints, _initial(used, previous))
@@ -565,7 +571,7 @@ def fit(
             step = np.zeros_like(values)
             step[j] = GAUSS_NEWTON_STEP[str(kind)]
             moved, _, _ = _build(
-                reference, structure, _corrections(channel_effects, values + step), airborne, tyre
+                reference, structure, _corrections(channel_effects, values + step), airborne, tyre, friction
             )
             moved_used = restrict(moved, rows) if rows is not None else moved
             jacobian[f"step of {effect.label}"] = (moved_used.residuals(theta) - base_residual) / step[j]
