@@ -37,9 +37,13 @@ def envelope_checks(tree: ast.Module) -> list[int]:
     `self.envelope.check(s)`, `envelope.check(s)`."""
     lines = []
     for node in ast.walk(tree):
-        if isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr == "check":
-            if "envelope" in ast.unparse(node.func.value).lower():
-                lines.append(node.lineno)
+        if (
+            isinstance(node, ast.Call)
+            and isinstance(node.func, ast.Attribute)
+            and node.func.attr == "check"
+            and "envelope" in ast.unparse(node.func.value).lower()
+        ):
+            lines.append(node.lineno)
     return lines
 
 
@@ -62,11 +66,12 @@ def test_the_envelope_is_checked_at_the_edge_and_in_the_driver_only() -> None:
 
 
 def test_the_sweep_never_reads_a_vehicle_file_again() -> None:
-    found = {
-        path: lines
+    acquisition = {
+        path: tree
         for path, tree in product_modules().items()
-        if path.startswith("daq/") and path != "daq/formats/vehicle_file.py" and (lines := vehicle_reads(tree))
+        if path.startswith("daq/") and path != "daq/formats/vehicle_file.py"
     }
+    found = {path: lines for path, tree in acquisition.items() if (lines := vehicle_reads(tree))}
     assert found == {}
 
 
