@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import csv
 import math
+from collections.abc import Iterable
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -26,6 +28,37 @@ class RecordingFormatError(UserError, ValueError):
     """The file is not a valid recording CSV; the message names the line."""
 
 
+@dataclass
+class _Layout:
+    """A recording CSV's lines sorted out: metadata ('# key: value' before the header), the header's cells
+    and line, and the data rows with their 1-based line numbers (blank and '#' lines skipped)."""
+
+    metadata: dict[str, str] = field(default_factory=dict)
+    header: list[str] | None = None
+    header_line: int = 0
+    rows: list[tuple[int, str]] = field(default_factory=list)
+
+
+def _layout(lines: Iterable[str]) -> _Layout:
+    """One pass over the lines, shared by both readers below."""
+    layout = _Layout()
+    for line_no, raw in enumerate(lines, start=1):
+        line = raw.strip()
+        if not line:
+            continue
+        if line.startswith("#"):
+            if layout.header is None and ":" in line:
+                key, _, value = line[1:].partition(":")
+                layout.metadata[key.strip()] = value.strip()
+            continue
+        if layout.header is None:
+            layout.header = [c.strip() for c in next(csv.reader([line]))]
+            layout.header_line = line_no
+            continue
+        layout.rows.append((line_no, line))
+    return layout
+
+
 def read_recording_csv(path: Path | str) -> Recording:
     path = Path(path)
     if not path.is_file():
@@ -33,47 +66,32 @@ def read_recording_csv(path: Path | str) -> Recording:
     fast = _read_well_formed(path)
     if fast is not None:
         return fast
-    metadata: dict[str, str] = {}
-    rows: list[list[float]] = []
-    header: list[str] | None = None
     with path.open(newline="") as handle:
-        for line_no, raw in enumerate(handle, start=1):
-            line = raw.strip()
-            if not line:
-                continue
-            if line.startswith("#"):
-                if header is None and ":" in line:
-                    key, _, value = line[1:].partition(":")
-                    metadata[key.strip()] = value.strip()
-                continue
-            cells = next(csv.reader([line]))
-            if header is None:
-                header = [c.strip() for c in cells]
-                _check_header(path, header, line_no)
-                continue
-            if len(cells) != len(header):
-                raise RecordingFormatError(
-                    f"{path}:{line_no}: expected {len(header)} values, found {len(cells)}"
-                )
-            try:
-                values = [float(c) for c in cells]
-            except ValueError:
-                raise RecordingFormatError(f"{path}:{line_no}: not a number in {line!r}") from None
-            bad = [header[i] for i, v in enumerate(values) if not math.isfinite(v)]
-            if bad:
-                raise RecordingFormatError(
-                    f"{path}:{line_no}: missing or non-finite value in column {bad[0]}"
-                )
-            rows.append(values)
+        layout = _layout(handle)
+    header = layout.header
     if header is None:
         raise RecordingFormatError(f"{path}: no header row (expected t,x_s,x_t,x_r or the axle columns)")
+    _check_header(path, header, layout.header_line)
+    rows: list[list[float]] = []
+    for line_no, line in layout.rows:
+        cells = next(csv.reader([line]))
+        if len(cells) != len(header):
+            raise RecordingFormatError(f"{path}:{line_no}: expected {len(header)} values, found {len(cells)}")
+        try:
+            values = [float(c) for c in cells]
+        except ValueError:
+            raise RecordingFormatError(f"{path}:{line_no}: not a number in {line!r}") from None
+        bad = [header[i] for i, v in enumerate(values) if not math.isfinite(v)]
+        if bad:
+            raise RecordingFormatError(f"{path}:{line_no}: missing or non-finite value in column {bad[0]}")
+        rows.append(values)
     if len(rows) < 3:
         raise RecordingFormatError(f"{path}: only {len(rows)} data rows; a recording needs at least 3")
     data = np.array(rows)
     t = data[:, header.index("t")]
-    _check_uniform(path, t, first_data_line=_first_data_line(path))
+    _check_uniform(path, t, first_data_line=layout.rows[0][0])
     channels = {name: data[:, i] for i, name in enumerate(header) if name != "t"}
-    return Recording(t, channels, metadata)
+    return Recording(t, channels, layout.metadata)
 
 
 def _read_well_formed(path: Path) -> Recording | None:
@@ -81,30 +99,13 @@ def _read_well_formed(path: Path) -> Recording | None:
     line-by-line reader above then finds and names the first bad line. Why: that reader spends some 0.1 s
     per 10 000 rows in Python, a tenth of a whole `shockbench identify`."""
     try:
-        lines = path.read_text().splitlines()
-    except (OSError, UnicodeDecodeError):
+        layout = _layout(path.read_text().splitlines())
+    except (OSError, UnicodeDecodeError, csv.Error):
         return None
-    metadata: dict[str, str] = {}
-    header: list[str] | None = None
-    first_data_line = 0
-    data_lines: list[str] = []
-    for line_no, raw in enumerate(lines, start=1):
-        line = raw.strip()
-        if not line:
-            continue
-        if line.startswith("#"):
-            if header is None and ":" in line:
-                key, _, value = line[1:].partition(":")
-                metadata[key.strip()] = value.strip()
-            continue
-        if header is None:
-            header = [c.strip() for c in next(csv.reader([line]))]
-            continue
-        if not first_data_line:
-            first_data_line = line_no
-        data_lines.append(line)
-    if header is None or len(data_lines) < 3:
+    header = layout.header
+    if header is None or len(layout.rows) < 3:
         return None
+    data_lines = [line for _, line in layout.rows]
     try:
         _check_header(path, header, 0)
         data = np.loadtxt(data_lines, delimiter=",", comments=None, dtype=float, ndmin=2)
@@ -113,9 +114,9 @@ def _read_well_formed(path: Path) -> Recording | None:
     if data.shape != (len(data_lines), len(header)) or not np.all(np.isfinite(data)):
         return None
     t = data[:, header.index("t")]
-    _check_uniform(path, t, first_data_line=first_data_line)
+    _check_uniform(path, t, first_data_line=layout.rows[0][0])
     channels = {name: np.ascontiguousarray(data[:, i]) for i, name in enumerate(header) if name != "t"}
-    return Recording(np.ascontiguousarray(t), channels, metadata)
+    return Recording(np.ascontiguousarray(t), channels, layout.metadata)
 
 
 def _check_header(path: Path, header: list[str], line_no: int) -> None:
@@ -129,20 +130,6 @@ def _check_header(path: Path, header: list[str], line_no: int) -> None:
         f"{path}:{line_no}: columns {','.join(header)} are neither t,{','.join(QUARTER_CAR_CHANNELS)} "
         f"nor t,{','.join(AXLE_CHANNELS)}"
     )
-
-
-def _first_data_line(path: Path) -> int:
-    """1-based line number of the first data row (after comments and the header)."""
-    seen_header = False
-    with path.open() as handle:
-        for line_no, raw in enumerate(handle, start=1):
-            line = raw.strip()
-            if not line or line.startswith("#"):
-                continue
-            if seen_header:
-                return line_no
-            seen_header = True
-    return 0
 
 
 def _check_uniform(path: Path, t: np.ndarray, first_data_line: int) -> None:
