@@ -213,6 +213,7 @@ export class LiveChart {
     let hi = 1;
     for (const values of Object.values(this.series)) {
       for (const v of values) {
+        if (v === null) continue; // a sample the stream could not give (not finite)
         lo = Math.min(lo, v * 1000);
         hi = Math.max(hi, v * 1000);
       }
@@ -242,7 +243,16 @@ export class LiveChart {
       g.strokeStyle = colour;
       g.setLineDash(dash);
       g.beginPath();
-      values.forEach((v, i) => (i ? g.lineTo(x(t[i]), y(v * 1000)) : g.moveTo(x(t[i]), y(v * 1000))));
+      let gap = true;
+      values.forEach((v, i) => {
+        if (v === null) {
+          gap = true;
+          return;
+        }
+        if (gap) g.moveTo(x(t[i]), y(v * 1000));
+        else g.lineTo(x(t[i]), y(v * 1000));
+        gap = false;
+      });
       g.stroke();
     }
     this.frames += 1;

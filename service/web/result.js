@@ -130,7 +130,7 @@ export function showPending(sweep, message) {
 function wireDownloads(sweep, job) {
   const links = {
     "dl-csv": [sweep.links.recording_csv, `sweep-${sweep.id}.csv`],
-    "dl-h5": [`${sweep.links.self}/recording.h5`, `sweep-${sweep.id}.h5`],
+    "dl-h5": [sweep.links.recording_h5 ?? `${sweep.links.self}/recording.h5`, `sweep-${sweep.id}.h5`],
     "dl-json": [job.links.self, `job-${job.id}.json`],
     "dl-png": [job.links.plot_png, `job-${job.id}.png`],
     "dl-svg": [job.links.plot_svg, `job-${job.id}.svg`],

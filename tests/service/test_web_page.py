@@ -1,0 +1,251 @@
+"""The operator page (issue 17) in a real headless Chromium against a real `shockbench serve --simulated`
+on loopback, keys for a viewer, an operator and an admin: sign in, start a sweep, watch its progress and
+the live chart, read the curve, the lane figures and the verdict, open it again from the history, stop
+the plate with the emergency-stop button, and what a viewer may not do. Every test fails on a browser
+console error. The result view's screenshot is docs/operator-page.png (the README shows it).
+
+The simulated bench runs in simulated time, so a sweep of a few seconds keeps these tests short."""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Callable, Iterator
+from typing import Any
+
+import pytest
+from headless_chromium import Chromium, chromium_driver, console_errors, find_chromium
+from live_server import ROOT, SERVE_STARTUP_TIMEOUT_S, ServeProcess, serve_process, wait_until
+
+VIEWER = "viewer-key-0123456789"
+OPERATOR = "operator-key-0123456789"
+ADMIN = "admin-key-0123456789abc"
+SCREENSHOT = ROOT / "docs" / "operator-page.png"
+VEHICLE_TOML = '[vehicle]\nmodel = "quarter-car"\nmass_kg = 420.0\n'
+"""Mass only: what the bench operator knows; the simulated car on the plate carries 420 kg too."""
+PLATE_RGB = (124, 196, 255)
+"""The live chart's plate colour (service/web/live.js)."""
+WAIT_S = 120.0
+"""Longest wait for the page: a sweep and its identification on a loaded 2-core machine."""
+
+
+@pytest.fixture(scope="module")
+def chromium() -> Chromium:
+    return find_chromium()
+
+
+@pytest.fixture(scope="module")
+def service(tmp_path_factory: pytest.TempPathFactory, chromium: Chromium) -> Iterator[ServeProcess]:
+    folder = tmp_path_factory.mktemp("web")
+    keys = folder / "keys.toml"
+    keys.write_text(f'viewer = ["{VIEWER}"]\noperator = ["{OPERATOR}"]\nadmin = ["{ADMIN}"]\n')
+    service = serve_process(
+        folder, "serve", "--simulated", "--data", str(folder / "data"), "--keys", str(keys)
+    )
+    try:
+        wait_until(lambda: service.answers(OPERATOR), SERVE_STARTUP_TIMEOUT_S, "service ready", 0.2)
+        yield service
+    finally:
+        service.stop()
+
+
+class Page:
+    """The operator page in a browser: find by data-testid, wait for a condition."""
+
+    def __init__(self, driver: Any, url: str) -> None:
+        self.driver = driver
+        self.url = url
+        self.expected_errors: tuple[str, ...] = ()
+        driver.get(url)
+
+    def testid(self, name: str) -> Any:
+        from selenium.webdriver.common.by import By
+
+        return self.driver.find_element(By.CSS_SELECTOR, f'[data-testid="{name}"]')
+
+    def all_testid(self, name: str) -> list[Any]:
+        from selenium.webdriver.common.by import By
+
+        return self.driver.find_elements(By.CSS_SELECTOR, f'[data-testid="{name}"]')
+
+    def by_id(self, element_id: str) -> Any:
+        from selenium.webdriver.common.by import By
+
+        return self.driver.find_element(By.ID, element_id)
+
+    def wait(self, condition: Callable[[], Any], what: str, timeout_s: float = WAIT_S) -> Any:
+        from selenium.webdriver.support.ui import WebDriverWait
+
+        return WebDriverWait(self.driver, timeout_s, poll_frequency=0.1).until(
+            lambda _driver: condition(), message=what
+        )
+
+    def sign_in(self, key: str) -> None:
+        """Type the key and press Enter (the keyboard alone signs in)."""
+        from selenium.webdriver.common.keys import Keys
+
+        self.testid("login-key").send_keys(key, Keys.ENTER)
+        self.wait(lambda: self.testid("bench-status").text.startswith("Bench"), "signed in")
+
+    def fill(self, element_id: str, value: str) -> None:
+        field = self.by_id(element_id)
+        field.clear()
+        field.send_keys(value)
+
+    def start_sweep(self, duration_s: float, vehicle_id: str) -> None:
+        """Fill the form (the vehicle pasted as TOML) and press start."""
+        self.by_id("vehicle-source-toml").click()
+        self.testid("vehicle-toml").clear()
+        self.testid("vehicle-toml").send_keys(VEHICLE_TOML)
+        self.fill("vehicle-id", vehicle_id)
+        self.fill("tyre-pressure", "2.2")
+        self.fill("operator-name", "A. Tester")
+        self.fill("duration-s", f"{duration_s:g}")
+        self.fill("settle-s", "0.5")
+        self.testid("start-sweep").click()
+
+    def phase(self) -> str:
+        return str(self.by_id("progress-phase").text)
+
+
+@pytest.fixture
+def page(service: ServeProcess, chromium: Chromium) -> Iterator[Page]:
+    with chromium_driver(chromium) as driver:
+        page = Page(driver, service.url + "/")
+        yield page
+        errors = console_errors(driver, page.expected_errors)
+        assert not errors, f"browser console errors: {errors}"
+
+
+def plate_pixels(page: Page) -> int:
+    """How many pixels of the live chart are drawn in the plate's colour."""
+    script = """
+        const [r, g, b] = arguments[0];
+        const canvas = arguments[1];
+        const data = canvas.getContext("2d").getImageData(0, 0, canvas.width, canvas.height).data;
+        let n = 0;
+        for (let i = 0; i < data.length; i += 4) {
+          const near = (k, v) => Math.abs(data[i + k] - v) < 40;
+          if (near(0, r) && near(1, g) && near(2, b)) n++;
+        }
+        return n;"""
+    return int(page.driver.execute_script(script, list(PLATE_RGB), page.testid("live-chart")))
+
+
+def test_an_operator_runs_a_test_and_reads_curve_figures_and_verdict(
+    page: Page, service: ServeProcess
+) -> None:
+    page.sign_in(OPERATOR)
+    assert OPERATOR not in page.driver.current_url
+    assert page.driver.execute_script("return sessionStorage.getItem('shockbench.key')") == OPERATOR
+
+    page.start_sweep(duration_s=3, vehicle_id="WVW ZZZ 1JZ 3W386752")
+    page.wait(lambda: page.phase() == "sweeping", "the sweep's progress: sweeping")
+    progress = page.testid("sweep-progress").text
+    assert re.search(r"\d+\.\d s of \d+\.\d s", progress) and re.search(r"\d+\.\d\d Hz", progress), progress
+    chart = page.testid("live-chart")
+    page.wait(lambda: int(chart.get_attribute("data-points") or 0) > 0, "samples in the live chart")
+    page.wait(lambda: int(chart.get_attribute("data-frames") or 0) >= 3, "the live chart redrawn")
+    assert plate_pixels(page) > 100, "the plate's trace is not drawn"
+
+    page.wait(lambda: page.testid("result-curve").find_elements("css selector", "svg"), "the curve", WAIT_S)
+    curve = page.testid("result-curve")
+    assert len(curve.find_elements("css selector", "svg polygon.band")) == 1
+    assert len(curve.find_elements("css selector", "svg polyline.fit")) == 1
+    assert len(curve.find_elements("css selector", "svg circle")) > 10
+    assert re.fullmatch(r"\d+(\.\d+)? %", page.testid("result-eusama").text)
+    verdict = page.testid("result-verdict")
+    assert verdict.get_attribute("data-outcome") in ("pass", "fail", "check"), verdict.text
+    assert "estimate" in page.by_id("result").text.lower()
+    page.driver.save_screenshot(str(SCREENSHOT))
+
+    with service.client(VIEWER) as client:
+        stored = client.get("/api/v1/sweeps", params={"vehicle_id": "WVW ZZZ 1JZ 3W386752"}).json()
+    (sweep,) = stored["sweeps"]
+    assert sweep["test"] == {
+        "vehicle_id": "WVW ZZZ 1JZ 3W386752",
+        "tyre_pressure_bar": 2.2,
+        "operator_name": "A. Tester",
+    }
+
+    from selenium.webdriver.common.keys import Keys
+
+    page.fill("history-filter", "WVW ZZZ 1JZ 3W386752")
+    page.by_id("history-filter").send_keys(Keys.ENTER)
+    page.wait(lambda: len(page.all_testid("history-row")) == 1, "the history filtered to the vehicle")
+    page.driver.execute_script("document.getElementById('result').hidden = true")
+    page.all_testid("history-row")[0].send_keys(Keys.ENTER)
+    page.wait(lambda: page.by_id("result").is_displayed(), "the result opened from the history")
+    page.wait(lambda: page.testid("result-curve").find_elements("css selector", "svg"), "its curve")
+    assert page.by_id("result-title").text.startswith(f"Result of sweep {sweep['id']}")
+
+
+def test_the_emergency_stop_button_stops_the_plate_in_one_click(page: Page, service: ServeProcess) -> None:
+    page.sign_in(OPERATOR)
+    page.start_sweep(duration_s=300, vehicle_id="ESTOP-1")
+    page.wait(lambda: page.phase() == "sweeping", "the plate sweeping")
+    page.testid("emergency-stop").click()
+    page.wait(lambda: page.by_id("estop-status").text.startswith("Stopped"), "the stop acknowledged")
+    page.wait(lambda: "idle" in page.testid("bench-status").text, "the bench idle")
+    with service.client(VIEWER) as client:
+        (sweep,) = client.get("/api/v1/sweeps", params={"vehicle_id": "ESTOP-1"}).json()["sweeps"]
+        bench = client.get("/api/v1/bench").json()
+    assert sweep["status"] == "failed" and "emergency stop" in sweep["reason"]
+    assert bench["busy"] is False
+    page.wait(lambda: "emergency stop" in page.by_id("result-curves").text, "the page says why")
+
+
+def test_a_sweep_setting_the_api_refuses_is_shown_beside_its_field(page: Page) -> None:
+    page.expected_errors = (
+        "/api/v1/sweeps - Failed to load resource: the server responded with a status of 422",
+    )
+    page.sign_in(OPERATOR)
+    page.fill("duration-s", "0.2")
+    page.testid("start-sweep").click()
+    error = page.by_id("duration-s-error")
+    page.wait(lambda: error.text, "the field's error")
+    assert "duration_s" in error.text
+    assert page.by_id("duration-s").get_attribute("aria-invalid") == "true"
+    assert page.by_id("start-error").text == ""
+
+
+def test_a_viewer_sees_no_enabled_control_and_the_api_refuses_it(page: Page, service: ServeProcess) -> None:
+    page.sign_in(VIEWER)
+    for control in ("start-sweep", "emergency-stop"):
+        assert not page.testid(control).is_enabled(), control
+    assert not page.by_id("abort-sweep").is_enabled()
+    assert not page.by_id("run-doctor").is_enabled()
+    assert not page.by_id("schedules-title").is_displayed()
+    page.driver.execute_script("document.getElementById('start-form').requestSubmit()")
+    with service.client(VIEWER) as client:
+        refused = client.post("/api/v1/sweeps", json={"vehicle_toml": VEHICLE_TOML, "duration_s": 2})
+        assert refused.status_code == 403
+        assert client.get("/api/v1/sweeps", params={"vehicle_id": "VIEWER-1"}).json()["total"] == 0
+
+
+def test_the_page_is_labelled_and_fits_a_tablet(page: Page) -> None:
+    page.sign_in(ADMIN)
+    unlabelled = page.driver.execute_script(
+        "return [...document.querySelectorAll('input, select, textarea')]"
+        ".filter(e => !e.labels.length && !e.getAttribute('aria-label')).map(e => e.id)"
+    )
+    assert unlabelled == []
+    for width, height in ((1280, 800), (800, 1280)):
+        page.driver.set_window_size(width, height)
+        overflow = page.driver.execute_script(
+            "return document.documentElement.scrollWidth - document.documentElement.clientWidth"
+        )
+        assert overflow <= 0, f"{overflow} px wider than a {width} px screen"
+        assert page.testid("emergency-stop").is_displayed()
+
+
+def test_an_admin_schedules_a_test_and_cancels_it(page: Page) -> None:
+    page.sign_in(ADMIN)
+    page.wait(lambda: page.by_id("schedules-title").is_displayed(), "the schedules shown to an admin")
+    page.driver.execute_script("document.getElementById('schedule-at').value = '2099-01-01T06:30'")
+    page.by_id("schedule-form").find_element("css selector", "button[type=submit]").click()
+    cancel = page.wait(
+        lambda: page.by_id("schedule-body").find_elements("css selector", "button"),
+        "a waiting test to cancel",
+    )
+    cancel[0].click()
+    page.wait(lambda: "cancelled" in page.by_id("schedule-body").text, "the test cancelled")
