@@ -156,7 +156,8 @@ def test_an_operator_runs_a_test_and_reads_curve_figures_and_verdict(
     verdict = page.testid("result-verdict")
     assert verdict.get_attribute("data-outcome") in ("pass", "fail", "check"), verdict.text
     assert "estimate" in page.by_id("result").text.lower()
-    page.driver.save_screenshot(str(SCREENSHOT))
+    SCREENSHOT.parent.mkdir(exist_ok=True)
+    assert page.driver.save_screenshot(str(SCREENSHOT)), SCREENSHOT
 
     with service.client(VIEWER) as client:
         stored = client.get("/api/v1/sweeps", params={"vehicle_id": "WVW ZZZ 1JZ 3W386752"}).json()
