@@ -24,6 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from daq.alignment import ChannelAligner
+from daq.live_view import LiveView
 from daq.ring_buffer import Reader
 from daq.sources.laser_source import LaserSource
 from daq.storage.hdf5_recording import RecordingWriter
@@ -68,10 +69,12 @@ class Recorder:
         origin_s: float,
         max_intervals_s: Mapping[str, float],
         rest_offsets_m: Mapping[str, float] | None = None,
+        live: LiveView | None = None,
     ) -> None:
         """max_intervals_s: per channel, the longest interval between samples that is not a gap
         (`max_interval_s`). rest_offsets_m: per channel, subtracted from every value (the mean at rest),
-        so the recording is measured from the static position."""
+        so the recording is measured from the static position. live: the screens' decimated copy of the
+        rows written (daq.live_view), if any."""
         by_channel = {source.channel: source for source in sources}
         missing = [c for c in writer.channels if c not in by_channel]
         if missing:
@@ -86,6 +89,7 @@ class Recorder:
         self._aligners = [ChannelAligner(max_intervals_s[s.channel]) for s in self._sources]
         offsets = rest_offsets_m or {}
         self._offsets_m = [float(offsets.get(s.channel, 0.0)) for s in self._sources]
+        self.live = live
         self._next_row = 0
         self._gap_rows = 0
         self._overruns = 0
@@ -118,6 +122,8 @@ class Recorder:
             for channel, aligner in zip(self.writer.channels, self._aligners, strict=True)
         }
         self.writer.append(rows * self.sample_time_s, values)
+        if self.live is not None:
+            self.live.add(rows, rows * self.sample_time_s, values)
         gap = np.zeros(rows.size, dtype=bool)
         for column in values.values():
             gap |= np.isnan(column)

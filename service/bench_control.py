@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from daq.bench_config import BenchConfig
+from daq.live_view import LiveView
 from daq.sweep.model import SweepOutcome, SweepProgress, SweepRequest
 from daq.sweep.pacing import Pacing, RealtimePacing, SimulatedPacing
 from daq.sweep.plan import SweepPlan, plan_sweep
@@ -81,6 +82,8 @@ class BenchController:
         self._abort = threading.Event()
         self._emergency = threading.Event()
         self._service_stopping = False
+        self.live = LiveView()
+        """The running (or last) sweep's rows, decimated, for screens (GET /bench/live)."""
 
     def stop_drive(self, timeout_s: float = STARTUP_STOP_TIMEOUT_S) -> str:
         """Command the drive to stop (controlled stop), whatever it is doing: at start-up, before anything
@@ -191,6 +194,7 @@ class BenchController:
             self._abort.clear()
             self._emergency.clear()
             self._sweep_id, self._progress = sweep_id, None
+            self.live.start(self.config.channels, label=sweep_id)
             self._thread = threading.Thread(
                 target=self._run,
                 args=(sweep_id, plan, out_path, done),
@@ -220,6 +224,7 @@ class BenchController:
                     abort=self._abort,
                     emergency=self._emergency,
                     abort_reason=self._abort_reason,
+                    live=self.live,
                 )
             )
         except SweepError as exc:

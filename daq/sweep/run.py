@@ -49,6 +49,7 @@ from pathlib import Path
 import numpy as np
 
 from daq.bench_config import BenchConfig
+from daq.live_view import LiveView
 from daq.recorder import Recorder, max_interval_s
 from daq.sources.laser_source import LaserSource
 from daq.storage.hdf5_recording import MetadataValue, RecordingWriter
@@ -108,13 +109,16 @@ async def run_sweep(
     emergency: threading.Event | None = None,
     silence_timeout_s: float = DEFAULT_SILENCE_TIMEOUT_S,
     abort_reason: Callable[[], str] | None = None,
+    live: LiveView | None = None,
 ) -> SweepOutcome:
     """Run one planned sweep (daq.sweep.plan.plan_sweep on this `config`) on the bench `config` describes
     and record it at out_path (HDF5). See the module.
 
     abort: set it to end the sweep with a controlled stop; emergency: set it for an emergency stop (both
     are looked at every orchestration cycle, STEP_S). abort_reason: what an abort is recorded as (default
-    "aborted by the operator"; the service says "service stopped" when its own stop aborts the sweep)."""
+    "aborted by the operator"; the service says "service stopped" when its own stop aborts the sweep).
+    live: a daq.live_view.LiveView the recorder copies its rows to, decimated, for screens (its owner
+    starts it with the bench's channels)."""
     if plan.bench != config.name:  # a programming error, not an input: plans are made for one bench
         raise ValueError(f"a sweep planned for bench {plan.bench!r} cannot run on bench {config.name!r}")
     run = _SweepRun(config, plan.request, Path(out_path), pacing or RealtimePacing(), progress, abort)
@@ -122,6 +126,7 @@ async def run_sweep(
         run.abort_reason = abort_reason
     run.emergency = emergency or threading.Event()
     run.silence_timeout_s = silence_timeout_s
+    run.live = live
     return await run.run()
 
 
@@ -159,6 +164,7 @@ class _SweepRun:
         self.exciter: PlateExciter | None = None
         self.writer: RecordingWriter | None = None
         self.recorder: Recorder | None = None
+        self.live: LiveView | None = None
         self.phase = SweepPhase.CONNECTING
         self.frequency_Hz = 0.0
         self.started_s = math.nan
@@ -285,6 +291,7 @@ class _SweepRun:
             origin_s=self.started_s,
             max_intervals_s={s.channel: max_interval_s(s, rest[s.channel][1]) for s in self.sources},
             rest_offsets_m={channel: mean for channel, (mean, _) in rest.items()},
+            live=self.live,
         )
 
     def _open_recording(self, rest: dict[str, tuple[float, float]]) -> None:

@@ -26,11 +26,13 @@ from service.api.errors import install_error_handlers
 from service.api.input_check import CHECKER
 from service.api.limits import BodyTimeout, UploadSizeLimit
 from service.api.methods import AllowedMethods
-from service.api.routes import bench, events, jobs, schedules, status, sweeps
+from service.api.results import verdict_of
+from service.api.routes import bench, events, jobs, live, schedules, status, sweeps
 from service.api.scheduler import InspectionScheduler
 from service.api.schemas import API_PREFIX
 from service.api.settings import ServiceSettings
 from service.api.stream_limit import StreamLimit
+from service.api.web import install_page
 from service.bench_control import BenchController
 from service.jobs.manager import JobManager
 from service.store.database import Database
@@ -144,7 +146,7 @@ def lifespan_factory(settings: ServiceSettings) -> Lifespan:
         failed_sweeps = await asyncio.to_thread(sweep_store.recover_interrupted)
         if failed_sweeps:
             log.warning("sweeps %s were cut off by a restart; marked failed", failed_sweeps)
-        manager = JobManager(store, settings.worker)
+        manager = JobManager(store, settings.worker, completing=verdict_of(settings.verdict))
         tests = ScheduleStore(database)
         scheduler = None
         if bench is not None:
@@ -188,6 +190,7 @@ def api_router() -> APIRouter:
     router.include_router(jobs.router())
     router.include_router(events.router)
     router.include_router(bench.router)
+    router.include_router(live.router)
     router.include_router(sweeps.router)
     router.include_router(schedules.router)
     return router
@@ -207,6 +210,7 @@ def create_app(settings: ServiceSettings) -> FastAPI:
     app.add_middleware(UploadSizeLimit, max_bytes=settings.max_upload_bytes)
     app.add_middleware(BodyTimeout, timeout_s=settings.body_timeout_s)
     app.include_router(api_router())
+    install_page(app)
     install_contract(app)
     app.add_middleware(AllowedMethods, routes=app.router.routes)
     return app

@@ -20,7 +20,14 @@ from fastapi.openapi.utils import get_openapi
 from pydantic import BaseModel, ConfigDict, Field, WithJsonSchema, create_model
 
 from service.api.errors import ErrorBody
-from service.api.schemas import JOB_EVENTS, ClosingEvent, ProgressEvent
+from service.api.schemas import (
+    JOB_EVENTS,
+    ClosingEvent,
+    LiveClosingEvent,
+    LiveSamplesEvent,
+    LiveStateEvent,
+    ProgressEvent,
+)
 from service.jobs.kinds import JobKindSpec
 
 REF = "#/components/schemas/{model}"
@@ -104,17 +111,23 @@ def download(media_type: str, description: str) -> dict[int | str, dict[str, Any
     return {200: {"description": description, "content": {media_type: {"schema": dict(BINARY)}}}}
 
 
-def event_stream() -> dict[int | str, dict[str, Any]]:
-    """The 200 of GET /jobs/{id}/events: a text/event-stream. Each event is described by `itemSchema` (as
-    OpenAPI 3.2 and FastAPI's own SSE routes state it): one variant per event name, its `data` JSON text
-    with the schema of what it carries (`contentSchema`). No `schema`: a generated client reads the
-    stream as text."""
-    lines = [f"- `{name}`: {when}; data: {schema} (JSON)" for name, (schema, when) in JOB_EVENTS.items()]
-    description = (
-        "Server-Sent Events, each `id: N`, `event: NAME`, `data: JSON`. The stream opens with `state`, "
-        "carries `progress` while the job runs and ends with exactly one of `succeeded`, `failed`, "
-        "`cancelled` (or `closing`). A comment line every 15 s keeps it open. Events:\n" + "\n".join(lines)
-    )
+JOB_STREAM_SUMMARY = (
+    "Server-Sent Events, each `id: N`, `event: NAME`, `data: JSON`. The stream opens with `state`, "
+    "carries `progress` while the job runs and ends with exactly one of `succeeded`, `failed`, "
+    "`cancelled` (or `closing`). A comment line every 15 s keeps it open."
+)
+
+
+def event_stream(
+    events: dict[str, tuple[str, str]] = JOB_EVENTS, summary: str = JOB_STREAM_SUMMARY
+) -> dict[int | str, dict[str, Any]]:
+    """The 200 of an event stream (GET /jobs/{id}/events, GET /bench/live): a text/event-stream. Each
+    event is described by `itemSchema` (as OpenAPI 3.2 and FastAPI's own SSE routes state it): one variant
+    per event name (`events`: name -> (schema of its data, when it comes)), its `data` JSON text with the
+    schema of what it carries (`contentSchema`). No `schema`: a generated client reads the stream as
+    text."""
+    lines = [f"- `{name}`: {when}; data: {schema} (JSON)" for name, (schema, when) in events.items()]
+    description = summary + " Events:\n" + "\n".join(lines)
     variants = [
         {
             "type": "object",
@@ -130,7 +143,7 @@ def event_stream() -> dict[int | str, dict[str, Any]]:
                 },
             },
         }
-        for name, (schema, when) in JOB_EVENTS.items()
+        for name, (schema, when) in events.items()
     ]
     return {
         200: {
@@ -145,7 +158,13 @@ def _event_data_schema(names: str) -> dict[str, Any]:
     return refs[0] if len(refs) == 1 else {"oneOf": refs}
 
 
-EXTRA_COMPONENTS: tuple[type[BaseModel], ...] = (ProgressEvent, ClosingEvent)
+EXTRA_COMPONENTS: tuple[type[BaseModel], ...] = (
+    ProgressEvent,
+    ClosingEvent,
+    LiveStateEvent,
+    LiveSamplesEvent,
+    LiveClosingEvent,
+)
 """Models only the event stream's description refers to (no route returns them as JSON)."""
 
 

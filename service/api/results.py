@@ -11,10 +11,14 @@ adds before it is typed here passes through unchanged (`extra="allow"`), never s
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from typing import Any, Literal
+
 from pydantic import BaseModel, ConfigDict, Field
 
 from estimator.identify import Solver
 from estimator.vehicle import TyreModel
+from estimator.verdict import VerdictThresholds, judge
 
 MaybeNumber = float | None
 """A figure that is null when the estimator could not compute a finite value."""
@@ -104,6 +108,28 @@ class AxleInspectionOut(ResultPart):
     imbalance: ImbalanceOut | None
 
 
+class VerdictOut(ResultPart):
+    """Pass, check or fail: the lane figures judged against the service's thresholds (estimator.verdict)."""
+
+    outcome: Literal["pass", "check", "fail"]
+    thresholds_version: str = Field(description="which thresholds judged it")
+    reasons: list[str] = Field(description="one line per figure that made it check or fail")
+    thresholds: dict[str, float] = Field(description="the limits themselves (degrees, %)")
+
+
+def verdict_of(limits: VerdictThresholds) -> Callable[[str, dict[str, Any]], dict[str, Any]]:
+    """The job manager's `completing` hook: an identification's result gains the verdict its inspection
+    figures earn under `limits`, stored with it (a later change of thresholds does not rewrite it)."""
+
+    def completing(kind: str, result: dict[str, Any]) -> dict[str, Any]:
+        inspection = result.get("inspection")
+        if kind != "identify" or not isinstance(inspection, dict):
+            return result
+        return {**result, "verdict": judge(inspection, limits).as_dict()}
+
+    return completing
+
+
 class FiltersOut(ResultPart):
     kinematics_cutoff_Hz: MaybeNumber = Field(description="low-pass of the derived velocities (Hz)")
     equation_cutoff_Hz: MaybeNumber = Field(description="low-pass of the equations (Hz)")
@@ -146,6 +172,9 @@ class IdentifyResult(ResultPart):
     )
     roll_inertia_kg_m2_interval: Interval | None = Field(None, description="axle: 95% interval (kg·m²)")
     warnings: list[str] = Field(default_factory=list, description="what the identification warns about")
+    verdict: VerdictOut | None = Field(
+        None, description="service only: the lane figures judged against its configured thresholds"
+    )
 
 
 # ---- diagnose ----------------------------------------------------------------------------------------------

@@ -265,6 +265,40 @@ class SweepSettingsOut(BaseModel):
     settle_s: float | None = Field(None, description="recorded after the sweep (s)")
 
 
+class LiveStateEvent(BaseModel):
+    """The data of a live stream's `state` event (GET /bench/live)."""
+
+    busy: bool = Field(description="a sweep is running")
+    sweep_id: int | None = Field(None, description="the running sweep")
+    progress: SweepProgressOut | None = Field(None, description="the running sweep's latest progress")
+
+
+class LiveSamplesEvent(BaseModel):
+    """The data of a live stream's `samples` event: the rows recorded since the last one, decimated."""
+
+    sweep_id: int | None = Field(description="the sweep they belong to")
+    t_s: list[float] = Field(description="seconds since the sweep's start command")
+    channels: dict[str, list[float | None]] = Field(
+        description="recording channel -> displacement (m) per row (x_r plate, x_t wheel, x_s body; an axle "
+        "adds _l/_r); null where the recording has a gap"
+    )
+    missed: int = Field(0, description="decimated rows this stream fell too far behind to get")
+
+
+class LiveClosingEvent(BaseModel):
+    """The data of a live stream's `closing` event: the service stops; reconnect later."""
+
+    reason: str
+
+
+LIVE_EVENTS: dict[str, tuple[str, str]] = {
+    "state": ("LiveStateEvent", "first, on every change of phase or sweep, and at least once a second"),
+    "samples": ("LiveSamplesEvent", "while a sweep records, about 20 a second: the rows new since the last"),
+    "closing": ("LiveClosingEvent", "last, when the service stops"),
+}
+"""The events of GET /bench/live: name -> (schema of its JSON data, when it comes)."""
+
+
 # ---- the service ---------------------------------------------------------------------------------------
 
 

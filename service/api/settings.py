@@ -6,6 +6,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from estimator.verdict import VerdictThresholds
 from service.access import KeyRing
 from service.jobs.manager import WorkerSettings
 from service.store.database import default_database_url
@@ -36,6 +37,9 @@ class ServiceSettings:
     max_streams_per_key: int = DEFAULT_MAX_STREAMS_PER_KEY
     """Event streams one key may hold open at once; one more is answered 429."""
     worker: WorkerSettings = field(default_factory=WorkerSettings)
+    verdict: VerdictThresholds = field(default_factory=VerdictThresholds)
+    """The limits an identification's lane figures are judged by (estimator.verdict; serve
+    --verdict-thresholds): the verdict is stored with the result when the job ends."""
 
     @property
     def resolved_database_url(self) -> str:

@@ -67,12 +67,33 @@ class SweepSettingsIn(BaseModel):
         return self.model_dump(mode="json", include={*SETTINGS_FIELDS, "settle_s"})
 
 
+TEST_FIELDS = ("vehicle_id", "tyre_pressure_bar", "operator_name")
+"""What the operator records about the test, stored with the sweep's settings (not used by the sweep)."""
+
+
 class SweepIn(SweepSettingsIn):
-    """A sweep to run: the plate's settings, the settling time, and the vehicle on the bench."""
+    """A sweep to run: the plate's settings, the settling time, the vehicle on the bench, and what the
+    operator records about the test (vehicle id, tyre pressure, their name)."""
 
     vehicle_toml: str = Field(
         min_length=1, max_length=1_000_000, description="the vehicle file (TOML, one [vehicle] table)"
     )
+    vehicle_id: str | None = Field(
+        None,
+        min_length=1,
+        max_length=40,
+        pattern=r"^[A-Za-z0-9][A-Za-z0-9 .\-]*$",
+        description="the vehicle's VIN or registration: letters, digits, spaces, dots and dashes",
+    )
+    tyre_pressure_bar: float | None = Field(None, ge=0.5, le=10, description="tyre pressure measured (bar)")
+    operator_name: str | None = Field(
+        None, min_length=1, max_length=80, description="who ran the test (free text, for the record)"
+    )
+
+    def as_submitted(self) -> dict[str, object]:
+        """The settings and the test's record as stored with the sweep (JSON); unset test fields left out."""
+        test = self.model_dump(mode="json", include=set(TEST_FIELDS), exclude_none=True)
+        return super().as_submitted() | test
 
 
 def plan_request(bench: BenchController, body: SweepIn, operator: str | None = None) -> SweepPlan:

@@ -16,9 +16,11 @@ import contextlib
 import ipaddress
 import logging
 import sys
+import tomllib
 from collections.abc import Sequence
 from pathlib import Path
 
+from estimator.verdict import ThresholdsError, VerdictThresholds
 from service.access import KeyRing, load_keys
 from service.cli.errors import EXIT_FAILED, CliError, run_command
 
@@ -49,6 +51,7 @@ def run_serve(args: argparse.Namespace) -> int:
         raise CliError("--max-streams-per-key must be at least 1")
     if args.body_timeout_s is not None and not 0 < args.body_timeout_s <= 3600:
         raise CliError("--body-timeout-s must lie in (0, 3600]")
+    verdict = load_verdict_thresholds(Path(args.verdict_thresholds)) if args.verdict_thresholds else None
     generated_key = None
     if args.keys is not None:
         keys = load_keys(args.keys)
@@ -77,6 +80,7 @@ def run_serve(args: argparse.Namespace) -> int:
         max_upload_bytes=int(args.max_upload_mb * 2**20),
         **limits,  # type: ignore[arg-type]
         worker=WorkerSettings(nice=args.worker_nice),
+        **({"verdict": verdict} if verdict is not None else {}),  # type: ignore[arg-type]
     )
     database = Database(settings.resolved_database_url)  # a bad URL or an unreachable server: one line now
     try:
@@ -103,6 +107,23 @@ def run_serve(args: argparse.Namespace) -> int:
     return 0 if server.started else EXIT_FAILED
 
 
+def load_verdict_thresholds(path: Path) -> VerdictThresholds:
+    """The [verdict] table of a TOML file (CliError, one line naming the file and the problem)."""
+    if not path.is_file():
+        raise CliError(f"{path}: no such verdict thresholds file")
+    try:
+        document = tomllib.loads(path.read_text(encoding="utf-8"))
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise CliError(f"{path}: not valid TOML ({str(exc).splitlines()[0]})") from None
+    table = document.get("verdict")
+    if not isinstance(table, dict):
+        raise CliError(f"{path}: no [verdict] table")
+    try:
+        return VerdictThresholds.from_table(table)
+    except (ThresholdsError, TypeError) as exc:
+        raise CliError(f"{path}: {exc}") from None
+
+
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "serve",
@@ -121,6 +142,14 @@ def register(sub: argparse._SubParsersAction) -> None:
         default=None,
         help="keys file (TOML: viewer/operator/admin = [keys]); required off loopback; without it an "
         "operator key is generated and printed",
+    )
+    p.add_argument(
+        "--verdict-thresholds",
+        default=None,
+        metavar="FILE.toml",
+        help="the limits verdicts are judged by: a [verdict] table (version, phase_fail_below_deg, "
+        "eusama_pass_from_percent, eusama_fail_below_percent, imbalance_check_above_percent, "
+        "imbalance_fail_above_percent); default: EGEA SPECSUS2018 and EUSAMA practice (README)",
     )
     p.add_argument("--data", default="shockbench-data", help="data directory (default ./shockbench-data)")
     p.add_argument("--database", default=None, help="SQLAlchemy URL (default: SQLite in the data directory)")

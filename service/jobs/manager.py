@@ -24,6 +24,7 @@ import logging
 import math
 import time
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from service.jobs.broker import EventBroker, JobEvent
@@ -97,9 +98,17 @@ class _Worker:
 
 
 class JobManager:
-    def __init__(self, store: JobStore, settings: WorkerSettings = WorkerSettings()) -> None:
+    def __init__(
+        self,
+        store: JobStore,
+        settings: WorkerSettings = WorkerSettings(),
+        completing: Callable[[str, dict], dict] | None = None,
+    ) -> None:
+        """completing(kind, result): what to store as a succeeded job's result (the service adds the
+        verdict an identification's figures earn under its configured thresholds)."""
         self.store = store
         self.settings = settings
+        self.completing = completing
         self.broker = EventBroker()
         self.restarts = 0
         self._queue: deque[int] = deque()
@@ -355,6 +364,8 @@ class JobManager:
             self._kill_timer = None
         try:
             if status is JobStatus.SUCCEEDED:
+                if self.completing is not None:
+                    result = self.completing(current.kind, result or {})
                 await asyncio.to_thread(self.store.succeed, job_id, result or {}, artefacts or {}, progress)
             elif status is JobStatus.FAILED:
                 await asyncio.to_thread(self.store.fail, job_id, reason or "failed", progress)

@@ -133,6 +133,18 @@ class JobStore:
             rows = session.scalars(query.order_by(JobRow.id.desc()).limit(limit).offset(offset)).all()
             return [JobRecord.of(r) for r in rows], int(session.scalar(count) or 0)
 
+    def latest_of_sweeps(self, sweep_ids: list[int], kind: str) -> dict[int, int]:
+        """Sweep id -> the newest job of `kind` on it, for the sweeps that have one."""
+        if not sweep_ids:
+            return {}
+        query = (
+            select(JobRow.sweep_id, func.max(JobRow.id))
+            .where(JobRow.sweep_id.in_(sweep_ids), JobRow.kind == kind)
+            .group_by(JobRow.sweep_id)
+        )
+        with self.db.sessions() as session:
+            return {int(sweep): int(job) for sweep, job in session.execute(query).all()}
+
     def queued_ids(self) -> list[int]:
         """Queued jobs in the order they were submitted."""
         with self.db.sessions() as session:

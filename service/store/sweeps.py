@@ -95,14 +95,23 @@ class SweepStore:
             return SweepRecord.of(row) if row is not None else None
 
     def list_sweeps(
-        self, *, status: SweepStatus | None = None, limit: int = 50, offset: int = 0
+        self,
+        *,
+        status: SweepStatus | None = None,
+        vehicle_id: str | None = None,
+        limit: int = 50,
+        offset: int = 0,
     ) -> tuple[list[SweepRecord], int]:
-        """Newest first, and the total count that matches."""
+        """Newest first, and the total count that matches. vehicle_id: only the tests of that vehicle (the
+        `vehicle_id` stored in the settings), compared without regard to case."""
         query = select(SweepRow)
         count = select(func.count()).select_from(SweepRow)
         if status is not None:
             query = query.where(SweepRow.status == status.value)
             count = count.where(SweepRow.status == status.value)
+        if vehicle_id is not None:
+            same = func.lower(SweepRow.settings["vehicle_id"].as_string()) == vehicle_id.lower()
+            query, count = query.where(same), count.where(same)
         with self.db.sessions() as session:
             rows = session.scalars(query.order_by(SweepRow.id.desc()).limit(limit).offset(offset)).all()
             return [SweepRecord.of(r) for r in rows], int(session.scalar(count) or 0)

@@ -36,12 +36,13 @@ OPERATION_IDS = {
     "get_job_plot_png", "get_job_plot_svg", "get_job_file", "get_bench", "list_devices", "emergency_stop",
     "start_sweep", "list_sweeps", "get_sweep", "abort_sweep", "get_sweep_recording_csv",
     "submit_sweep_identify", "schedule_test", "list_scheduled_tests", "get_scheduled_test",
-    "cancel_scheduled_test",
+    "cancel_scheduled_test", "whoami", "bench_live", "get_sweep_recording_h5",
 }  # fmt: skip
 DOWNLOADS = {
     ("/api/v1/jobs/{job_id}/plot.png", "image/png"),
     ("/api/v1/jobs/{job_id}/plot.svg", "image/svg+xml"),
     ("/api/v1/sweeps/{sweep_id}/recording.csv", "text/csv"),
+    ("/api/v1/sweeps/{sweep_id}/recording.h5", "application/octet-stream"),
     ("/api/v1/jobs/{job_id}/files/{name}", "text/markdown"),
     ("/api/v1/jobs/{job_id}/files/{name}", "image/png"),
 }

@@ -1,11 +1,14 @@
 """GET /api/v1/status: the service at a glance. Answers from memory only (no database, no worker round
-trip), so it stays fast while a DE job runs."""
+trip), so it stays fast while a DE job runs. GET /api/v1/whoami: the caller's role, so that a page shows
+only the controls the key may use (the API still enforces every role itself)."""
 
 from __future__ import annotations
 
 import time
+from typing import Literal
 
 from fastapi import APIRouter, Request
+from pydantic import BaseModel, Field
 
 from service.api.auth import Viewer
 from service.api.errors import responses
@@ -13,6 +16,17 @@ from service.api.routes.bench import bench_summary
 from service.api.schemas import CurrentJobOut, ProgressOut, StatusOut, WorkerOut
 
 router = APIRouter(tags=["status"])
+
+
+class WhoAmIOut(BaseModel):
+    key_id: str = Field(description="the key's id (a keyed hash), as recorded with what it does")
+    role: Literal["viewer", "operator", "admin"]
+
+
+@router.get("/whoami", response_model=WhoAmIOut, operation_id="whoami", responses=responses(401, 403))
+async def whoami(principal: Viewer) -> WhoAmIOut:
+    """The role of the key in the Authorization header (401 when it is not a valid key)."""
+    return WhoAmIOut(key_id=principal.key_id, role=principal.role.label)  # type: ignore[arg-type]
 
 
 @router.get("/status", response_model=StatusOut, operation_id="get_status", responses=responses(401, 403))

@@ -15,7 +15,7 @@ from datetime import datetime
 from pathlib import Path as FilePath
 from typing import Annotated
 
-from fastapi import APIRouter, Body, Path, Request, Response
+from fastapi import APIRouter, Body, Path, Query, Request, Response
 from fastapi.responses import FileResponse
 from pydantic import BaseModel, ConfigDict, Field
 from starlette.background import BackgroundTask
@@ -37,7 +37,7 @@ from service.api.sweep_launch import SweepIn, launch_sweep
 from service.api.sweep_recordings import accept_sweep_job, export, recording_path
 from service.bench_control import BenchController
 from service.jobs.identify_job import IdentifyJobOptions
-from service.store.models import SweepStatus
+from service.store.models import JobKind, SweepStatus
 from service.store.sweeps import SweepRecord, SweepStore
 
 router = APIRouter(tags=["sweeps"])
@@ -49,7 +49,16 @@ class SweepLinks(BaseModel):
     self: str
     abort: str
     recording_csv: str
+    recording_h5: str
     jobs: str
+
+
+class SweepTestOut(BaseModel):
+    """What the operator recorded about the test when starting it (each null when not given)."""
+
+    vehicle_id: str | None = Field(None, description="VIN or registration")
+    tyre_pressure_bar: float | None = Field(None, description="tyre pressure measured (bar)")
+    operator_name: str | None = Field(None, description="who ran the test")
 
 
 class SweepOut(BaseModel):
@@ -57,6 +66,8 @@ class SweepOut(BaseModel):
     bench: str
     status: SweepStatus = Field(description="requested, running, complete, failed or aborted")
     settings: SweepSettingsOut = Field(description="the sweep settings and settle_s as submitted")
+    test: SweepTestOut = Field(description="the vehicle id, tyre pressure and operator recorded with it")
+    latest_job_id: int | None = Field(None, description="the newest identification job on this sweep")
     complete: bool = Field(description="the recording holds the whole sweep without gaps")
     reason: str | None = Field(None, description="why the sweep failed or was aborted")
     operator: str | None = Field(None, description="id of the key that requested it (a hash)")
@@ -68,7 +79,9 @@ class SweepOut(BaseModel):
     links: SweepLinks
 
     @classmethod
-    def of(cls, record: SweepRecord, bench: BenchController | None = None) -> SweepOut:
+    def of(
+        cls, record: SweepRecord, bench: BenchController | None = None, latest_job_id: int | None = None
+    ) -> SweepOut:
         progress = None
         if bench is not None and not record.finished:
             state = bench.state()
@@ -80,6 +93,8 @@ class SweepOut(BaseModel):
             bench=record.bench,
             status=record.status,
             settings=SweepSettingsOut.model_validate(record.settings),
+            test=SweepTestOut.model_validate(record.settings),
+            latest_job_id=latest_job_id,
             complete=record.complete,
             reason=record.reason,
             operator=record.operator,
@@ -89,7 +104,11 @@ class SweepOut(BaseModel):
             started_at=record.started_at,
             finished_at=record.finished_at,
             links=SweepLinks(
-                self=base, abort=f"{base}/abort", recording_csv=f"{base}/recording.csv", jobs=f"{base}/jobs"
+                self=base,
+                abort=f"{base}/abort",
+                recording_csv=f"{base}/recording.csv",
+                recording_h5=f"{base}/recording.h5",
+                jobs=f"{base}/jobs",
             ),
         )
 
@@ -122,8 +141,17 @@ async def load_sweep(request: Request, sweep_id: int) -> SweepRecord:
     return record
 
 
-def sweep_out(request: Request, record: SweepRecord) -> SweepOut:
-    return SweepOut.of(record, request.app.state.services.bench)
+async def sweep_outs(request: Request, records: list[SweepRecord]) -> list[SweepOut]:
+    """The sweeps as the API shows them, each with its newest identification job (one query for all)."""
+    services = request.app.state.services
+    latest = await asyncio.to_thread(
+        services.jobs.latest_of_sweeps, [r.id for r in records], JobKind.IDENTIFY.value
+    )
+    return [SweepOut.of(r, services.bench, latest.get(r.id)) for r in records]
+
+
+async def sweep_out(request: Request, record: SweepRecord) -> SweepOut:
+    return (await sweep_outs(request, [record]))[0]
 
 
 def _export_to_temp(record: SweepRecord) -> tuple[FilePath, FilePath]:
@@ -158,7 +186,7 @@ async def start_sweep(request: Request, response: Response, body: SweepIn, princ
     record = await asyncio.to_thread(
         launch_sweep, bench, services.sweeps, data_dir, body, principal.key_id, services.wake_scheduler
     )
-    out = sweep_out(request, record)
+    out = await sweep_out(request, record)
     response.headers["Location"] = out.links.self
     return out
 
@@ -170,14 +198,16 @@ async def list_sweeps(
     request: Request,
     _principal: Viewer,
     status: SweepStatus | None = None,
+    vehicle_id: Annotated[str | None, Query(min_length=1, max_length=40)] = None,
     limit: PageLimit = 50,
     offset: PageOffset = 0,
 ) -> SweepList:
-    """Sweeps, newest first."""
+    """Sweeps, newest first; `vehicle_id`: only that vehicle's tests (case does not matter)."""
     records, total = await asyncio.to_thread(
-        _store(request).list_sweeps, status=status, limit=limit, offset=offset
+        _store(request).list_sweeps, status=status, vehicle_id=vehicle_id, limit=limit, offset=offset
     )
-    return SweepList(sweeps=[sweep_out(request, r) for r in records], total=total, limit=limit, offset=offset)
+    sweeps = await sweep_outs(request, records)
+    return SweepList(sweeps=sweeps, total=total, limit=limit, offset=offset)
 
 
 @router.get(
@@ -188,7 +218,7 @@ async def list_sweeps(
 )
 async def get_sweep(request: Request, sweep_id: SweepId, _principal: Viewer) -> SweepOut:
     """Status (with live progress while it runs), settings, and why it failed or was aborted."""
-    return sweep_out(request, await load_sweep(request, sweep_id))
+    return await sweep_out(request, await load_sweep(request, sweep_id))
 
 
 @router.post(
@@ -207,7 +237,7 @@ async def abort_sweep(request: Request, sweep_id: SweepId, _principal: Operator)
         raise ApiError(409, f"sweep {sweep_id} has already ended ({record.status.value})")
     if not bench.abort(str(sweep_id)):
         raise ApiError(409, f"sweep {sweep_id} is not running on the bench")
-    return sweep_out(request, record)
+    return await sweep_out(request, record)
 
 
 @router.get(
@@ -228,6 +258,22 @@ async def sweep_recording_csv(request: Request, sweep_id: SweepId, _principal: V
         filename=csv.name,
         background=BackgroundTask(shutil.rmtree, folder, ignore_errors=True),
     )
+
+
+@router.get(
+    "/sweeps/{sweep_id}/recording.h5",
+    response_class=FileResponse,
+    operation_id="get_sweep_recording_h5",
+    responses=download(
+        "application/octet-stream", "the recording as acquisition wrote it (HDF5, gaps flagged)"
+    )
+    | responses(401, 403, 404, 409, 422),
+)
+async def sweep_recording_h5(request: Request, sweep_id: SweepId, _principal: Viewer) -> FileResponse:
+    """The sweep's recording as acquisition wrote it (HDF5, with its gaps flagged, the vehicle file and
+    the metadata). 409 until the sweep has ended."""
+    h5 = recording_path(await load_sweep(request, sweep_id))
+    return FileResponse(h5, media_type="application/octet-stream", filename=f"sweep-{sweep_id}.h5")
 
 
 @router.post(

@@ -1,0 +1,106 @@
+"""GET /api/v1/bench/live: the bench as the operator page watches it, as Server-Sent Events.
+
+`state` (busy, the running sweep, its progress) comes first, whenever the phase or the sweep changes, and
+at least once a second; `samples` carries the rows recorded since the last event, decimated to about 100
+per second of signal (daq.live_view), about 20 times a second while a sweep records. The stream reads
+the bench controller's LiveView with its own cursor: any number of screens cost the acquisition nothing
+but the view's one decimated copy. When the service stops, the stream ends with `closing`.
+
+EventSource cannot send an Authorization header: a page reads this stream with fetch and a
+ReadableStream (service/web/app.js).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import math
+import time
+from collections.abc import AsyncIterator
+
+from fastapi import APIRouter, Request
+from fastapi.responses import StreamingResponse
+
+from daq.live_view import LiveRows
+from service.api.auth import Viewer
+from service.api.contract import event_stream
+from service.api.errors import responses
+from service.api.routes.bench import bench_out, require_bench
+from service.api.schemas import LIVE_EVENTS, LiveSamplesEvent, LiveStateEvent
+from service.api.stream_limit import HeldStreamingResponse
+
+TICK_S = 0.05
+"""Time between two looks at the bench: up to 20 `samples` events a second."""
+STATE_EVERY_S = 1.0
+"""A `state` event at least this often, changed or not (a screen shows the stream is alive)."""
+DECIMALS = 7
+"""Displacements sent to 0.1 µm: enough for a chart, a third of the text of full floats."""
+
+LIVE_SUMMARY = (
+    "Server-Sent Events, each `id: N`, `event: NAME`, `data: JSON`: the bench's state and, while a sweep "
+    "records, its plate, wheel and body channels decimated for a live chart. Runs until the client closes "
+    "it (or `closing`)."
+)
+
+router = APIRouter(tags=["bench"])
+
+
+def _sse(event: str, data: str, event_id: int) -> str:
+    return f"id: {event_id}\nevent: {event}\ndata: {data}\n\n"
+
+
+def _rounded(values: list[float]) -> list[float | None]:
+    return [round(v, DECIMALS) if math.isfinite(v) else None for v in values]
+
+
+def samples_event(rows: LiveRows) -> LiveSamplesEvent:
+    return LiveSamplesEvent(
+        sweep_id=int(rows.label) if rows.label.isdigit() else None,
+        t_s=[round(t, 4) for t in rows.time_s.tolist()],
+        channels={name: _rounded(values.tolist()) for name, values in rows.channels.items()},
+        missed=rows.missed,
+    )
+
+
+@router.get(
+    "/bench/live",
+    response_class=StreamingResponse,
+    operation_id="bench_live",
+    responses=event_stream(LIVE_EVENTS, LIVE_SUMMARY) | responses(401, 403, 429, 503),
+)
+async def bench_live(request: Request, principal: Viewer) -> StreamingResponse:
+    """The bench's state and the running sweep's channels, live (see the module text for the events)."""
+    bench = require_bench(request)
+    streams = request.app.state.services.streams
+    streams.acquire(principal.key_id)  # 429 when this key has its most streams open
+
+    async def stream() -> AsyncIterator[str]:
+        sequence = 0
+        cursor, run = 0, None
+        last_state, last_sent = "", -math.inf
+        while True:
+            if bench.stopping:
+                sequence += 1
+                yield _sse("closing", json.dumps({"reason": "the service is stopping"}), sequence)
+                return
+            state = bench_out(bench)
+            data = LiveStateEvent(busy=state.busy, sweep_id=state.sweep_id, progress=state.progress)
+            phase = (state.sweep_id, state.progress.phase if state.progress else None)
+            now = time.monotonic()
+            if repr(phase) != last_state or now - last_sent >= STATE_EVERY_S:
+                sequence += 1
+                yield _sse("state", data.model_dump_json(), sequence)
+                last_state, last_sent = repr(phase), now
+            rows = bench.live.since(cursor, run)
+            cursor, run = rows.cursor, rows.run
+            if rows.time_s.size or rows.missed:
+                sequence += 1
+                yield _sse("samples", samples_event(rows).model_dump_json(), sequence)
+            await asyncio.sleep(TICK_S)
+
+    return HeldStreamingResponse(
+        stream(),
+        media_type="text/event-stream",
+        headers={"Cache-Control": "no-cache", "X-Accel-Buffering": "no"},
+        on_close=lambda: streams.release(principal.key_id),
+    )
