@@ -40,7 +40,8 @@ def find_chromium() -> Chromium:
 
 @contextmanager
 def chromium_driver(chromium: Chromium, width: int = 1280, height: int = 800) -> Iterator[object]:
-    """A headless Chromium of width x height CSS pixels whose console log is kept (`console_errors`)."""
+    """A headless Chromium with a viewport of width x height CSS pixels, whose console log is kept
+    (`console_errors`)."""
     from selenium import webdriver
     from selenium.webdriver.chrome.service import Service
 
@@ -60,9 +61,16 @@ def chromium_driver(chromium: Chromium, width: int = 1280, height: int = 800) ->
     options.set_capability("goog:loggingPrefs", {"browser": "ALL"})
     driver = webdriver.Chrome(options=options, service=Service(chromium.driver))
     try:
+        set_viewport(driver, width, height)
         yield driver
     finally:
         driver.quit()
+
+
+def set_viewport(driver: object, width: int, height: int) -> None:
+    """Make the page's viewport exactly width x height CSS pixels (the window's size includes more)."""
+    metrics = {"width": width, "height": height, "deviceScaleFactor": 1, "mobile": False}
+    driver.execute_cdp_cmd("Emulation.setDeviceMetricsOverride", metrics)  # type: ignore[attr-defined]
 
 
 def console_errors(driver: object, expected: tuple[str, ...] = ()) -> list[str]:

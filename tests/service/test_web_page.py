@@ -13,7 +13,7 @@ from collections.abc import Callable, Iterator
 from typing import Any
 
 import pytest
-from headless_chromium import Chromium, chromium_driver, console_errors, find_chromium
+from headless_chromium import Chromium, chromium_driver, console_errors, find_chromium, set_viewport
 from live_server import ROOT, SERVE_STARTUP_TIMEOUT_S, ServeProcess, serve_process, wait_until
 
 VIEWER = "viewer-key-0123456789"
@@ -231,7 +231,7 @@ def test_the_page_is_labelled_and_fits_a_tablet(page: Page) -> None:
     )
     assert unlabelled == []
     for width, height in ((1280, 800), (800, 1280)):
-        page.driver.set_window_size(width, height)
+        set_viewport(page.driver, width, height)
         overflow = page.driver.execute_script(
             "return document.documentElement.scrollWidth - document.documentElement.clientWidth"
         )
