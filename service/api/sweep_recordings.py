@@ -16,6 +16,7 @@ from daq.storage.hdf5_recording import RecordingFileError, export_csv
 from estimator.errors import ConflictError, NotFoundError
 from service.api.intake import accept_recording
 from service.api.settings import ServiceSettings
+from service.jobs.diagnose_job import DiagnoseJobOptions
 from service.jobs.identify_job import IdentifyJobOptions
 from service.jobs.kinds import KINDS
 from service.store.jobs import JobRecord, JobStore
@@ -55,17 +56,19 @@ def accept_sweep_job(
     settings: ServiceSettings,
     jobs: JobStore,
     record: SweepRecord,
-    options: IdentifyJobOptions,
+    options: IdentifyJobOptions | DiagnoseJobOptions,
     submitted_by: str | None,
+    kind: JobKind = JobKind.IDENTIFY,
 ) -> JobRecord:
-    """A queued identification job on the sweep's recording (ConflictError until the sweep has ended, a
-    UserError when its recording cannot be read as one). The caller enqueues it with the job manager."""
+    """A queued job of `kind` (identification, diagnosis) on the sweep's recording (ConflictError until
+    the sweep has ended, a UserError when its recording cannot be read as one). The caller enqueues it
+    with the job manager."""
     h5 = recording_path(record)
     assert record.vehicle_file is not None
     return accept_recording(
         settings,
         jobs,
-        KINDS[JobKind.IDENTIFY.value],
+        KINDS[kind.value],
         options,
         h5,
         FilePath(record.vehicle_file),

@@ -37,6 +37,7 @@ OPERATION_IDS = {
     "start_sweep", "list_sweeps", "get_sweep", "abort_sweep", "get_sweep_recording_csv",
     "submit_sweep_identify", "schedule_test", "list_scheduled_tests", "get_scheduled_test",
     "cancel_scheduled_test", "whoami", "bench_live", "get_sweep_recording_h5",
+    "submit_sweep_diagnose",
 }  # fmt: skip
 DOWNLOADS = {
     ("/api/v1/jobs/{job_id}/plot.png", "image/png"),
@@ -170,10 +171,21 @@ def test_every_201_declares_location_and_every_download_its_media_type() -> None
             location = operation["responses"]["201"]["headers"]["Location"]
             assert location["required"] is True and location["schema"]["type"] == "string", (method, path)
             created += 1
-    assert created == 6  # jobs, diagnoses, validations, sweeps, sweep jobs, schedules
+    assert created == 7  # jobs, diagnoses, validations, sweeps, sweep jobs, sweep diagnoses, schedules
     for path, media_type in DOWNLOADS:
         content = document()["paths"][path]["get"]["responses"]["200"]["content"]
         assert content[media_type]["schema"] == {"type": "string", "format": "binary"}
+
+
+def test_the_live_stream_lists_its_events_and_their_data() -> None:
+    response = document()["paths"]["/api/v1/bench/live"]["get"]["responses"]["200"]
+    variants = response["content"]["text/event-stream"]["itemSchema"]["oneOf"]
+    events = {v["properties"]["event"]["const"]: v["properties"]["data"] for v in variants}
+    assert set(events) == {"state", "samples", "closing"}
+    schemas = document()["components"]["schemas"]
+    assert resolve(events["samples"]["contentSchema"]) is schemas["LiveSamplesEvent"]
+    assert set(schemas["LiveSamplesEvent"]["properties"]) >= {"sweep_id", "t_s", "channels"}
+    assert resolve(events["state"]["contentSchema"]) is schemas["LiveStateEvent"]
 
 
 def test_the_event_stream_lists_its_events_and_their_data() -> None:

@@ -120,6 +120,15 @@ def test_live_stream_then_record_search_download_job_and_verdict(
     assert verdict["thresholds_version"] and verdict["thresholds"]["phase_fail_below_deg"] == 35.0
     assert (verdict["outcome"] == "pass") == (not verdict["reasons"])
 
+    doctor = client.post(f"/api/v1/sweeps/{sweep['id']}/diagnoses", json={"max_steps": 1})
+    assert doctor.status_code == 201, doctor.text
+    assert doctor.json()["kind"] == "diagnose" and doctor.json()["sweep_id"] == sweep["id"]
+    report = wait_for(client, f"/api/v1/jobs/{doctor.json()['id']}", "succeeded", "failed", timeout_s=300)
+    assert report["status"] == "succeeded", report["error"]
+    assert "report.md" in report["links"]["files"]
+    bad = client.post(f"/api/v1/sweeps/{sweep['id']}/diagnoses", json={"max_steps": 99})
+    assert bad.status_code == 422 and bad.json()["error"]["field"] == "max_steps"
+
 
 def test_the_recording_of_an_unfinished_or_unknown_sweep_is_refused(client: httpx.Client) -> None:
     assert client.get("/api/v1/sweeps/999999/recording.h5").status_code == 404

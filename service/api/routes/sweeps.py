@@ -27,6 +27,7 @@ from service.api.routes.bench import require_bench
 from service.api.routes.jobs import job_out
 from service.api.schemas import (
     API_PREFIX,
+    DiagnoseJobOut,
     IdentifyJobOut,
     PageLimit,
     PageOffset,
@@ -36,6 +37,7 @@ from service.api.schemas import (
 from service.api.sweep_launch import SweepIn, launch_sweep
 from service.api.sweep_recordings import accept_sweep_job, export, recording_path
 from service.bench_control import BenchController
+from service.jobs.diagnose_job import DiagnoseJobOptions
 from service.jobs.identify_job import IdentifyJobOptions
 from service.store.models import JobKind, SweepStatus
 from service.store.sweeps import SweepRecord, SweepStore
@@ -122,6 +124,12 @@ class SweepList(BaseModel):
 
 class SweepJobIn(IdentifyJobOptions):
     """Options of the identification job (as for POST /jobs)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+
+class SweepDiagnosisIn(DiagnoseJobOptions):
+    """Options of the diagnosis (as for POST /diagnoses)."""
 
     model_config = ConfigDict(extra="forbid")
 
@@ -303,3 +311,37 @@ async def identify_sweep(
     out = job_out(request, job)
     response.headers["Location"] = out.links.self
     return out
+
+
+@router.post(
+    "/sweeps/{sweep_id}/diagnoses",
+    status_code=201,
+    response_model=DiagnoseJobOut,
+    operation_id="submit_sweep_diagnose",
+    responses=created("diagnose job") | responses(400, 401, 403, 404, 409, 422),
+)
+async def diagnose_sweep(
+    request: Request,
+    response: Response,
+    sweep_id: SweepId,
+    principal: Operator,
+    options: Annotated[SweepDiagnosisIn | None, Body()] = None,
+) -> DiagnoseJobOut:
+    """The model doctor on the sweep's recording (JSON body: the options of POST /diagnoses, all
+    optional). 409 until the sweep has ended. Answers 201 with Location: the job."""
+    services = request.app.state.services
+    record = await load_sweep(request, sweep_id)
+    job_options = DiagnoseJobOptions.model_validate((options or SweepDiagnosisIn()).model_dump())
+    job = await asyncio.to_thread(
+        accept_sweep_job,
+        services.settings,
+        services.jobs,
+        record,
+        job_options,
+        principal.key_id,
+        JobKind.DIAGNOSE,
+    )
+    services.manager.enqueue(job)
+    out = job_out(request, job)
+    response.headers["Location"] = out.links.self
+    return out  # type: ignore[return-value]
