@@ -6,7 +6,7 @@ import { initStartForm } from "./form.js";
 import { initHistory, loadHistory, loadSchedules } from "./history.js";
 import { BenchFeed, LiveChart } from "./live.js";
 import { can, setRole } from "./roles.js";
-import { rememberVehicle, showPending, showResult } from "./result.js";
+import { showPending, showResult } from "./result.js";
 
 const $ = (id) => document.getElementById(id);
 
@@ -20,20 +20,10 @@ const page = {
 
 // ---- sign-in ---------------------------------------------------------------------------------------------
 
-async function whoami() {
-  try {
-    return await api("/whoami");
-  } catch (error) {
-    if (!(error instanceof ApiFailure) || error.status !== 404) throw error;
-    await api("/status"); // a service without /whoami: the key is valid; assume the least role
-    return { key_id: "?", role: "viewer" };
-  }
-}
-
 async function signIn(key) {
   storeKey(key);
   try {
-    const me = await whoami();
+    const me = await api("/whoami");
     enter(me);
   } catch (error) {
     forgetKey();
@@ -49,7 +39,8 @@ function enter(me) {
   $("login").hidden = true;
   $("app").hidden = false;
   $("session-actions").hidden = false;
-  $("whoami").textContent = `${me.role} (key ${me.key_id})`;
+  $("whoami").textContent = me.role;
+  $("whoami").title = `key id ${me.key_id}`;
   $("login-key").value = "";
   page.chart = new LiveChart($("live-chart"), $("live-legend"));
   page.feed = new BenchFeed({ onState, onSamples: (s) => page.chart.add(s), onError: feedError });
@@ -145,9 +136,8 @@ async function abortSweep() {
 
 // ---- from a sweep to its result --------------------------------------------------------------------------
 
-function sweepStarted(sweep, body) {
+function sweepStarted(sweep) {
   page.startedHere.add(sweep.id);
-  rememberVehicle(sweep.id, body.vehicle_toml);
   $("result-status").textContent = "";
   $("bench-status").textContent = `Sweep ${sweep.id} requested`;
   loadHistory(openSweep);
@@ -156,13 +146,6 @@ function sweepStarted(sweep, body) {
 async function sweepEnded(id) {
   loadHistory(openSweep);
   await openSweep({ id }, { identify: page.startedHere.has(id) && can("operator") });
-}
-
-/** The newest identify job on a sweep: the sweep's latest_job_id, else a look through the job list. */
-async function latestJob(sweep) {
-  if (sweep.latest_job_id !== undefined) return sweep.latest_job_id;
-  const { jobs } = await api("/jobs?kind=identify&limit=200");
-  return jobs.find((job) => job.sweep_id === sweep.id)?.id ?? null;
 }
 
 /** Open the result of a sweep (a history row, or the sweep that just ended). */
@@ -179,7 +162,7 @@ async function openSweep({ id }, { identify = false } = {}) {
       showPending(sweep, `Sweep ${id} ${sweep.status}${sweep.reason ? `: ${sweep.reason}` : ""}; no result.`);
       return;
     }
-    let jobId = await latestJob(sweep);
+    let jobId = sweep.latest_job_id;
     if (jobId === null && identify) {
       status.textContent = `identifying sweep ${id}…`;
       jobId = (await api(`/sweeps/${id}/jobs`, { method: "POST", body: {} })).id;

@@ -1,11 +1,10 @@
 // The live bench: the SSE stream GET /api/v1/bench/live read with fetch + ReadableStream (EventSource cannot
 // send the Bearer header), and the live chart of plate, wheel and body drawn on a <canvas>.
 
-import { API, ApiFailure, api, pause, storedKey } from "./api.js";
+import { API, ApiFailure, pause, storedKey } from "./api.js";
 import { ticks } from "./axes.js";
 
 const RECONNECT_MS = 1000;
-const POLL_MS = 500;
 
 /**
  * Split an SSE byte stream into events. `feed(text)` takes the next chunk and calls `onEvent(name, data)`
@@ -40,8 +39,7 @@ export class SseParser {
 
 /**
  * Follow the bench: `onState({busy, sweep_id, progress})` and `onSamples({sweep_id, t_s, channels})`.
- * Reconnects after a dropped stream; a service without the live stream (404) is polled at GET /bench
- * instead (progress only, no samples). `stop()` ends it.
+ * Reconnects a second after a dropped stream. `stop()` ends it.
  */
 export class BenchFeed {
   constructor({ onState, onSamples, onError }) {
@@ -63,9 +61,9 @@ export class BenchFeed {
         await this.stream(signal);
       } catch (error) {
         if (signal.aborted) return;
-        if (error instanceof ApiFailure && error.status === 404) return this.poll(signal);
-        if (error instanceof ApiFailure && error.status === 401) return this.onError(error);
         this.onError(error);
+        // a key no longer valid, or no bench: trying again would not help
+        if (error instanceof ApiFailure && [401, 403, 503].includes(error.status)) return;
       }
       try {
         await pause(RECONNECT_MS, signal);
@@ -100,23 +98,6 @@ export class BenchFeed {
       parser.feed(value);
     }
   }
-
-  async poll(signal) {
-    while (!signal.aborted) {
-      try {
-        const bench = await api("/bench", { signal });
-        this.onState({ busy: bench.busy, sweep_id: bench.sweep_id, progress: bench.progress });
-      } catch (error) {
-        if (signal.aborted) return;
-        this.onError(error);
-      }
-      try {
-        await pause(POLL_MS, signal);
-      } catch {
-        return;
-      }
-    }
-  }
 }
 
 /** Channel name -> [label, colour, dash]: plate, wheel, body; an axle's right side dashed. */
@@ -125,6 +106,12 @@ const CHANNELS = {
   x_t: ["wheel", "#ffb347", []],
   x_s: ["body", "#9be37d", []],
 };
+
+/** Plate, wheel, body; left before right: the order of the legend and of drawing. */
+function byChannel(a, b) {
+  const rank = (name) => Object.keys(CHANNELS).indexOf(name.slice(0, 3)) * 2 + (name.slice(4) === "r" ? 1 : 0);
+  return rank(a) - rank(b);
+}
 
 function channelStyle(name) {
   const [base, side] = [name.slice(0, 3), name.slice(4)];
@@ -161,7 +148,8 @@ export class LiveChart {
 
   add({ sweep_id: sweepId, t_s: t, channels }) {
     if (sweepId !== this.sweepId) this.clear(sweepId);
-    for (const [name, values] of Object.entries(channels)) {
+    for (const name of Object.keys(channels).sort(byChannel)) {
+      const values = channels[name];
       if (!this.series[name]) {
         this.series[name] = [];
         const { label, colour, dash } = channelStyle(name);
@@ -218,8 +206,8 @@ export class LiveChart {
         hi = Math.max(hi, v * 1000);
       }
     }
-    const t1 = t.length ? t[t.length - 1] : this.windowS;
-    const t0 = t1 - this.windowS;
+    const t0 = t.length ? Math.max(t[0], t[t.length - 1] - this.windowS) : 0;
+    const t1 = t0 + this.windowS;
     const x = (time) => pad.left + ((time - t0) / this.windowS) * plotW;
     const y = (mm) => pad.top + (1 - (mm - lo) / (hi - lo)) * plotH;
     g.strokeStyle = "#3a4756";

@@ -2,6 +2,7 @@
 // (estimates, kept apart), the verdict, the downloads and the model doctor's report.
 
 import { api, download, fetchBlob, waitForJob } from "./api.js";
+import { can } from "./roles.js";
 import { curveSvg } from "./curve.js";
 
 const $ = (id) => document.getElementById(id);
@@ -150,34 +151,13 @@ function wireDownloads(sweep, job) {
   }
 }
 
-/** Vehicle files the page submitted, by sweep id (for the doctor's upload). */
-export function rememberVehicle(sweepId, toml) {
-  sessionStorage.setItem(`shockbench.vehicle.${sweepId}`, toml);
-}
-
-async function submitDiagnosis(sweep) {
-  try {
-    return await api(`/sweeps/${sweep.id}/diagnoses`, { method: "POST", body: {} });
-  } catch (error) {
-    if (error.status !== 404 && error.status !== 405) throw error;
-  }
-  const vehicle = sessionStorage.getItem(`shockbench.vehicle.${sweep.id}`);
-  if (!vehicle) {
-    throw new Error("this service diagnoses uploads only, and this browser did not start this sweep");
-  }
-  const form = new FormData();
-  form.append("recording", await fetchBlob(sweep.links.recording_csv), `sweep-${sweep.id}.csv`);
-  form.append("vehicle", new Blob([vehicle], { type: "application/toml" }), "vehicle.toml");
-  return api("/diagnoses", { method: "POST", body: form });
-}
-
 async function runDoctor(sweep) {
   const status = $("doctor-status");
   const button = $("run-doctor");
   button.disabled = true;
   status.textContent = "submitting the diagnosis…";
   try {
-    const submitted = await submitDiagnosis(sweep);
+    const submitted = await api(`/sweeps/${sweep.id}/diagnoses`, { method: "POST", body: {} });
     const job = await waitForJob(submitted.links.self, (now) => {
       const phase = now.progress ? ` (${now.progress.stage ?? now.progress.phase ?? ""})` : "";
       status.textContent = `diagnosis ${now.id}: ${now.status}${phase}`;
@@ -190,6 +170,6 @@ async function runDoctor(sweep) {
   } catch (error) {
     status.textContent = `the doctor could not run: ${error.message}`;
   } finally {
-    button.disabled = false;
+    button.disabled = !can("operator");
   }
 }

@@ -12,6 +12,7 @@ import shutil
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
+from pathlib import Path
 
 import pytest
 
@@ -39,9 +40,11 @@ def find_chromium() -> Chromium:
 
 
 @contextmanager
-def chromium_driver(chromium: Chromium, width: int = 1280, height: int = 800) -> Iterator[object]:
+def chromium_driver(
+    chromium: Chromium, downloads: Path, width: int = 1280, height: int = 800
+) -> Iterator[object]:
     """A headless Chromium with a viewport of width x height CSS pixels, whose console log is kept
-    (`console_errors`)."""
+    (`console_errors`), and which saves downloads in the folder `downloads` without asking."""
     from selenium import webdriver
     from selenium.webdriver.chrome.service import Service
 
@@ -59,9 +62,13 @@ def chromium_driver(chromium: Chromium, width: int = 1280, height: int = 800) ->
     ):
         options.add_argument(argument)
     options.set_capability("goog:loggingPrefs", {"browser": "ALL"})
+    prefs = {"download.default_directory": str(downloads), "download.prompt_for_download": False}
+    options.add_experimental_option("prefs", prefs)
     driver = webdriver.Chrome(options=options, service=Service(chromium.driver))
     try:
         set_viewport(driver, width, height)
+        behaviour = {"behavior": "allow", "downloadPath": str(downloads)}
+        driver.execute_cdp_cmd("Page.setDownloadBehavior", behaviour)  # type: ignore[attr-defined]
         yield driver
     finally:
         driver.quit()

@@ -8,8 +8,10 @@ The simulated bench runs in simulated time, so a sweep of a few seconds keeps th
 
 from __future__ import annotations
 
+import json
 import re
 from collections.abc import Callable, Iterator
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -51,9 +53,10 @@ def service(tmp_path_factory: pytest.TempPathFactory, chromium: Chromium) -> Ite
 class Page:
     """The operator page in a browser: find by data-testid, wait for a condition."""
 
-    def __init__(self, driver: Any, url: str) -> None:
+    def __init__(self, driver: Any, url: str, downloads: Path) -> None:
         self.driver = driver
         self.url = url
+        self.downloads = downloads
         self.expected_errors: tuple[str, ...] = ()
         driver.get(url)
 
@@ -108,9 +111,9 @@ class Page:
 
 
 @pytest.fixture
-def page(service: ServeProcess, chromium: Chromium) -> Iterator[Page]:
-    with chromium_driver(chromium) as driver:
-        page = Page(driver, service.url + "/")
+def page(service: ServeProcess, chromium: Chromium, tmp_path: Path) -> Iterator[Page]:
+    with chromium_driver(chromium, tmp_path / "downloads") as driver:
+        page = Page(driver, service.url + "/", tmp_path / "downloads")
         yield page
         errors = console_errors(driver, page.expected_errors)
         assert not errors, f"browser console errors: {errors}"
@@ -145,7 +148,7 @@ def test_an_operator_runs_a_test_and_reads_curve_figures_and_verdict(
     chart = page.testid("live-chart")
     page.wait(lambda: int(chart.get_attribute("data-points") or 0) > 0, "samples in the live chart")
     page.wait(lambda: int(chart.get_attribute("data-frames") or 0) >= 3, "the live chart redrawn")
-    assert plate_pixels(page) > 100, "the plate's trace is not drawn"
+    page.wait(lambda: plate_pixels(page) > 100, "the plate's trace drawn")
 
     page.wait(lambda: page.testid("result-curve").find_elements("css selector", "svg"), "the curve", WAIT_S)
     curve = page.testid("result-curve")
@@ -167,6 +170,19 @@ def test_an_operator_runs_a_test_and_reads_curve_figures_and_verdict(
         "tyre_pressure_bar": 2.2,
         "operator_name": "A. Tester",
     }
+
+    page.by_id("dl-json").click()
+    saved = page.downloads / f"job-{sweep['latest_job_id']}.json"
+    page.wait(saved.is_file, "the result JSON saved")
+    assert json.loads(saved.read_text())["result"]["curves"][0]["force_N"]
+    page.by_id("dl-csv").click()
+    saved = page.downloads / f"sweep-{sweep['id']}.csv"
+    page.wait(saved.is_file, "the recording CSV saved")
+    assert "t,x_s,x_t,x_r" in saved.read_text()
+
+    page.by_id("run-doctor").click()
+    page.wait(lambda: page.by_id("doctor-text").text, "the model doctor's report")
+    assert page.by_id("doctor-text").text.startswith("# Model doctor")
 
     from selenium.webdriver.common.keys import Keys
 
