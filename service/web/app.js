@@ -36,6 +36,7 @@ async function signIn(key) {
 
 function enter(me) {
   setRole(me.role);
+  $("abort-sweep").disabled = true; // until the bench says a sweep runs
   $("login").hidden = true;
   $("app").hidden = false;
   $("session-actions").hidden = false;
@@ -86,6 +87,13 @@ async function loadBench() {
   }
 }
 
+/** The phases the followed sweep went through, in data-phases (a short phase may pass between looks). */
+function notePhase(phase) {
+  const seen = $("sweep-progress").dataset;
+  const phases = (seen.phases ?? "").split(" ").filter(Boolean);
+  if (!phases.includes(phase)) seen.phases = [...phases, phase].join(" ");
+}
+
 function onState({ busy, sweep_id: sweepId, progress }) {
   const moving = busy && progress && progress.phase !== "done";
   $("bench-status").textContent = busy
@@ -95,17 +103,19 @@ function onState({ busy, sweep_id: sweepId, progress }) {
   $("running-sweep").textContent = sweepId ? `sweep ${sweepId}` : "none";
   document.body.classList.toggle("plate-moving", Boolean(busy));
   $("abort-sweep").disabled = !(busy && sweepId && can("operator"));
+  if (busy && sweepId && sweepId !== page.following) {
+    page.following = sweepId;
+    page.chart.clear(sweepId);
+    $("sweep-progress").dataset.phases = "";
+  }
   if (progress) {
+    notePhase(progress.phase);
     $("progress-bar").value = progress.fraction;
     $("progress-phase").textContent = progress.phase;
     $("progress-elapsed").textContent = `${progress.elapsed_s.toFixed(1)} s of ${progress.total_s.toFixed(1)} s`;
     $("progress-frequency").textContent = `${progress.frequency_Hz.toFixed(2)} Hz`;
   }
-  if (busy && sweepId && sweepId !== page.following) {
-    page.following = sweepId;
-    page.chart.clear(sweepId);
-    $("progress-phase").textContent = progress?.phase ?? "starting";
-  } else if (!busy && page.following !== null) {
+  if (!busy && page.following !== null) {
     const ended = page.following;
     page.following = null;
     $("progress-phase").textContent = "ended";

@@ -97,6 +97,7 @@ class Page:
     def start_sweep(self, duration_s: float, vehicle_id: str) -> None:
         """Fill the form (the vehicle pasted as TOML) and press start."""
         self.by_id("vehicle-source-toml").click()
+        assert not self.by_id("mass-kg").is_displayed()  # the mass-only form gives way to the file
         self.testid("vehicle-toml").clear()
         self.testid("vehicle-toml").send_keys(VEHICLE_TOML)
         self.fill("vehicle-id", vehicle_id)
@@ -142,9 +143,12 @@ def test_an_operator_runs_a_test_and_reads_curve_figures_and_verdict(
     assert page.driver.execute_script("return sessionStorage.getItem('shockbench.key')") == OPERATOR
 
     page.start_sweep(duration_s=3, vehicle_id="WVW ZZZ 1JZ 3W386752")
-    page.wait(lambda: page.phase() == "sweeping", "the sweep's progress: sweeping")
-    progress = page.testid("sweep-progress").text
-    assert re.search(r"\d+\.\d s of \d+\.\d s", progress) and re.search(r"\d+\.\d\d Hz", progress), progress
+    progress = page.testid("sweep-progress")
+    page.wait(
+        lambda: "sweeping" in (progress.get_attribute("data-phases") or "").split(), "the progress: sweeping"
+    )
+    shown = progress.text
+    assert re.search(r"\d+\.\d s of \d+\.\d s", shown) and re.search(r"\d+\.\d\d Hz", shown), shown
     chart = page.testid("live-chart")
     page.wait(lambda: int(chart.get_attribute("data-points") or 0) > 0, "samples in the live chart")
     page.wait(lambda: int(chart.get_attribute("data-frames") or 0) >= 3, "the live chart redrawn")
@@ -223,6 +227,18 @@ def test_a_sweep_setting_the_api_refuses_is_shown_beside_its_field(page: Page) -
     assert "duration_s" in error.text
     assert page.by_id("duration-s").get_attribute("aria-invalid") == "true"
     assert page.by_id("start-error").text == ""
+
+
+def test_an_unknown_key_is_refused_and_not_kept(page: Page) -> None:
+    page.expected_errors = (
+        "/api/v1/whoami - Failed to load resource: the server responded with a status of 401",
+    )
+    page.testid("login-key").send_keys("not-a-key-of-this-service")
+    page.testid("login-submit").click()
+    page.wait(lambda: page.by_id("login-error").text, "the sign-in error")
+    assert "not valid" in page.by_id("login-error").text
+    assert page.driver.execute_script("return sessionStorage.length") == 0
+    assert not page.by_id("app").is_displayed()
 
 
 def test_a_viewer_sees_no_enabled_control_and_the_api_refuses_it(page: Page, service: ServeProcess) -> None:
