@@ -282,3 +282,82 @@ def test_an_admin_schedules_a_test_and_cancels_it(page: Page) -> None:
     )
     cancel[0].click()
     page.wait(lambda: "cancelled" in page.by_id("schedule-body").text, "the test cancelled")
+
+
+def run_module(page: Page, script: str) -> Any:
+    """Run `script` in the page as the body of an async function given the page's modules as `web`
+    (web.live, web.result, ...); answers what the script returns."""
+    wrapper = """
+        const done = arguments[arguments.length - 1];
+        const names = ["axes", "curve", "live", "result"];
+        Promise.all(names.map((name) => import(`/web/${name}.js`)))
+          .then(async (modules) => {
+            const web = Object.fromEntries(names.map((name, i) => [name, modules[i]]));
+            done({ value: await (async () => { %s })() });
+          })
+          .catch((error) => done({ error: String(error) }));"""
+    answer = page.driver.execute_async_script(wrapper % script)
+    assert "error" not in answer, answer["error"]
+    return answer["value"]
+
+
+def test_the_event_stream_parser_joins_events_split_across_chunks(page: Page) -> None:
+    events = run_module(
+        page,
+        """
+        const seen = [];
+        const parser = new web.live.SseParser((name, data) => seen.push([name, data]));
+        const text = ': keep-alive\\n\\nid: 1\\nevent: state\\ndata: {"busy":true}\\n\\n' +
+          'id: 2\\r\\nevent: samples\\r\\ndata: {"t_s":[0.01,0.02]}\\r\\n\\r\\n';
+        for (let i = 0; i < text.length; i += 7) parser.feed(text.slice(i, i + 7));
+        return seen;""",
+    )
+    assert events == [["state", {"busy": True}], ["samples", {"t_s": [0.01, 0.02]}]]
+
+
+def test_an_axle_result_shows_left_and_right_curves_and_figures(page: Page) -> None:
+    page.sign_in(VIEWER)
+    curve = {
+        "velocity_m_s": [-0.4, -0.2, 0.0, 0.2, 0.4],
+        "force_N": [-600.0, -350.0, 0.0, 500.0, 900.0],
+        "force_N_low": [-650.0, -380.0, -20.0, 470.0, 850.0],
+        "force_N_high": [-550.0, -320.0, 20.0, 530.0, 950.0],
+        "tanh": {"c_s": 800.0, "kappa": 300.0, "mu": 10.0, "beta": 0.1},
+        "outliers": [],
+    }
+    corner = {"eusama_percent": 48.0, "phase_shift_min_deg": 41.0, "damping_ratio": 0.3}
+    result = {
+        "curves": [{**curve, "corner": "left"}, {**curve, "corner": "right"}],
+        "masses_kg": {"sprung": 750.0, "unsprung": 45.0},
+        "stiffness_N_per_m": {
+            "spring": 26000.0,
+            "tyre": 210000.0,
+            "anti_roll_bar": 18000.0,
+            "identified": [],
+        },
+        "tyre_damping_Ns_per_m": 1500.0,
+        "tyre_model": "maxwell",
+        "gap_m": 0.0002,
+        "gap_diverged": False,
+        "inspection": {
+            "left": corner,
+            "right": {**corner, "eusama_percent": 30.0},
+            "imbalance": {"eusama_difference_points": 18.0, "damping_difference_percent": 5.0},
+        },
+        "verdict": {
+            "outcome": "fail",
+            "thresholds_version": "test",
+            "reasons": ["left/right EUSAMA differ by 37.5% (> 20%)"],
+        },
+    }
+    sweep = {"id": 99, "test": {"vehicle_id": "AXLE-1"}, "links": {"self": "/api/v1/sweeps/99"}}
+    job = {"id": 98, "links": {"self": "/api/v1/jobs/98"}}
+    run_module(page, f"web.result.showResult({json.dumps(sweep)}, {json.dumps({**job, 'result': result})});")
+    titles = [t.text for t in page.testid("result-curve").find_elements("css selector", "svg .chart-title")]
+    assert titles == ["Left damper", "Right damper"]
+    assert page.testid("result-eusama").text == "left 48 %, right 30 %"
+    lane = page.by_id("lane-figures").text
+    assert "Left/right EUSAMA difference 18 points" in lane and "Minimum phase angle right 41 °" in lane
+    assert page.testid("result-verdict").get_attribute("data-outcome") == "fail"
+    assert "37.5%" in page.testid("result-verdict").text
+    assert "Anti-roll bar 18 kN/m" in page.by_id("model-figures").text
