@@ -248,7 +248,8 @@ def test_a_viewer_sees_no_enabled_control_and_the_api_refuses_it(page: Page, ser
     assert not page.by_id("abort-sweep").is_enabled()
     assert not page.by_id("run-doctor").is_enabled()
     assert not page.by_id("schedules-title").is_displayed()
-    page.driver.execute_script("document.getElementById('start-form').requestSubmit()")
+    page.fill("vehicle-id", "VIEWER-1")
+    page.driver.execute_script("document.getElementById('start-form').requestSubmit()")  # Enter in a field
     with service.client(VIEWER) as client:
         refused = client.post("/api/v1/sweeps", json={"vehicle_toml": VEHICLE_TOML, "duration_s": 2})
         assert refused.status_code == 403
