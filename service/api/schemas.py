@@ -85,6 +85,7 @@ class JobOutBase(BaseModel):
     """What every job carries; `kind` says which options and result (IdentifyJobOut, DiagnoseJobOut)."""
 
     id: int
+    lane: str = Field(description="the lane it was submitted on")
     kind: str
     status: JobStatus
     options: BaseModel
@@ -151,6 +152,7 @@ def job_view(record: JobRecord, live: Progress | None = None, *, with_result: bo
     return JOB_MODELS[record.kind].model_validate(
         {
             "id": record.id,
+            "lane": record.lane,
             "kind": record.kind,
             "status": record.status,
             "options": record.options,
@@ -318,6 +320,7 @@ class CurrentJobOut(BaseModel):
 class StatusOut(BaseModel):
     service: str = "shockbench"
     version: str
+    lane: str = Field(description="this instance's lane (serve --lane)")
     uptime_s: float
     worker: WorkerOut
     queue_length: int = Field(description="jobs waiting for the worker")

@@ -81,10 +81,11 @@ def run_serve(args: argparse.Namespace) -> int:
         **limits,  # type: ignore[arg-type]
         worker=WorkerSettings(nice=args.worker_nice),
         **({"verdict": verdict} if verdict is not None else {}),  # type: ignore[arg-type]
+        **({"lane": args.lane} if args.lane else {}),  # type: ignore[arg-type]
     )
     database = Database(settings.resolved_database_url)  # a bad URL or an unreachable server: one line now
     try:
-        database.create_tables()
+        database.upgrade_schema()
     finally:
         database.dispose()
     logging.basicConfig(level=args.log_level.upper(), format="%(levelname)-9s %(name)s: %(message)s")
@@ -94,7 +95,11 @@ def run_serve(args: argparse.Namespace) -> int:
         raise CliError(f"cannot listen on {args.host}:{args.port} ({exc.strerror or exc})") from None
     url = url_of(sock)
     print(f"shockbench serve: listening on {url} (API {url}/api/v1, docs {url}/docs)", flush=True)
-    print(f"shockbench serve: data in {settings.data_dir}, database {database.safe_url}", flush=True)
+    print(
+        f"shockbench serve: lane {settings.lane!r}, data in {settings.data_dir}, "
+        f"database {database.safe_url}",
+        flush=True,
+    )
     if generated_key is not None:
         print(
             "shockbench serve: no keys file, so this operator key was generated for this run; send it as "
@@ -150,6 +155,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="the limits verdicts are judged by: a [verdict] table (version, phase_fail_below_deg, "
         "eusama_pass_from_percent, eusama_fail_below_percent, imbalance_check_above_percent, "
         "imbalance_fail_above_percent); default: EGEA SPECSUS2018 and EUSAMA practice (README)",
+    )
+    p.add_argument(
+        "--lane",
+        default=None,
+        help="this instance's lane: stamped on its sweeps, jobs and tests, its scheduler runs only its "
+        "own (default: the host name)",
     )
     p.add_argument("--data", default="shockbench-data", help="data directory (default ./shockbench-data)")
     p.add_argument("--database", default=None, help="SQLAlchemy URL (default: SQLite in the data directory)")

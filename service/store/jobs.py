@@ -33,6 +33,8 @@ class JobFiles:
 @dataclass(frozen=True)
 class JobRecord:
     id: int
+    lane: str
+    """The lane it belongs to ("" for rows from before lanes)."""
     kind: str
     status: JobStatus
     options: dict[str, Any]
@@ -54,6 +56,7 @@ class JobRecord:
     def of(cls, row: JobRow) -> JobRecord:
         return cls(
             id=row.id,
+            lane=row.lane,
             kind=row.kind,
             status=JobStatus(row.status),
             options=dict(row.options or {}),
@@ -74,8 +77,10 @@ class JobRecord:
 
 
 class JobStore:
-    def __init__(self, database: Database) -> None:
+    def __init__(self, database: Database, lane: str = "") -> None:
+        """lane: stamped on every row this store creates (the service's `--lane`)."""
         self.db = database
+        self.lane = lane
 
     def create(
         self,
@@ -91,6 +96,7 @@ class JobStore:
         uploaded files into the job's folder) and says where; if it raises, no job is created."""
         with self.db.transaction() as session:
             row = JobRow(
+                lane=self.lane,
                 kind=kind,
                 status=JobStatus.QUEUED.value,
                 options=options,
@@ -117,11 +123,19 @@ class JobStore:
             return JobRecord.of(row) if row is not None else None
 
     def list_jobs(
-        self, *, status: JobStatus | None = None, kind: str | None = None, limit: int = 50, offset: int = 0
+        self,
+        *,
+        status: JobStatus | None = None,
+        kind: str | None = None,
+        lane: str | None = None,
+        limit: int = 50,
+        offset: int = 0,
     ) -> tuple[list[JobRecord], int]:
         """Newest first, and the total count that matches."""
         query = select(JobRow)
         count = select(func.count()).select_from(JobRow)
+        if lane is not None:
+            query, count = query.where(JobRow.lane == lane), count.where(JobRow.lane == lane)
         if status is not None:
             query, count = (
                 query.where(JobRow.status == status.value),

@@ -80,10 +80,12 @@ class SweepRow(Base):
     """A sweep on the bench (filled in by the acquisition layer). The recording stays in its file."""
 
     __tablename__ = "sweeps"
-    __table_args__ = {"sqlite_autoincrement": True}  # noqa: RUF012 - SQLAlchemy API; ids are never reused
+    __table_args__ = (Index("ix_sweeps_lane", "lane"), {"sqlite_autoincrement": True})  # ids never reused
 
     id: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=True)
     bench: Mapped[str] = mapped_column(String(100), default="default")
+    lane: Mapped[str] = mapped_column(String(100), default="", server_default="")
+    """The lane (`serve --lane`) whose bench ran it; "" for rows from before lanes."""
     status: Mapped[str] = mapped_column(String(16), default=SweepStatus.REQUESTED.value)
     settings: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
     """Sweep settings as submitted (frequencies, amplitude, duration ...)."""
@@ -105,10 +107,16 @@ class JobRow(Base):
     the data directory) or a sweep's recording; the result is the estimator's JSON."""
 
     __tablename__ = "jobs"
-    __table_args__ = (Index("ix_jobs_status", "status"), {"sqlite_autoincrement": True})
+    __table_args__ = (
+        Index("ix_jobs_status", "status"),
+        Index("ix_jobs_lane", "lane"),
+        {"sqlite_autoincrement": True},
+    )
 
     id: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=True)
     """Increasing: the submission order, which is the order jobs run in (FIFO)."""
+    lane: Mapped[str] = mapped_column(String(100), default="", server_default="")
+    """The lane it was submitted on; "" for rows from before lanes."""
     kind: Mapped[str] = mapped_column(String(16), default=JobKind.IDENTIFY.value)
     status: Mapped[str] = mapped_column(String(16), default=JobStatus.QUEUED.value)
     options: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
@@ -135,10 +143,16 @@ class ScheduleRow(Base):
     that is None, as soon as the bench is free. One test runs at a time per bench."""
 
     __tablename__ = "schedules"
-    __table_args__ = (Index("ix_schedules_bench_status", "bench", "status"), {"sqlite_autoincrement": True})
+    __table_args__ = (
+        Index("ix_schedules_bench_status", "bench", "status"),
+        Index("ix_schedules_lane", "lane"),
+        {"sqlite_autoincrement": True},
+    )
 
     id: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=True)
     bench: Mapped[str] = mapped_column(String(100), default="default")
+    lane: Mapped[str] = mapped_column(String(100), default="", server_default="")
+    """The lane whose scheduler runs it; "" for rows from before lanes."""
     vehicle_file: Mapped[str] = mapped_column(Text)
     sweep_settings: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
     job_options: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)

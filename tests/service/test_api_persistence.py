@@ -23,8 +23,10 @@ OPERATOR = "operator-key-0123456789"
 AUTH = {"Authorization": f"Bearer {OPERATOR}"}
 
 
-def settings_for(data_dir: Path) -> ServiceSettings:
-    return ServiceSettings(data_dir=data_dir, keys=KeyRing({OPERATOR: Role.OPERATOR}))
+def settings_for(data_dir: Path, database_url: str | None = None) -> ServiceSettings:
+    return ServiceSettings(
+        data_dir=data_dir, keys=KeyRing({OPERATOR: Role.OPERATOR}), database_url=database_url
+    )
 
 
 def finished(client: httpx.Client, job_id: int, timeout_s: float = 120) -> dict[str, Any]:
@@ -37,9 +39,11 @@ def upload(inputs: SimulatedInputs) -> dict[str, bytes]:
     return {"recording": inputs.recording.read_bytes(), "vehicle": inputs.vehicle.read_bytes()}
 
 
-def test_restarting_the_server_keeps_all_jobs_and_results(tmp_path: Path, inputs: SimulatedInputs) -> None:
+def test_restarting_the_server_keeps_all_jobs_and_results(
+    tmp_path: Path, inputs: SimulatedInputs, database_url: str
+) -> None:
     with (
-        LiveServer(create_app(settings_for(tmp_path))) as server,
+        LiveServer(create_app(settings_for(tmp_path, database_url))) as server,
         httpx.Client(base_url=server.url, headers=AUTH) as client,
     ):
         succeeded = client.post("/api/v1/jobs", files=upload(inputs), data={"output_error": "false"}).json()
@@ -50,7 +54,7 @@ def test_restarting_the_server_keeps_all_jobs_and_results(tmp_path: Path, inputs
     assert before[succeeded["id"]]["status"] == "succeeded"
 
     with (
-        LiveServer(create_app(settings_for(tmp_path))) as server,
+        LiveServer(create_app(settings_for(tmp_path, database_url))) as server,
         httpx.Client(base_url=server.url, headers=AUTH) as client,
     ):
         after = {j: client.get(f"/api/v1/jobs/{j}").json() for j in before}
@@ -65,7 +69,7 @@ def test_a_crash_leaves_running_jobs_failed_with_the_reason_and_queued_jobs_resu
     """The database as a crashed service leaves it: one job running, one queued."""
     settings = settings_for(tmp_path)
     database = Database(settings.resolved_database_url)
-    database.create_tables()
+    database.upgrade_schema()
     store = JobStore(database)
 
     def place(job_id: int) -> JobFiles:
@@ -130,9 +134,9 @@ def test_stopping_the_server_puts_the_running_job_back_in_the_queue_and_ends_eve
     assert record is not None and record.status is JobStatus.QUEUED and record.started_at is None
 
 
-def test_state_changes_have_one_winner(tmp_path: Path) -> None:
-    database = Database(f"sqlite:///{tmp_path / 'db.sqlite3'}")
-    database.create_tables()
+def test_state_changes_have_one_winner(tmp_path: Path, database_url: str) -> None:
+    database = Database(database_url)
+    database.upgrade_schema()
     store = JobStore(database)
     files = JobFiles(tmp_path / "r.csv", tmp_path / "v.toml", tmp_path)
     job = store.create("identify", {}, lambda _id: files, submitted_by="abc")
@@ -152,9 +156,9 @@ def test_state_changes_have_one_winner(tmp_path: Path) -> None:
     database.dispose()
 
 
-def test_a_job_whose_input_cannot_be_placed_is_not_created(tmp_path: Path) -> None:
-    database = Database(f"sqlite:///{tmp_path / 'db.sqlite3'}")
-    database.create_tables()
+def test_a_job_whose_input_cannot_be_placed_is_not_created(tmp_path: Path, database_url: str) -> None:
+    database = Database(database_url)
+    database.upgrade_schema()
     store = JobStore(database)
 
     def refuse(_job_id: int) -> JobFiles:
