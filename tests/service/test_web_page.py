@@ -163,6 +163,7 @@ def test_an_operator_runs_a_test_and_reads_curve_figures_and_verdict(
     verdict = page.testid("result-verdict")
     assert verdict.get_attribute("data-outcome") in ("pass", "fail", "check"), verdict.text
     assert "estimate" in page.by_id("result").text.lower()
+    assert "tyre pressure 2.2 bar; operator A. Tester" in page.by_id("result-record").text
     SCREENSHOT.parent.mkdir(exist_ok=True)
     assert page.driver.save_screenshot(str(SCREENSHOT)), SCREENSHOT
 
