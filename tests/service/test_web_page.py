@@ -14,6 +14,7 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
+import headless_chromium
 import pytest
 from headless_chromium import Chromium, chromium_driver, console_errors, find_chromium, set_viewport
 from live_server import ROOT, SERVE_STARTUP_TIMEOUT_S, ServeProcess, serve_process, wait_until
@@ -363,3 +364,13 @@ def test_an_axle_result_shows_left_and_right_curves_and_figures(page: Page) -> N
     assert page.testid("result-verdict").get_attribute("data-outcome") == "fail"
     assert "37.5%" in page.testid("result-verdict").text
     assert "Anti-roll bar 18 kN/m" in page.by_id("model-figures").text
+
+
+def test_without_chromium_the_tests_skip_except_in_ci(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(headless_chromium.shutil, "which", lambda _name: None)
+    monkeypatch.delenv("CI", raising=False)
+    with pytest.raises(pytest.skip.Exception, match="chromium and chromium-driver not installed"):
+        find_chromium()
+    monkeypatch.setenv("CI", "1")
+    with pytest.raises(pytest.fail.Exception, match="CI is set, so the browser tests must run"):
+        find_chromium()
