@@ -33,6 +33,7 @@ import importlib
 import importlib.util
 from collections.abc import Callable
 from functools import cache
+from types import ModuleType
 
 import numpy as np
 
@@ -89,16 +90,34 @@ def extension_name() -> str:
 
 
 @cache
+def _extension() -> ModuleType | None:
+    """The extension built ahead of time for the present source, or None where there is none (not built
+    for this source, or for this Python / numpy)."""
+    try:
+        return importlib.import_module(f"estimator.{extension_name()}")
+    except ImportError:
+        return None
+
+
+@cache
 def _kernel() -> tuple[str, Callable[..., None]]:
     """("extension" or "numba", the kernel's integrate function): the extension built ahead of time when
     it exists for the present source, else numba's just-in-time compile (loaded from its on-disk cache)."""
-    try:
-        extension = importlib.import_module(f"estimator.{extension_name()}")
+    extension = _extension()
+    if extension is not None:
         return "extension", extension.integrate
-    except ImportError:  # not built for this source (or for this Python / numpy): numba compiles it
-        from estimator.simulation_kernel_numba import _integrate
+    from estimator.simulation_kernel_numba import _integrate
 
-        return "numba", _integrate
+    return "numba", _integrate
+
+
+def compiled_recursion() -> Callable[[float, float, np.ndarray], None] | None:
+    """The extension's `recursion(a1, a2, right)` (in place, each column of a float (samples, columns)
+    array: y[n] + a1·y[n−1] + a2·y[n−2] = right[n], zero before n = 0), or None without an extension for
+    the present source. estimator.digital_filters then solves with LAPACK instead: it does not import numba,
+    whose import and cache load cost a fresh process more than its filtering."""
+    extension = _extension()
+    return None if extension is None else extension.recursion
 
 
 def kernel_in_use() -> str:
