@@ -67,13 +67,19 @@ TYRE_CODES = {TyreModel.MAXWELL: 0, TyreModel.KELVIN_VOIGT: 1, TyreModel.SPRING:
 STATE_SLOTS = 10
 """The kernel carries every model's state in 10 slots (the axle's); a quarter car leaves the last 5 at 0."""
 
-KERNEL_MODULES = ("estimator.simulation_kernel", "estimator.simulation_kernel_numba")
+KERNEL_MODULES = (
+    "estimator.simulation_kernel",
+    "estimator.simulation_kernel_numba",
+    "estimator.filter_kernel_numba",
+)
+"""The modules the extension is built from (its digest covers their source)."""
 EXTENSION_PREFIX = "_simulation_kernel_aot_"
 
 
 def source_digest() -> str:
-    """The kernel's version: a digest of the source of this module (the table layout) and of the kernel's,
-    as the import system reads them (the kernel module is not imported: that would import numba)."""
+    """The kernel's version: a digest of the source of this module (the table layout) and of the kernels'
+    (KERNEL_MODULES), as the import system reads them (the kernel modules are not imported: that would
+    import numba)."""
     digest = hashlib.sha256()
     for name in KERNEL_MODULES:
         spec = importlib.util.find_spec(name)
@@ -111,13 +117,12 @@ def _kernel() -> tuple[str, Callable[..., None]]:
     return "numba", _integrate
 
 
-def compiled_recursion() -> Callable[[float, float, np.ndarray], None] | None:
-    """The extension's `recursion(a1, a2, right)` (in place, each column of a float (samples, columns)
-    array: y[n] + a1·y[n−1] + a2·y[n−2] = right[n], zero before n = 0), or None without an extension for
-    the present source. estimator.digital_filters then solves with LAPACK instead: it does not import numba,
-    whose import and cache load cost a fresh process more than its filtering."""
-    extension = _extension()
-    return None if extension is None else extension.recursion
+def compiled_filters() -> ModuleType | None:
+    """The extension whose `recursion` and `zero_phase` run estimator.digital_filters' recursive filters
+    (source: estimator/filter_kernel_numba.py), or None without an extension for the present source.
+    digital_filters then uses LAPACK instead: it does not import numba, whose import and cache load cost a
+    fresh process more than its filtering."""
+    return _extension()
 
 
 def kernel_in_use() -> str:

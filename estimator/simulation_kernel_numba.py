@@ -1,8 +1,6 @@
 """The output-error simulation's kernel for numba: the fixed-step Runge-Kutta of estimator.dynamics (quarter
 car or axle, piecewise-linear dampers, Maxwell / Kelvin-Voigt / spring tyre with a parallel dashpot, Coulomb
-friction, cubic spring, tyre lift-off) for a population of models, one column each; and the second-order
-recursion of estimator.digital_filters' recursive filters (`_recursion`, exported as `recursion`), so that
-the filters need not import scipy.linalg for LAPACK's banded solve when the extension is built.
+friction, cubic spring, tyre lift-off) for a population of models, one column each.
 
 Callers use estimator.simulation_kernel (integrate_compiled), which lays the models out in the tables this
 kernel reads and runs it either as built ahead of time into a Python extension (service/kernel_build.py,
@@ -293,21 +291,3 @@ INTEGRATE_SIGNATURE = (
     " f8[:, :, :], f8[:, :, :], f8[:, :, :])"
 )
 """_integrate's argument types, as the extension exports it (any memory layout)."""
-
-
-@numba.njit(cache=True, error_model="numpy")
-def _recursion(a1: float, a2: float, right) -> None:
-    """In place, every column of right (samples, columns): y[n] + a1·y[n−1] + a2·y[n−2] = right[n], zero
-    before n = 0 (estimator.digital_filters' recursive filters). Forward substitution in LAPACK dtbsv's order
-    of operations (y[n] = (right[n] − a2·y[n−2]) − a1·y[n−1]), a column at a time: its samples contiguous in
-    the column-major arrays the filters pass."""
-    samples, columns = right.shape
-    for column in range(columns):
-        if samples > 1:
-            right[1, column] = right[1, column] - a1 * right[0, column]
-        for n in range(2, samples):
-            right[n, column] = (right[n, column] - a2 * right[n - 2, column]) - a1 * right[n - 1, column]
-
-
-RECURSION_SIGNATURE = "void(f8, f8, f8[:, :])"
-"""_recursion's argument types, as the extension exports it (any memory layout)."""

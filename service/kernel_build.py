@@ -1,6 +1,6 @@
 """Build the output-error simulation kernel ahead of time: numba's pycc compiles
-estimator/simulation_kernel_numba.py's `_integrate` (and `_recursion`, the recursive filters' loop) into the
-Python extension
+estimator/simulation_kernel_numba.py's `_integrate` (and estimator/filter_kernel_numba.py's recursive filters)
+into the Python extension
 `estimator/_simulation_kernel_aot_<digest>` that estimator.simulation_kernel loads when its digest matches the
 present source (see that module). `shockbench demo` runs this once; so can an install script:
 
@@ -26,14 +26,15 @@ KERNEL_FOLDER = Path(simulation_kernel.__file__).resolve().parent
 
 
 def build_extension(module_name: str, output_dir: Path) -> Path:
-    """Compile the kernel into the extension `module_name` (exporting `integrate` and the filters'
-    `recursion`) in output_dir; returns the extension's path."""
-    from estimator.simulation_kernel_numba import (
-        INTEGRATE_SIGNATURE,
+    """Compile the kernels into the extension `module_name` (exporting `integrate` and the filters'
+    `recursion` and `zero_phase`) in output_dir; returns the extension's path."""
+    from estimator.filter_kernel_numba import (
         RECURSION_SIGNATURE,
-        _integrate,
+        ZERO_PHASE_SIGNATURE,
         _recursion,
+        _zero_phase,
     )
+    from estimator.simulation_kernel_numba import INTEGRATE_SIGNATURE, _integrate
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # pycc is pending deprecation in numba; no replacement exists yet
@@ -44,6 +45,7 @@ def build_extension(module_name: str, output_dir: Path) -> Path:
         compiler.verbose = False
         compiler.export("integrate", INTEGRATE_SIGNATURE)(_integrate.py_func)
         compiler.export("recursion", RECURSION_SIGNATURE)(_recursion.py_func)
+        compiler.export("zero_phase", ZERO_PHASE_SIGNATURE)(_zero_phase.py_func)
         compiler.compile()
     built = [path for path in output_dir.iterdir() if path.name.startswith(module_name + ".")]
     if not built:

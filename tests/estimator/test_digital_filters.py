@@ -20,26 +20,26 @@ from estimator.digital_filters import (
     sosfiltfilt,
     welch_density,
 )
-from estimator.simulation_kernel import compiled_recursion
+from estimator.simulation_kernel import compiled_filters
 from service.kernel_build import compile_ahead
 
 RELATIVE_TOLERANCE = 1e-12
 
 
 @pytest.fixture(scope="module")
-def extension_recursion():
-    """The extension's compiled recursion, the extension built by compile_ahead if missing."""
+def extension():
+    """The extension with the compiled filters, built by compile_ahead if missing."""
     assert compile_ahead() == "extension"
-    recursion = compiled_recursion()
-    assert recursion is not None
-    return recursion
+    kernels = compiled_filters()
+    assert kernels is not None
+    return kernels
 
 
 @pytest.fixture(autouse=True, params=["compiled", "lapack"])
-def recursion(request, monkeypatch, extension_recursion) -> str:
-    """Runs the test with the extension's recursion, then with LAPACK's (no extension)."""
-    chosen = extension_recursion if request.param == "compiled" else None
-    monkeypatch.setattr(digital_filters, "compiled_recursion", lambda: chosen)
+def filters(request, monkeypatch, extension) -> str:
+    """Runs the test with the extension's filters, then with numpy and LAPACK's (no extension)."""
+    chosen = extension if request.param == "compiled" else None
+    monkeypatch.setattr(digital_filters, "compiled_filters", lambda: chosen)
     return request.param
 
 
@@ -124,7 +124,7 @@ def test_analytic_signal_equals_hilbert(samples: int) -> None:
     assert relative_difference(analytic_signal(x), signal.hilbert(x)) < RELATIVE_TOLERANCE
 
 
-def test_compiled_recursion_equals_lapack(extension_recursion) -> None:
+def test_compiled_recursion_equals_lapack(extension) -> None:
     """The extension's recursion against LAPACK's dtbtrs on 300 random stable second- and first-order
     recursions (poles of radius up to 0.9995), 1-3000 samples, 1-40 columns, column-major or not."""
     rng = np.random.default_rng(15)
@@ -136,13 +136,13 @@ def test_compiled_recursion_equals_lapack(extension_recursion) -> None:
         right = rng.standard_normal((samples, columns)) * rng.uniform(1e-6, 1e6)
         right = np.asfortranarray(right) if rng.random() < 0.8 else right
         reference = lapack_recursion(a1, a2, np.asfortranarray(right))
-        extension_recursion(a1, a2, right)
+        extension.recursion(a1, a2, right)
         worst = max(worst, relative_difference(right, reference))
     assert worst < RELATIVE_TOLERANCE
 
 
-def test_doctor_sized_filtering_same_with_both_recursions(monkeypatch, extension_recursion) -> None:
-    """The doctor's multi-column uses, each with the extension's recursion and with LAPACK's: a damper
+def test_doctor_sized_filtering_same_with_both_paths(monkeypatch, extension) -> None:
+    """The doctor's multi-column uses, each with the extension's filters and with LAPACK's: a damper
     basis of 30 s at 500 Hz, 45 columns, low-passed by sosfiltfilt (blocks of 16 columns), and 200 AR(1)
     noise draws of 6000 samples through first_order_filter."""
     rng = np.random.default_rng(2026)
@@ -150,8 +150,8 @@ def test_doctor_sized_filtering_same_with_both_recursions(monkeypatch, extension
     draws = rng.standard_normal((200, 6000))
     sos = butterworth_lowpass_sos(4, 25.0, 500.0)
     results = {}
-    for name, chosen in [("compiled", extension_recursion), ("lapack", None)]:
-        monkeypatch.setattr(digital_filters, "compiled_recursion", lambda chosen=chosen: chosen)
+    for name, chosen in [("compiled", extension), ("lapack", None)]:
+        monkeypatch.setattr(digital_filters, "compiled_filters", lambda chosen=chosen: chosen)
         results[name] = (sosfiltfilt(sos, basis, axis=0), first_order_filter((1.0, 0.0), -0.93, draws))
     for compiled, reference in zip(results["compiled"], results["lapack"], strict=True):
         assert relative_difference(compiled, reference) < RELATIVE_TOLERANCE

@@ -72,7 +72,7 @@ def test_without_an_extension_for_the_present_source_numba_runs_the_kernel(monke
     LOADER.cache_clear()
     try:
         assert LOADER()[0] == "numba"
-        assert simulation_kernel.compiled_recursion() is None  # the filters solve with LAPACK then
+        assert simulation_kernel.compiled_filters() is None  # the filters solve with LAPACK then
     finally:
         simulation_kernel._extension.cache_clear()
         LOADER.cache_clear()
