@@ -13,19 +13,18 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import ipaddress
-import logging
 import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from service.access import KeyRing, load_keys
 from service.cli.errors import EXIT_FAILED, CliError, run_command
 
 DEFAULT_PORT = 8000
 
 
 def is_loopback(host: str) -> bool:
+    import ipaddress  # here: every command imports this module
+
     if host == "localhost":
         return True
     try:
@@ -49,6 +48,10 @@ def run_serve(args: argparse.Namespace) -> int:
         raise CliError("--max-streams-per-key must be at least 1")
     if args.body_timeout_s is not None and not 0 < args.body_timeout_s <= 3600:
         raise CliError("--body-timeout-s must lie in (0, 3600]")
+    import logging
+
+    from service.access import KeyRing, load_keys  # here, not at the top: every command imports this module
+
     generated_key = None
     if args.keys is not None:
         keys = load_keys(args.keys)
