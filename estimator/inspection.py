@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from estimator.digital_filters import analytic_signal
+from estimator.order_statistics import median
 
 PHASE_MIN_FREQUENCY_HZ = 5.0
 PHASE_WINDOW_S = 0.5
@@ -67,7 +68,7 @@ def phase_shift_min_deg(
     best = np.nan
     for start in range(0, plate_m.size - window, step):
         sl = slice(start, start + window)
-        if np.median(frequency[sl]) < min_frequency_Hz or np.median(amplitude[sl]) < 0.2 * np.max(amplitude):
+        if median(frequency[sl]) < min_frequency_Hz or median(amplitude[sl]) < 0.2 * np.max(amplitude):
             continue
         a_plate = np.mean(plate_m[sl] * reference[sl])
         a_force = np.mean(force[sl] * reference[sl])
