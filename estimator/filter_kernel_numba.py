@@ -60,6 +60,51 @@ def _section(buffer, start: int, step: int, length: int, coefficients, zi0: floa
         y0, y1 = y1, y2
 
 
+@numba.njit(error_model="numpy", inline="always")
+def _two_sections(buffer, start: int, step: int, length: int, first, z0, z1, second, w0, w1) -> None:
+    """Two sections in cascade (`first` from the state (z0, z1), then `second` from (w0, w1)), in one pass:
+    the same values as _section twice, but the two recursions overlap in the processor (each is bound by
+    its own multiply-subtract latency), which makes the pass about twice as fast."""
+    b0, b1, b2, a1, a2 = first
+    c0, c1, c2, d1, d2 = second
+    index = start
+    x1 = buffer[index]
+    u0 = b0 * x1 + z0  # the first section's output, the second's input
+    v0 = c0 * u0 + w0
+    buffer[index] = v0
+    index += step
+    x0 = buffer[index]
+    u1 = ((b0 * x0 + b1 * x1) + z1) - a1 * u0
+    v1 = ((c0 * u1 + c1 * u0) + w1) - d1 * v0
+    buffer[index] = v1
+    x2, x1 = x1, x0
+    for _ in range(2, length):
+        index += step
+        x0 = buffer[index]
+        u2 = (((b0 * x0 + b1 * x1) + b2 * x2) - a2 * u0) - a1 * u1
+        v2 = (((c0 * u2 + c1 * u1) + c2 * u0) - d2 * v0) - d1 * v1
+        buffer[index] = v2
+        x2, x1 = x1, x0
+        u0, u1 = u1, u2
+        v0, v1 = v1, v2
+
+
+@numba.njit(error_model="numpy", inline="always")
+def _cascade(buffer, start: int, step: int, length: int, coefficients, zi, scale: float) -> None:
+    """Every section in turn (two at a time), from the states zi·scale, in place along the buffer."""
+    sections = len(coefficients)
+    k = 0
+    while k + 1 < sections:
+        _two_sections(
+            buffer, start, step, length,
+            coefficients[k], zi[k, 0] * scale, zi[k, 1] * scale,
+            coefficients[k + 1], zi[k + 1, 0] * scale, zi[k + 1, 1] * scale,
+        )  # fmt: skip
+        k += 2
+    if k < sections:
+        _section(buffer, start, step, length, coefficients[k], zi[k, 0] * scale, zi[k, 1] * scale)
+
+
 @numba.njit(cache=True, error_model="numpy")
 def _zero_phase(sos, zi, edge: int, x, out) -> None:
     """scipy.signal.sosfiltfilt of every column of x (samples, columns) into out (samples, columns):
@@ -67,10 +112,9 @@ def _zero_phase(sos, zi, edge: int, x, out) -> None:
     (sections, 5: b0, b1, b2, a1, a2 with a0 = 1) from the steady states zi (sections, 2) times the first
     sample each way, trimmed back to `samples`."""
     samples, columns = x.shape
-    sections = sos.shape[0]
     length = samples + 2 * edge
     buffer = np.empty(length)
-    coefficients = [(sos[k, 0], sos[k, 1], sos[k, 2], sos[k, 3], sos[k, 4]) for k in range(sections)]
+    coefficients = [(sos[k, 0], sos[k, 1], sos[k, 2], sos[k, 3], sos[k, 4]) for k in range(sos.shape[0])]
     for column in range(columns):
         first, last = x[0, column], x[samples - 1, column]
         for i in range(edge):
@@ -78,12 +122,8 @@ def _zero_phase(sos, zi, edge: int, x, out) -> None:
             buffer[edge + samples + i] = 2.0 * last - x[samples - 2 - i, column]
         for i in range(samples):
             buffer[edge + i] = x[i, column]
-        start = buffer[0]
-        for k in range(sections):
-            _section(buffer, 0, 1, length, coefficients[k], zi[k, 0] * start, zi[k, 1] * start)
-        start = buffer[length - 1]
-        for k in range(sections):
-            _section(buffer, length - 1, -1, length, coefficients[k], zi[k, 0] * start, zi[k, 1] * start)
+        _cascade(buffer, 0, 1, length, coefficients, zi, buffer[0])
+        _cascade(buffer, length - 1, -1, length, coefficients, zi, buffer[length - 1])
         for i in range(samples):
             out[i, column] = buffer[edge + i]
 
