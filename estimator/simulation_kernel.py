@@ -18,9 +18,11 @@ carries on with inf/NaN); callers treat both as a diverged model.
 Which compiled code runs (the kernel's source is estimator/simulation_kernel_numba.py):
 - the extension built ahead of time, `estimator/_simulation_kernel_aot_<digest>` (numba's pycc, built by
   service/kernel_build.py: `shockbench demo` or `python -m service.kernel_build`), when it exists for the
-  present source (the digest is of this file and the kernel's). Loading it takes milliseconds: it needs
-  neither numba nor its cache. A process that only runs one identify would otherwise spend 1-3 s importing
-  numba and loading the cached kernel (numba's typing registries), about 100 times the simulation itself;
+  present source (the digest is of the sources of KERNEL_MODULES: this file, the kernel's and that of
+  estimator.digital_filters' compiled filters, which the extension also holds). Loading it takes
+  milliseconds: it needs neither numba nor its cache. A process that only runs one identify would
+  otherwise spend 1-3 s importing numba and loading the cached kernel (numba's typing registries), about
+  100 times the simulation itself;
 - otherwise numba's just-in-time compile, cached on disk (cache=True: the compile, 10-30 s, is paid once
   per machine and source version; later processes load it from the cache).
 This module imports numba only in the second case.
