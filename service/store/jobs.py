@@ -14,9 +14,11 @@ from pathlib import Path
 from typing import Any
 
 from sqlalchemy import func, select, update
+from sqlalchemy.orm import Session
 
 from service.store.database import Database
 from service.store.models import JobRow, JobStatus, utcnow
+from service.store.result_chain import append_link
 
 RESTART_REASON = "service restarted while the job ran"
 
@@ -165,13 +167,24 @@ class JobStore:
             query = select(JobRow.id).where(JobRow.status == JobStatus.QUEUED.value).order_by(JobRow.id)
             return list(session.scalars(query).all())
 
-    def _transition(self, job_id: int, from_status: tuple[JobStatus, ...], **values: Any) -> bool:
+    def _transition(
+        self,
+        job_id: int,
+        from_status: tuple[JobStatus, ...],
+        *,
+        then: Callable[[Session, int], object] | None = None,
+        **values: Any,
+    ) -> bool:
+        """The conditional UPDATE; when it changed the row, `then(session, job_id)` in the same
+        transaction."""
         with self.db.transaction() as session:
             done = session.execute(
                 update(JobRow)
                 .where(JobRow.id == job_id, JobRow.status.in_([s.value for s in from_status]))
                 .values(**values)
             )
+            if done.rowcount == 1 and then is not None:
+                then(session, job_id)
             return done.rowcount == 1
 
     def mark_running(self, job_id: int) -> bool:
@@ -197,9 +210,12 @@ class JobStore:
     def succeed(
         self, job_id: int, result: dict[str, Any], artefacts: dict[str, Any], progress: dict[str, Any] | None
     ) -> bool:
+        """running -> succeeded with the result, chained to the lane's previous result in the same
+        transaction (service.store.result_chain)."""
         return self._transition(
             job_id,
             (JobStatus.RUNNING,),
+            then=append_link,
             status=JobStatus.SUCCEEDED.value,
             result=result,
             artefacts=artefacts,
