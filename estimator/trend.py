@@ -47,7 +47,8 @@ def change_percent(force_N: float | None, first_N: float | None) -> float | None
     velocity); None when either is None or first is 0."""
     if force_N is None or first_N is None or first_N == 0:
         return None
-    return 100.0 * (force_N - first_N) / first_N
+    change = 100.0 * (force_N - first_N) / first_N
+    return change if change != 0 else 0.0  # never -0.0 (a compression side's own first test)
 
 
 @dataclass(frozen=True)

@@ -32,6 +32,7 @@ def test_change_is_relative_to_the_first_test_that_reaches_the_velocity() -> Non
     first, second, third = left.points
     assert first.force_N == (None, pytest.approx(180.0), None)
     assert first.change_percent == (None, 0.0, None)
+    assert str(left.points[1].change_percent[0]) == "0.0"  # the compression side's own first: not -0.0
     assert second.force_N == (pytest.approx(-1000.0), pytest.approx(200.0), pytest.approx(1000.0))
     # ±0.5 m/s: the first test reaching it is this one; 0.1 m/s: +11.1% since the narrow first test
     assert second.change_percent == (0.0, pytest.approx(100 * 20 / 180), 0.0)
