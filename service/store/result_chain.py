@@ -28,7 +28,7 @@ from dataclasses import dataclass
 from datetime import UTC, datetime
 from typing import Any
 
-from sqlalchemy import exists, func, select
+from sqlalchemy import BigInteger, exists, func, literal, select
 from sqlalchemy.orm import Session
 
 from service.store.database import Database
@@ -81,7 +81,7 @@ def append_link(session: Session, job_id: int) -> str:
     """Chain the job's stored result to its lane's newest link, in `session`'s transaction; its hash."""
     job = session.execute(select(JobRow).where(JobRow.id == job_id)).scalar_one()  # as verify reads it
     if session.get_bind().dialect.name == "postgresql":
-        session.execute(select(func.pg_advisory_xact_lock(lane_lock_key(job.lane))))
+        session.execute(select(func.pg_advisory_xact_lock(literal(lane_lock_key(job.lane), BigInteger))))
     newest = select(ResultChainRow.hash).where(ResultChainRow.lane == job.lane)
     previous = session.scalar(newest.order_by(ResultChainRow.id.desc()).limit(1)) or GENESIS
     digest = job_hash(previous, job)
