@@ -42,6 +42,11 @@ class VehicleTestOut(BaseModel):
         None, description="the lane figures (quarter car: the corner's; axle: left, right, imbalance)"
     )
     verdict: VerdictOut | None = Field(None, description="the verdict stored with the identification")
+    result_hash: str | None = Field(
+        None,
+        description="the identification's content hash, chained to its lane's previous result (sha256, "
+        "hex; `shockbench verify` checks it)",
+    )
 
 
 class TrendTestOut(BaseModel):
@@ -98,6 +103,7 @@ def vehicle_test_out(test: VehicleTest) -> VehicleTestOut:
         curves=_curves(result),
         inspection=inspection if isinstance(inspection, dict) else None,  # type: ignore[arg-type]
         verdict=result.get("verdict"),
+        result_hash=test.result_hash,
     )
 
 

@@ -1,5 +1,6 @@
 """A vehicle's history in the database: every test (sweep) of that vehicle, across lanes, each with its
-newest succeeded identification, in one query on SQLite and PostgreSQL alike."""
+newest succeeded identification and that result's hash in the result chain, in one query on SQLite and
+PostgreSQL alike."""
 
 from __future__ import annotations
 
@@ -9,7 +10,7 @@ from sqlalchemy import func, select
 
 from service.store.database import Database
 from service.store.jobs import JobRecord
-from service.store.models import JobKind, JobRow, JobStatus, SweepRow
+from service.store.models import JobKind, JobRow, JobStatus, ResultChainRow, SweepRow
 from service.store.sweeps import SweepRecord, of_vehicle
 
 
@@ -20,6 +21,8 @@ class VehicleTest:
 
     sweep: SweepRecord
     identification: JobRecord | None
+    result_hash: str | None = None
+    """The identification's result hash in its lane's chain (service.store.result_chain)."""
 
 
 def vehicle_tests(database: Database, vehicle_id: str) -> list[VehicleTest]:
@@ -36,14 +39,15 @@ def vehicle_tests(database: Database, vehicle_id: str) -> list[VehicleTest]:
         .subquery()
     )
     query = (
-        select(SweepRow, JobRow)
+        select(SweepRow, JobRow, ResultChainRow.hash)
         .where(of_vehicle(vehicle_id))
         .outerjoin(newest, newest.c.sweep_id == SweepRow.id)
         .outerjoin(JobRow, JobRow.id == newest.c.job_id)
+        .outerjoin(ResultChainRow, ResultChainRow.job_id == JobRow.id)
         .order_by(SweepRow.created_at.desc(), SweepRow.id.desc())
     )
     with database.sessions() as session:
         return [
-            VehicleTest(SweepRecord.of(sweep), JobRecord.of(job) if job is not None else None)
-            for sweep, job in session.execute(query).all()
+            VehicleTest(SweepRecord.of(sweep), JobRecord.of(job) if job is not None else None, digest)
+            for sweep, job, digest in session.execute(query).all()
         ]

@@ -83,6 +83,7 @@ def test_a_vehicles_tests_newest_first_with_curves_figures_verdict_and_trend(
         assert curve["corner"] == "single" and len(curve["velocity_m_s"]) == len(curve["force_N"]) >= 10
         assert shown["inspection"]["eusama_percent"] is not None
         assert shown["verdict"]["outcome"] in ("pass", "check", "fail")
+        assert len(shown["result_hash"]) == 64 and int(shown["result_hash"], 16) >= 0
 
     trend = history["trend"]
     velocities = trend["reference_velocities_m_s"]

@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+import sqlalchemy as sa
 
 from service.api.history import vehicle_history
 from service.store.database import Database
@@ -97,6 +98,9 @@ def test_every_test_of_the_vehicle_newest_first_with_its_newest_succeeded_identi
         ids["first job"],
     ]
     assert vehicle_tests(database, "nobody") == []
+    with database.engine.connect() as c:
+        chained = dict(c.execute(sa.text("SELECT job_id, hash FROM result_chain")).all())
+    assert [t.result_hash for t in tests] == [chained[ids["last job"]], None, chained[ids["first job"]]]
 
 
 def test_the_history_carries_curves_figures_verdict_and_the_trend(database: Database, tmp_path: Path) -> None:
