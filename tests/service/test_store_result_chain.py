@@ -90,14 +90,26 @@ def test_an_altered_result_is_named(database: Database, database_url: str, tmp_p
     assert verify_chain(database, lane="south").problem is None  # the other lane's chain holds
 
 
-def test_an_altered_lane_or_options_is_named_too(database: Database, tmp_path: Path) -> None:
+@pytest.mark.parametrize(
+    ("change", "named"),
+    [
+        ("options = '{\"points\": 30}'", "'s stored result was altered"),
+        ("lane = 'north'", "'s stored result was altered"),  # moved to another lane
+        ("kind = 'diagnose'", "'s stored result was altered"),
+        ("finished_at = created_at", "'s stored result was altered"),
+        ("status = 'failed'", " succeeded but is now stored as failed"),
+    ],
+)
+def test_every_hashed_column_and_the_status_are_guarded(
+    database: Database, tmp_path: Path, change: str, named: str
+) -> None:
     jobs = fill(database, tmp_path)
+    altered = jobs["south"][0]
     with database.engine.begin() as c:
-        c.execute(
-            sa.text("UPDATE jobs SET options = '{\"points\": 30}' WHERE id = :id"), {"id": jobs["south"][0]}
-        )
+        c.execute(sa.text(f"UPDATE jobs SET {change} WHERE id = :id"), {"id": altered})
     report = verify_chain(database)
-    assert report.problem is not None and f"job {jobs['south'][0]}'s stored result" in report.problem
+    assert report.problem is not None and f"job {altered}{named}" in report.problem
+    assert report.problem.startswith("lane 'south'")
 
 
 @pytest.mark.parametrize("which", [1, -1], ids=["middle", "newest"])
