@@ -12,10 +12,22 @@ import argparse
 import sys
 from collections.abc import Sequence
 
-from service.cli import db, devices, diagnose, export, identify, serve, simulate, sweep, validate
+from service.cli import (
+    db,
+    devices,
+    diagnose,
+    export,
+    history,
+    identify,
+    serve,
+    simulate,
+    sweep,
+    validate,
+    verify,
+)
 from service.cli.errors import run_command
 
-MODULES = (simulate, identify, diagnose, validate, devices, sweep, export, serve, db)
+MODULES = (simulate, identify, diagnose, validate, devices, sweep, export, serve, db, history, verify)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -79,3 +79,25 @@ def upgrade(engine: Engine, to: str | None = None) -> tuple[str | None, str]:
         after = current_revision(connection)
     assert after is not None
     return before, after
+
+
+def require_newest(engine: Engine) -> str:
+    """For a command that only reads: the database's revision when it is this shockbench's newest; else a
+    SchemaError (one line) saying what to do: an empty database has nothing to read, an older one needs
+    `shockbench db upgrade`, a newer one a newer shockbench."""
+    head = head_revision()
+    with engine.connect() as connection:
+        revision = current_revision(connection)
+    if revision is None:
+        raise SchemaError("the database holds no shockbench tables (wrong --database or --data?)")
+    if revision not in known_revisions():
+        raise SchemaError(
+            f"database schema revision {revision} is newer than this shockbench knows (newest {head}): "
+            "upgrade shockbench"
+        )
+    if revision != head:
+        raise SchemaError(
+            f"database schema revision {revision} is older than this shockbench's ({head}): run "
+            "`shockbench db upgrade` first"
+        )
+    return revision
