@@ -53,7 +53,8 @@ def test_a_database_of_the_previous_schema_keeps_every_row(database_url: str) ->
             c.execute(
                 sa.text(
                     "INSERT INTO schedules (bench, vehicle_file, sweep_settings, job_options, status, "
-                    "created_at) VALUES ('lane bench', 'v.toml', '{}', '{}', 'waiting', :t)"
+                    "sweep_id, job_id, created_at) VALUES ('lane bench', 'v.toml', '{}', '{}', 'waiting', "
+                    "1, 1, :t)"
                 ),
                 {"t": now},
             )

@@ -18,8 +18,9 @@ depends_on = None
 
 
 def upgrade() -> None:
-    with op.batch_alter_table("jobs") as batch:
-        batch.add_column(sa.Column("claimed_by", sa.String(100)))
-        batch.add_column(sa.Column("lease_until", sa.DateTime(timezone=True)))
-        batch.add_column(sa.Column("attempts", sa.Integer, nullable=False, server_default="0"))
-        batch.add_column(sa.Column("cancel_requested", sa.Boolean, nullable=False, server_default=sa.false()))
+    # plain ADD COLUMNs (no batch copy of the table on SQLite: other tables' foreign keys point at jobs)
+    op.add_column("jobs", sa.Column("claimed_by", sa.String(100)))
+    op.add_column("jobs", sa.Column("lease_until", sa.DateTime(timezone=True)))
+    op.add_column("jobs", sa.Column("attempts", sa.Integer, nullable=False, server_default="0"))
+    cancel_requested = sa.Column("cancel_requested", sa.Boolean, nullable=False, server_default=sa.false())
+    op.add_column("jobs", cancel_requested)
