@@ -86,6 +86,8 @@ class JobOutBase(BaseModel):
 
     id: int
     lane: str = Field(description="the lane it was submitted on")
+    run_by: str | None = Field(None, description="the instance (lane) that runs or ran it")
+    attempts: int = Field(0, description="times it was begun (2 or more: an instance died while running it)")
     kind: str
     status: JobStatus
     options: BaseModel
@@ -153,6 +155,8 @@ def job_view(record: JobRecord, live: Progress | None = None, *, with_result: bo
         {
             "id": record.id,
             "lane": record.lane,
+            "run_by": record.claimed_by,
+            "attempts": record.attempts,
             "kind": record.kind,
             "status": record.status,
             "options": record.options,

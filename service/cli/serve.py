@@ -45,6 +45,8 @@ def run_serve(args: argparse.Namespace) -> int:
         )
     if args.config is not None and not Path(args.config).is_file():
         raise CliError(f"{args.config}: no such bench configuration")
+    if not 0.5 <= args.job_lease_s <= 3600:
+        raise CliError("--job-lease-s must lie in [0.5, 3600]")
     if not args.max_upload_mb > 0:
         raise CliError("--max-upload-mb must be > 0")
     if args.max_streams_per_key is not None and not args.max_streams_per_key >= 1:
@@ -79,7 +81,7 @@ def run_serve(args: argparse.Namespace) -> int:
         simulated=args.simulated,
         max_upload_bytes=int(args.max_upload_mb * 2**20),
         **limits,  # type: ignore[arg-type]
-        worker=WorkerSettings(nice=args.worker_nice),
+        worker=WorkerSettings(nice=args.worker_nice, lease_s=args.job_lease_s),
         **({"verdict": verdict} if verdict is not None else {}),  # type: ignore[arg-type]
         **({"lane": args.lane} if args.lane else {}),  # type: ignore[arg-type]
     )
@@ -179,6 +181,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         "(default 30)",
     )
     p.add_argument("--worker-nice", type=int, default=5, help="nice increment of the worker (default 5)")
+    p.add_argument(
+        "--job-lease-s",
+        type=float,
+        default=30.0,
+        help="a job's claim in the shared queue lasts this long unless renewed; another instance runs "
+        "the job again after it if this one dies (default 30)",
+    )
     p.add_argument("--log-level", default="info", choices=["critical", "error", "warning", "info", "debug"])
     p.set_defaults(handler=run_serve)
 

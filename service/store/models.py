@@ -11,7 +11,18 @@ from datetime import UTC, datetime
 from enum import StrEnum
 from typing import Any
 
-from sqlalchemy import JSON, Boolean, DateTime, ForeignKey, Index, Integer, String, Text, UniqueConstraint
+from sqlalchemy import (
+    JSON,
+    Boolean,
+    DateTime,
+    ForeignKey,
+    Index,
+    Integer,
+    String,
+    Text,
+    UniqueConstraint,
+    false,
+)
 from sqlalchemy.engine import Dialect
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
 from sqlalchemy.types import TypeDecorator
@@ -136,6 +147,14 @@ class JobRow(Base):
     created_at: Mapped[datetime] = mapped_column(default=utcnow)
     started_at: Mapped[datetime | None] = mapped_column(default=None)
     finished_at: Mapped[datetime | None] = mapped_column(default=None)
+    claimed_by: Mapped[str | None] = mapped_column(String(100), default=None)
+    """The instance (its lane) running it; set when claimed (service.store.job_queue)."""
+    lease_until: Mapped[datetime | None] = mapped_column(default=None)
+    """The claim holds until then unless renewed; past it, any instance may run the job again."""
+    attempts: Mapped[int] = mapped_column(Integer, default=0, server_default="0")
+    """How many times it was begun: a job whose instance keeps dying is failed after a few."""
+    cancel_requested: Mapped[bool] = mapped_column(Boolean, default=False, server_default=false())
+    """Cancel asked while it runs (on any instance); the running instance sees it at its next renewal."""
 
 
 class ScheduleRow(Base):
