@@ -99,8 +99,10 @@ def test_a_newer_schema_is_refused_in_one_line(database_url: str) -> None:
 def test_a_lanes_database_gains_the_result_chain_with_every_row_kept_and_its_results_chained(
     database_url: str,
 ) -> None:
-    """0002 (lanes) -> 0003 (result chain): nothing is lost, and the results stored before the chain
-    existed are chained per lane in the order they finished, so that `verify` holds at once."""
+    """0002 (lanes) -> 0003 (result chain) and on: nothing is lost, and the results stored before the chain
+    existed are chained per lane in the order they finished, so that `verify` holds at once. On SQLite the
+    later revisions copy the jobs table, which rows of other tables refer to (chain links, a scheduled
+    test): foreign keys are unenforced while the migrations run and checked at the end."""
     database = Database(database_url)
     times = [datetime(2026, 11, day, 9, 30, 0, 123456, tzinfo=UTC) for day in (1, 2, 3, 4)]
     try:
@@ -128,11 +130,21 @@ def test_a_lanes_database_gains_the_result_chain_with_every_row_kept_and_its_res
                     ),
                     {"lane": lane, "status": status, "result": result, "t": times[0], "f": finished},
                 )
+            c.execute(  # a scheduled test done: it refers to its sweep and its job
+                sa.text(
+                    "INSERT INTO schedules (bench, lane, vehicle_file, sweep_settings, job_options, "
+                    "status, sweep_id, job_id, created_at) "
+                    "VALUES ('b', 'north', 'v.toml', '{}', '{}', 'done', 1, 1, :t)"
+                ),
+                {"t": times[0]},
+            )
         assert database.upgrade_schema() == ("0002", head_revision())
         with database.engine.connect() as c:
             jobs = c.execute(sa.text("SELECT id, lane, status, result FROM jobs ORDER BY id")).all()
             links = c.execute(sa.text("SELECT lane, job_id FROM result_chain ORDER BY id")).all()
             sweep = c.execute(sa.text("SELECT lane, settings FROM sweeps")).one()
+            schedule = c.execute(sa.text("SELECT sweep_id, job_id, status FROM schedules")).one()
+        assert tuple(schedule) == (1, 1, "done")
         assert [(j.id, j.lane, j.status) for j in jobs] == [
             (1, "north", "succeeded"),
             (2, "south", "succeeded"),
