@@ -21,8 +21,6 @@ import argparse
 import json
 import os
 import platform
-import signal
-import subprocess
 import sys
 import tempfile
 import threading
@@ -38,8 +36,8 @@ from simulators.vehicle_sim import default_quarter_car
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "service"))
 
-from bench_service_under_load import start, url_from  # the processes, as the load benchmark starts them
 from live_server import wait_until  # the tests' deadline-bounded wait, shared
+from realtime_bench import realtime_service
 
 KEY = "benchmark-operator-key-0123456789"
 AUTH = {"Authorization": f"Bearer {KEY}"}
@@ -131,31 +129,12 @@ def main() -> None:
     results: list[dict[str, Any]] = []
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
-        (folder / "keys.toml").write_text(f'operator = ["{KEY}"]\n')
-        bench_toml = folder / "bench.toml"
-        devices = start(
-            [sys.executable, "-m", "service.cli.main", "sim-devices", "--config", str(bench_toml)],
-            folder / "devices.log",
-        )
-        service: subprocess.Popen[bytes] | None = None
-        try:
-            wait_until(lambda: bench_toml.exists() or devices.poll() is not None, 120, "sim-devices", 0.1)
-            command = [sys.executable, "-m", "service.cli.serve", "--port", "0", "--config", str(bench_toml)]
-            command += ["--data", str(folder / "data"), "--keys", str(folder / "keys.toml")]
-            service = start([*command, "--log-level", "warning"], folder / "service.log")
-            url = url_from(folder / "service.log", service)
+        keys = f'operator = ["{KEY}"]\n'
+        with realtime_service(folder, keys, "--log-level", "warning") as (url, pid):
             vehicle_toml = format_vehicle(default_quarter_car().known)
             for _ in range(args.rounds):
                 for viewers in (0, args.viewers):
-                    results.append(one_sweep(url, service.pid, vehicle_toml, args.duration_s, viewers))
-        finally:
-            for process in (service, devices):
-                if process is not None and process.poll() is None:
-                    process.send_signal(signal.SIGINT)
-                    try:
-                        process.wait(60)
-                    except subprocess.TimeoutExpired:
-                        process.kill()
+                    results.append(one_sweep(url, pid, vehicle_toml, args.duration_s, viewers))
     print(f"load average {os.getloadavg()[0]:.2f} at end")
     print(
         "| viewers | status | rows | gap samples | service CPU (s) | wall (s) "

@@ -24,8 +24,6 @@ from __future__ import annotations
 import argparse
 import os
 import platform
-import re
-import signal
 import statistics
 import subprocess
 import sys
@@ -43,6 +41,7 @@ from simulators.vehicle_sim import SimulationSettings, default_quarter_car, simu
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "service"))
 
 from live_server import wait_until  # the tests' deadline-bounded wait, shared
+from realtime_bench import realtime_service
 
 KEY = "benchmark-operator-key-0123456789"
 PATHS = ("/api/v1/status", "/api/v1/jobs")
@@ -76,21 +75,6 @@ def write_large_csv(path: Path, megabytes: float, source: Path) -> None:
         )
 
 
-def start(command: list[str], log: Path) -> subprocess.Popen[bytes]:
-    with log.open("w") as out:
-        return subprocess.Popen(command, stdout=out, stderr=subprocess.STDOUT)
-
-
-def url_from(log: Path, process: subprocess.Popen[bytes]) -> str:
-    def found() -> str | None:
-        if process.poll() is not None:
-            raise RuntimeError(f"the service exited:\n{log.read_text()}")
-        match = re.search(r"listening on (http://\S+)", log.read_text())
-        return match.group(1) if match else None
-
-    return wait_until(found, 120, "service start-up", 0.1)
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--upload-mb", type=float, default=60.0, help="size of the upload (default 60)")
@@ -110,51 +94,10 @@ def main() -> None:
         write_vehicle(folder / "vehicle.toml", vehicle.known)
         write_large_csv(folder / "large.csv", args.upload_mb, folder / "recording.csv")
         size_mb = (folder / "large.csv").stat().st_size / 1e6
-        (folder / "keys.toml").write_text(f'operator = ["{KEY}"]\n')
-        bench_toml = folder / "bench.toml"
-        devices = start(
-            [sys.executable, "-m", "service.cli.main", "sim-devices", "--config", str(bench_toml)],
-            folder / "devices.log",
-        )
-        service: subprocess.Popen[bytes] | None = None
-        try:
-            wait_until(lambda: bench_toml.exists() or devices.poll() is not None, 120, "sim-devices", 0.1)
-            service = start(
-                [
-                    sys.executable,
-                    "-m",
-                    "service.cli.serve",
-                    "--port",
-                    "0",
-                    "--config",
-                    str(bench_toml),
-                    "--data",
-                    str(folder / "data"),
-                    "--keys",
-                    str(folder / "keys.toml"),
-                    "--log-level",
-                    "warning",
-                    "--max-upload-mb",
-                    str(int(size_mb * 1.2) + 1),
-                ],
-                folder / "service.log",
-            )
-            url = url_from(folder / "service.log", service)
-            try:
-                result = measure(
-                    url, folder, args.generations, format_vehicle(vehicle.known), args.idle_requests
-                )
-            except Exception:
-                print((folder / "service.log").read_text()[-3000:], file=sys.stderr)
-                raise
-        finally:
-            for process in (service, devices):
-                if process is not None and process.poll() is None:
-                    process.send_signal(signal.SIGINT)
-                    try:
-                        process.wait(60)
-                    except subprocess.TimeoutExpired:
-                        process.kill()
+        keys = f'operator = ["{KEY}"]\n'
+        upload_limit = ("--max-upload-mb", str(int(size_mb * 1.2) + 1))
+        with realtime_service(folder, keys, "--log-level", "warning", *upload_limit) as (url, _pid):
+            result = measure(url, folder, args.generations, format_vehicle(vehicle.known), args.idle_requests)
     report(result, size_mb)
 
 

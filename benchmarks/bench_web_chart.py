@@ -19,8 +19,6 @@ from __future__ import annotations
 import argparse
 import os
 import platform
-import signal
-import subprocess
 import sys
 import tempfile
 import time
@@ -36,9 +34,9 @@ from simulators.vehicle_sim import default_quarter_car
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "service"))
 
-from bench_service_under_load import start, url_from  # the processes, as the load benchmark starts them
 from headless_chromium import chromium_driver, find_chromium  # the browser tests' Chromium
 from live_server import wait_until  # the tests' deadline-bounded wait, shared
+from realtime_bench import realtime_service
 
 OPERATOR = "benchmark-operator-key-0123456789"
 VIEWER = "benchmark-viewer-key-0123456789"
@@ -125,19 +123,8 @@ def main() -> None:
     results: list[dict[str, Any]] = []
     with tempfile.TemporaryDirectory() as tmp, ExitStack() as browsers:
         folder = Path(tmp)
-        (folder / "keys.toml").write_text(f'operator = ["{OPERATOR}"]\nviewer = ["{VIEWER}"]\n')
-        bench_toml = folder / "bench.toml"
-        devices = start(
-            [sys.executable, "-m", "service.cli.main", "sim-devices", "--config", str(bench_toml)],
-            folder / "devices.log",
-        )
-        service: subprocess.Popen[bytes] | None = None
-        try:
-            wait_until(lambda: bench_toml.exists() or devices.poll() is not None, 120, "sim-devices", 0.1)
-            command = [sys.executable, "-m", "service.cli.serve", "--port", "0", "--config", str(bench_toml)]
-            command += ["--data", str(folder / "data"), "--keys", str(folder / "keys.toml")]
-            service = start([*command, "--log-level", "warning"], folder / "service.log")
-            url = url_from(folder / "service.log", service)
+        keys = f'operator = ["{OPERATOR}"]\nviewer = ["{VIEWER}"]\n'
+        with realtime_service(folder, keys, "--log-level", "warning") as (url, _pid):
             drivers = [
                 browsers.enter_context(chromium_driver(chromium, folder / f"downloads-{i}"))
                 for i in range(args.browsers)
@@ -147,15 +134,7 @@ def main() -> None:
             vehicle_toml = format_vehicle(default_quarter_car().known)
             for _ in range(args.rounds):
                 results.append(one_sweep(url, drivers, vehicle_toml, args.duration_s))
-        finally:
             browsers.close()
-            for process in (service, devices):
-                if process is not None and process.poll() is None:
-                    process.send_signal(signal.SIGINT)
-                    try:
-                        process.wait(60)
-                    except subprocess.TimeoutExpired:
-                        process.kill()
     print(f"load average {os.getloadavg()[0]:.2f} at end")
     print("| browsers | status | rows | gap samples | wall (s) | per browser: chart frames/s, points held |")
     print("|---:|---|---:|---:|---:|---|")

@@ -14,6 +14,7 @@ from pg_server import CI_NEEDS_POSTGRES, PostgresServer, find_bindir
 # first imported (service/cli/__init__.py says why); tests that run a service worker or simulated devices
 # beside the estimator would otherwise oversubscribe the 2 cores.
 import service.cli  # noqa: F401
+from service.store.database import Database
 
 HIT_RATES: dict[str, list[tuple[str, bool]]] = defaultdict(list)
 
@@ -62,3 +63,12 @@ def database_url(request: pytest.FixtureRequest, tmp_path: Path) -> str:
         return f"sqlite:///{tmp_path / 'shockbench.sqlite3'}"
     server: PostgresServer = request.getfixturevalue("postgres")
     return server.new_database()
+
+
+@pytest.fixture
+def database(database_url: str) -> Iterator[Database]:
+    """`database_url` opened, its schema at the newest revision (service.store.schema)."""
+    database = Database(database_url)
+    database.upgrade_schema()
+    yield database
+    database.dispose()

@@ -6,25 +6,15 @@ from __future__ import annotations
 
 import threading
 from collections import Counter
-from collections.abc import Iterator
 from datetime import timedelta
 from pathlib import Path
 
-import pytest
 import sqlalchemy as sa
 
 from service.store.database import Database
 from service.store.job_queue import JobQueue
 from service.store.jobs import RESTART_REASON, JobFiles, JobStore
 from service.store.models import JobRow, JobStatus, utcnow
-
-
-@pytest.fixture
-def database(database_url: str) -> Iterator[Database]:
-    database = Database(database_url)
-    database.upgrade_schema()
-    yield database
-    database.dispose()
 
 
 def submit(store: JobStore, tmp_path: Path, count: int) -> list[int]:

@@ -3,7 +3,6 @@ what order, one running per bench, and that everything survives reopening the da
 
 from __future__ import annotations
 
-from collections.abc import Iterator
 from datetime import UTC, datetime, timedelta
 from pathlib import Path
 
@@ -16,14 +15,6 @@ from service.store.sweeps import SweepStore
 
 T0 = datetime.now(UTC).replace(microsecond=0) + timedelta(days=1)
 """'Now' for the store: a day after the tests were submitted (their created_at is the real clock)."""
-
-
-@pytest.fixture
-def database(database_url: str) -> Iterator[Database]:
-    database = Database(database_url)
-    database.upgrade_schema()
-    yield database
-    database.dispose()
 
 
 @pytest.fixture

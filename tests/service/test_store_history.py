@@ -7,7 +7,6 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -21,14 +20,6 @@ from service.store.jobs import JobFiles, JobStore
 from service.store.models import JobKind, SweepStatus
 from service.store.schema import BASELINE, upgrade
 from service.store.sweeps import SweepStore
-
-
-@pytest.fixture
-def database(database_url: str) -> Iterator[Database]:
-    database = Database(database_url)
-    database.upgrade_schema()
-    yield database
-    database.dispose()
 
 
 def linear_result(c_Ns_per_m: float, eusama: float = 55.0) -> dict[str, Any]:

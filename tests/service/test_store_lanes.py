@@ -4,25 +4,14 @@ lane's tests."""
 
 from __future__ import annotations
 
-from collections.abc import Iterator
 from datetime import UTC, datetime, timedelta
 from pathlib import Path
-
-import pytest
 
 from service.store.database import Database
 from service.store.jobs import JobFiles, JobStore
 from service.store.models import JobKind
 from service.store.schedules import ScheduleStore
 from service.store.sweeps import SweepStore
-
-
-@pytest.fixture
-def database(database_url: str) -> Iterator[Database]:
-    database = Database(database_url)
-    database.upgrade_schema()
-    yield database
-    database.dispose()
 
 
 def test_each_lane_stamps_and_finds_its_own(database: Database, tmp_path: Path) -> None:

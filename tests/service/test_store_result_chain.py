@@ -8,7 +8,6 @@ from __future__ import annotations
 import subprocess
 import sys
 import threading
-from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -18,14 +17,6 @@ from service.store.database import Database
 from service.store.jobs import JobFiles, JobStore
 from service.store.models import JobKind
 from service.store.result_chain import GENESIS, verify_chain
-
-
-@pytest.fixture
-def database(database_url: str) -> Iterator[Database]:
-    database = Database(database_url)
-    database.upgrade_schema()
-    yield database
-    database.dispose()
 
 
 def succeed_job(store: JobStore, tmp: Path, gap_m: float) -> int:

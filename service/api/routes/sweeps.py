@@ -20,6 +20,7 @@ from fastapi.responses import FileResponse
 from pydantic import BaseModel, ConfigDict, Field
 from starlette.background import BackgroundTask
 
+from service.access import Principal
 from service.api.auth import Operator, Viewer
 from service.api.contract import created, download
 from service.api.errors import ApiError, responses
@@ -308,17 +309,9 @@ async def identify_sweep(
 ) -> IdentifyJobOut:
     """An identification job on the sweep's recording (JSON body: the options of POST /jobs, all
     optional). 409 until the sweep has ended. Answers 201 with Location: the job."""
-    services = request.app.state.services
-    record = await load_sweep(request, sweep_id)
     job_options = IdentifyJobOptions.model_validate((options or SweepJobIn()).model_dump())
-
-    job = await asyncio.to_thread(
-        accept_sweep_job, services.settings, services.jobs, record, job_options, principal.key_id
-    )
-    services.manager.enqueue(job)
-    out = job_out(request, job)
-    response.headers["Location"] = out.links.self
-    return out
+    out = await _job_on_sweep(request, response, sweep_id, principal, job_options, JobKind.IDENTIFY)
+    return out  # type: ignore[return-value]
 
 
 @router.post(
@@ -337,17 +330,24 @@ async def diagnose_sweep(
 ) -> DiagnoseJobOut:
     """The model doctor on the sweep's recording (JSON body: the options of POST /diagnoses, all
     optional). 409 until the sweep has ended. Answers 201 with Location: the job."""
+    job_options = DiagnoseJobOptions.model_validate((options or SweepDiagnosisIn()).model_dump())
+    out = await _job_on_sweep(request, response, sweep_id, principal, job_options, JobKind.DIAGNOSE)
+    return out  # type: ignore[return-value]
+
+
+async def _job_on_sweep(
+    request: Request,
+    response: Response,
+    sweep_id: int,
+    principal: Principal,
+    options: IdentifyJobOptions | DiagnoseJobOptions,
+    kind: JobKind,
+) -> IdentifyJobOut | DiagnoseJobOut:
+    """Queue a job of `kind` on the sweep's recording; the 201's Location is the job."""
     services = request.app.state.services
     record = await load_sweep(request, sweep_id)
-    job_options = DiagnoseJobOptions.model_validate((options or SweepDiagnosisIn()).model_dump())
     job = await asyncio.to_thread(
-        accept_sweep_job,
-        services.settings,
-        services.jobs,
-        record,
-        job_options,
-        principal.key_id,
-        JobKind.DIAGNOSE,
+        accept_sweep_job, services.settings, services.jobs, record, options, principal.key_id, kind
     )
     services.manager.enqueue(job)
     out = job_out(request, job)
