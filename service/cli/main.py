@@ -12,10 +12,10 @@ import argparse
 import sys
 from collections.abc import Sequence
 
-from service.cli import devices, diagnose, export, identify, serve, simulate, sweep, validate
+from service.cli import devices, diagnose, export, identify, reanalyse, serve, simulate, sweep, validate
 from service.cli.errors import run_command
 
-MODULES = (simulate, identify, diagnose, validate, devices, sweep, export, serve)
+MODULES = (simulate, identify, diagnose, validate, devices, sweep, export, serve, reanalyse)
 
 
 def build_parser() -> argparse.ArgumentParser:
