@@ -17,13 +17,18 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from estimator.errors import one_line
+from estimator.errors import UserError, one_line
 from service.reanalyse.results import Done, save, stored, summary_row, write_summary
 from service.reanalyse.sources import Item, input_digest
 from service.reanalyse.task import Analysis, AnalysisOptions, Outcome, Task, run_task
 
 if TYPE_CHECKING:
     from dask.distributed import Client
+
+
+class SchedulerError(UserError, ValueError):
+    """--scheduler is not an address Dask understands; one line."""
+
 
 CONNECT_TIMEOUT = "10s"
 """How long to try a scheduler given by address before a one-line error."""
@@ -62,7 +67,11 @@ def dask_client(settings: RunSettings) -> Iterator[Client]:
     from dask.distributed import Client, LocalCluster
 
     if settings.scheduler is not None:
-        with Client(settings.scheduler, timeout=CONNECT_TIMEOUT) as client:
+        try:
+            client = Client(settings.scheduler, timeout=CONNECT_TIMEOUT)  # OSError when nobody answers
+        except ValueError as exc:
+            raise SchedulerError(f"--scheduler {settings.scheduler}: {one_line(exc)}") from None
+        with client:
             yield client
         return
     with (

@@ -92,13 +92,20 @@ def items_in_folder(folder: Path, out: Path | None = None) -> list[Item]:
 
 def items_in_database(url: str) -> list[Item]:
     """Every complete sweep stored in the database at `url`, oldest first, named sweep-<id>."""
-    from sqlalchemy.exc import SQLAlchemyError
+    from sqlalchemy.engine import make_url
+    from sqlalchemy.exc import ArgumentError, SQLAlchemyError
 
     from estimator.errors import one_line
     from service.store.database import Database
     from service.store.models import SweepStatus
     from service.store.sweeps import SweepStore
 
+    try:
+        parsed = make_url(url)
+    except ArgumentError:
+        raise SourceError(f"database URL {url!r} is not a valid SQLAlchemy URL") from None
+    if parsed.get_backend_name() == "sqlite" and not Path(parsed.database or "").is_file():
+        raise SourceError(f"database {url}: no such SQLite file")  # opening it would create an empty one
     database = Database(url)
     store = SweepStore(database)
     sweeps = []
@@ -109,7 +116,8 @@ def items_in_database(url: str) -> list[Item]:
             if not page or len(sweeps) >= total:
                 break
     except SQLAlchemyError as exc:
-        raise SourceError(f"database {database.safe_url}: cannot list the sweeps ({one_line(exc)})") from None
+        cause = one_line(getattr(exc, "orig", None) or exc)  # the driver's words, without SQLAlchemy's prefix
+        raise SourceError(f"database {database.safe_url}: cannot list the sweeps ({cause})") from None
     finally:
         database.dispose()
     items = []

@@ -204,8 +204,16 @@ def test_every_complete_sweep_of_a_database_with_the_doctor(
     assert rows["sweep-2"]["status"] == "failed" and "2.h5" in rows["sweep-2"]["reason"]
 
 
-def test_bad_input_is_one_line(tmp_path: Path) -> None:
-    done = run(str(tmp_path / "nowhere"), "--out", str(tmp_path / "out"))
-    assert done.returncode == 2 and done.stderr.strip().endswith("no such folder"), done.stderr
-    done = run("--out", str(tmp_path / "out"))
-    assert done.returncode == 2 and "either SOURCE" in done.stderr and len(done.stderr.splitlines()) == 1
+def test_bad_input_is_one_line(archive: Path, tmp_path: Path) -> None:
+    out = str(tmp_path / "out")
+    for args, says in (
+        ([str(tmp_path / "nowhere"), "--out", out], "nowhere: no such folder"),
+        (["--out", out], "give either SOURCE"),
+        ([str(archive), "--out", out, "--scheduler", "foo"], "--scheduler foo: missing port number"),
+        (["--database", f"sqlite:///{tmp_path / 'none.sqlite3'}", "--out", out], "no such SQLite file"),
+    ):
+        done = run(*args)
+        last = done.stderr.strip().splitlines()[-1]
+        assert done.returncode == 2 and says in last and last.startswith("shockbench reanalyse: error:"), args
+        assert "Traceback" not in done.stderr
+    assert not (tmp_path / "none.sqlite3").exists()  # not created by looking
