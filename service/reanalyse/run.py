@@ -32,6 +32,13 @@ class SchedulerError(UserError, ValueError):
 
 CONNECT_TIMEOUT = "10s"
 """How long to try a scheduler given by address before a one-line error."""
+NO_MALLOC_TRIM = {"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}
+"""Dask's nannies start workers with MALLOC_TRIM_THRESHOLD_=65536 (to give memory back to the system
+sooner); setting it turns off glibc's adaptive mmap threshold, so every array of the estimator above 128 kB
+is a fresh mmap whose pages fault in zeroed: an identification took 2.2 times the CPU time (30 short
+recordings: 6.1 s against 2.8 s of thread CPU, same with the variable set in a plain loop). The local
+cluster leaves it unset; workers of a scheduler given by address are started by whoever runs them
+(BENCHMARKS.md, "Archive re-analysis")."""
 
 
 @dataclass(frozen=True)
@@ -64,6 +71,7 @@ class RunReport:
 def dask_client(settings: RunSettings) -> Iterator[Client]:
     """A client of the scheduler at settings.scheduler, or of a LocalCluster of settings.workers processes
     with one thread each (the estimator is single-threaded numpy: processes, not threads, run in parallel)."""
+    import dask
     from dask.distributed import Client, LocalCluster
 
     if settings.scheduler is not None:
@@ -75,6 +83,7 @@ def dask_client(settings: RunSettings) -> Iterator[Client]:
             yield client
         return
     with (
+        dask.config.set(NO_MALLOC_TRIM),
         LocalCluster(
             n_workers=settings.workers,
             threads_per_worker=1,
