@@ -25,6 +25,7 @@ import os
 import platform
 import resource
 import shutil
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -97,6 +98,7 @@ def main() -> None:
     parser.add_argument(
         "--modes", default="loop,workers1,workers2", help="comma list of loop, workers1, workers2"
     )
+    parser.add_argument("--repeats", type=int, default=1, help="rounds of every mode, interleaved (median)")
     args = parser.parse_args()
 
     archive = args.workdir / "archive"
@@ -111,17 +113,26 @@ def main() -> None:
         f"{args.recordings} recordings of {args.seconds:g} s ({args.distinct} distinct)",
         flush=True,
     )
-    print("| mode | wall | wall per recording | CPU (all processes) | load average (1 min) |")
+    print(f"| mode | wall (median of {args.repeats}) | per recording | CPU, all processes | load average |")
+    modes = args.modes.split(",")
+    runs: dict[str, list[tuple[float, float, float, float]]] = {mode: [] for mode in modes}
+    for _ in range(args.repeats):
+        for mode in modes:
+            out = args.workdir / f"out-{mode}"
+            shutil.rmtree(out, ignore_errors=True)
+            runs[mode].append(timed([part.replace("{out}", str(out)) for part in commands[mode]]))
+            wall, cpu, before, after = runs[mode][-1]
+            print(
+                f"  {mode}: {wall:.1f} s wall, {cpu:.1f} s CPU, load {before:.1f} -> {after:.1f}", flush=True
+            )
     walls = {}
-    for mode in args.modes.split(","):
-        out = args.workdir / f"out-{mode}"
-        shutil.rmtree(out, ignore_errors=True)
-        command = [part.replace("{out}", str(out)) for part in commands[mode]]
-        wall, cpu, before, after = timed(command)
-        walls[mode] = wall
+    for mode in modes:
+        wall = walls[mode] = statistics.median(run[0] for run in runs[mode])
+        cpu = statistics.median(run[1] for run in runs[mode])
+        loads = [load for run in runs[mode] for load in run[2:]]
         print(
             f"| {mode} | {wall:.1f} s | {wall / args.recordings:.2f} s | {cpu:.1f} s | "
-            f"{before:.1f} -> {after:.1f} |",
+            f"{min(loads):.1f}-{max(loads):.1f} |",
             flush=True,
         )
     serial = walls.get("loop") or walls.get("workers1")
