@@ -37,8 +37,9 @@ NO_MALLOC_TRIM = {"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": 
 sooner); setting it turns off glibc's adaptive mmap threshold, so every array of the estimator above 128 kB
 is a fresh mmap whose pages fault in zeroed: an identification took 2.2 times the CPU time (30 short
 recordings: 6.1 s against 2.8 s of thread CPU, same with the variable set in a plain loop). The local
-cluster leaves it unset; workers of a scheduler given by address are started by whoever runs them
-(BENCHMARKS.md, "Archive re-analysis")."""
+cluster leaves it unset; workers of a scheduler given by address are started by whoever runs them, who
+should do the same (this key set to null in their Dask configuration; BENCHMARKS.md, "Archive
+re-analysis")."""
 
 
 @dataclass(frozen=True)
