@@ -25,8 +25,10 @@ from daq.storage.hdf5_recording import RecordingWriter
 from estimator.damper import PiecewiseLinearCurve
 from estimator.recording import QUARTER_CAR_CHANNELS
 from service.reanalyse import run as run_module
+from service.reanalyse import task as task_module
 from service.reanalyse.run import RunSettings
 from service.reanalyse.sources import items_in_folder
+from service.reanalyse.task import Analysis, AnalysisOptions, Task
 
 if TYPE_CHECKING:
     from dask.distributed import Client
@@ -100,6 +102,39 @@ def test_the_folder_rules_name_each_recording_and_its_vehicle_file(archive: Path
     found = {item.name: item for item in items_in_folder(alone)}
     assert set(found) == {"rec.csv", "rec.h5"}  # same stem: the suffix tells them apart
     assert "no vehicle file" in (found["rec.csv"].problem or "")
+
+
+def test_a_recording_without_vehicle_file_fails_without_a_worker(tmp_path: Path) -> None:
+    (tmp_path / "archive").mkdir()
+    (tmp_path / "archive" / "rec.csv").write_text(BROKEN_CSV)
+    said: list[str] = []
+    items = items_in_folder(tmp_path / "archive")
+    report = run_module.reanalyse(items, RunSettings(out=tmp_path / "out"), said.append)
+    assert said == [
+        "1 recording(s): 0 analysis(es) to run on a local cluster of 2 worker process(es), 0 done "
+        "before (skipped)"
+    ]  # no cluster started for nothing
+    (row,) = report.rows
+    assert (
+        row["status"] == "failed"
+        and row["reason"].startswith("identify: ")
+        and "no vehicle file" in row["reason"]
+    )
+
+
+def test_a_bug_on_one_recording_is_its_reason_not_a_crash(
+    monkeypatch: pytest.MonkeyPatch, archive: Path
+) -> None:
+    def bug(task: Task) -> dict:
+        raise RuntimeError("index 7 is out of bounds\nsecond line")
+
+    monkeypatch.setattr(task_module, "analyse", bug)
+    item = items_in_folder(archive)[0]
+    outcome = task_module.run_task(Task(item, Analysis.IDENTIFY, AnalysisOptions()))
+    assert (
+        not outcome.ok
+        and outcome.reason == "internal error: RuntimeError: index 7 is out of bounds"  # one line
+    )
 
 
 @pytest.fixture(scope="module")
