@@ -2,9 +2,13 @@
 
 from __future__ import annotations
 
+import os
 from collections import defaultdict
+from collections.abc import Iterator
+from pathlib import Path
 
 import pytest
+from pg_server import CI_NEEDS_POSTGRES, PostgresServer, find_bindir
 
 # One BLAS thread, as every `shockbench` process has it: importing the CLI package sets it before numpy is
 # first imported (service/cli/__init__.py says why); tests that run a service worker or simulated devices
@@ -34,3 +38,27 @@ def pytest_terminal_summary(terminalreporter: pytest.TerminalReporter) -> None:
 def hit_rate():
     """report(experiment, case, hit): record a random case of an accuracy experiment for the summary."""
     return report_case
+
+
+@pytest.fixture(scope="session")
+def postgres() -> Iterator[PostgresServer]:
+    """A real PostgreSQL server for the session (tests/pg_server.py). Skipped when Debian's postgresql is
+    not installed, except in CI (the environment variable CI set), where .ci/run installs it and a missing
+    server fails."""
+    bindir = find_bindir()
+    if bindir is None:
+        if os.environ.get(CI_NEEDS_POSTGRES):
+            pytest.fail("PostgreSQL binaries (Debian's postgresql) not found, and CI needs them")
+        pytest.skip("PostgreSQL binaries not found (apt-get install postgresql)")
+    with PostgresServer(bindir) as server:
+        yield server
+
+
+@pytest.fixture(params=["sqlite", "postgresql"])
+def database_url(request: pytest.FixtureRequest, tmp_path: Path) -> str:
+    """An empty database of each kind the service supports: SQLite in tmp_path, and a fresh database on
+    the session's PostgreSQL server."""
+    if request.param == "sqlite":
+        return f"sqlite:///{tmp_path / 'shockbench.sqlite3'}"
+    server: PostgresServer = request.getfixturevalue("postgres")
+    return server.new_database()

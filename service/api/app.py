@@ -131,7 +131,7 @@ def lifespan_factory(settings: ServiceSettings) -> Lifespan:
                 folder.mkdir(parents=True, exist_ok=True)
             settings.keys.fingerprint_secret = fingerprint_secret(settings.data_dir)
             database = Database(settings.resolved_database_url)
-            database.create_tables()
+            database.upgrade_schema()
             return database
 
         bench = await asyncio.to_thread(open_bench, settings)  # first: the drive stops before anything
@@ -141,13 +141,13 @@ def lifespan_factory(settings: ServiceSettings) -> Lifespan:
             if bench is not None:
                 await asyncio.to_thread(bench.close)
             raise
-        store = JobStore(database)
-        sweep_store = SweepStore(database)
+        store = JobStore(database, lane=settings.lane)
+        sweep_store = SweepStore(database, lane=settings.lane)
         failed_sweeps = await asyncio.to_thread(sweep_store.recover_interrupted)
         if failed_sweeps:
             log.warning("sweeps %s were cut off by a restart; marked failed", failed_sweeps)
         manager = JobManager(store, settings.worker, completing=verdict_of(settings.verdict))
-        tests = ScheduleStore(database)
+        tests = ScheduleStore(database, lane=settings.lane)
         scheduler = None
         if bench is not None:
             scheduler = InspectionScheduler(settings, bench, tests, sweep_store, store, manager)

@@ -85,6 +85,9 @@ class JobOutBase(BaseModel):
     """What every job carries; `kind` says which options and result (IdentifyJobOut, DiagnoseJobOut)."""
 
     id: int
+    lane: str = Field(description="the lane it was submitted on")
+    run_by: str | None = Field(None, description="the instance (lane) that runs or ran it")
+    attempts: int = Field(0, description="times it was begun (2 or more: an instance died while running it)")
     kind: str
     status: JobStatus
     options: BaseModel
@@ -151,6 +154,9 @@ def job_view(record: JobRecord, live: Progress | None = None, *, with_result: bo
     return JOB_MODELS[record.kind].model_validate(
         {
             "id": record.id,
+            "lane": record.lane,
+            "run_by": record.claimed_by,
+            "attempts": record.attempts,
             "kind": record.kind,
             "status": record.status,
             "options": record.options,
@@ -318,6 +324,7 @@ class CurrentJobOut(BaseModel):
 class StatusOut(BaseModel):
     service: str = "shockbench"
     version: str
+    lane: str = Field(description="this instance's lane (serve --lane)")
     uptime_s: float
     worker: WorkerOut
     queue_length: int = Field(description="jobs waiting for the worker")

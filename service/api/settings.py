@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import socket
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -37,6 +38,9 @@ class ServiceSettings:
     max_streams_per_key: int = DEFAULT_MAX_STREAMS_PER_KEY
     """Event streams one key may hold open at once; one more is answered 429."""
     worker: WorkerSettings = field(default_factory=WorkerSettings)
+    lane: str = field(default_factory=socket.gethostname)
+    """This instance's lane (`serve --lane`, default the host name): stamped on its sweeps, jobs and
+    scheduled tests; its scheduler runs only its own lane's tests."""
     verdict: VerdictThresholds = field(default_factory=VerdictThresholds)
     """The limits an identification's lane figures are judged by (estimator.verdict; serve
     --verdict-thresholds): the verdict is stored with the result when the job ends."""

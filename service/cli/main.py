@@ -12,10 +12,21 @@ import argparse
 import sys
 from collections.abc import Sequence
 
-from service.cli import devices, diagnose, export, identify, reanalyse, serve, simulate, sweep, validate
+from service.cli import (
+    db,
+    devices,
+    diagnose,
+    export,
+    identify,
+    reanalyse,
+    serve,
+    simulate,
+    sweep,
+    validate,
+)
 from service.cli.errors import run_command
 
-MODULES = (simulate, identify, diagnose, validate, devices, sweep, export, serve, reanalyse)
+MODULES = (simulate, identify, diagnose, validate, devices, sweep, export, serve, db, reanalyse)
 
 
 def build_parser() -> argparse.ArgumentParser:

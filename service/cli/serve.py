@@ -45,6 +45,8 @@ def run_serve(args: argparse.Namespace) -> int:
         )
     if args.config is not None and not Path(args.config).is_file():
         raise CliError(f"{args.config}: no such bench configuration")
+    if not 0.5 <= args.job_lease_s <= 3600:
+        raise CliError("--job-lease-s must lie in [0.5, 3600]")
     if not args.max_upload_mb > 0:
         raise CliError("--max-upload-mb must be > 0")
     if args.max_streams_per_key is not None and not args.max_streams_per_key >= 1:
@@ -79,12 +81,13 @@ def run_serve(args: argparse.Namespace) -> int:
         simulated=args.simulated,
         max_upload_bytes=int(args.max_upload_mb * 2**20),
         **limits,  # type: ignore[arg-type]
-        worker=WorkerSettings(nice=args.worker_nice),
+        worker=WorkerSettings(nice=args.worker_nice, lease_s=args.job_lease_s),
         **({"verdict": verdict} if verdict is not None else {}),  # type: ignore[arg-type]
+        **({"lane": args.lane} if args.lane else {}),  # type: ignore[arg-type]
     )
     database = Database(settings.resolved_database_url)  # a bad URL or an unreachable server: one line now
     try:
-        database.create_tables()
+        database.upgrade_schema()
     finally:
         database.dispose()
     logging.basicConfig(level=args.log_level.upper(), format="%(levelname)-9s %(name)s: %(message)s")
@@ -94,7 +97,11 @@ def run_serve(args: argparse.Namespace) -> int:
         raise CliError(f"cannot listen on {args.host}:{args.port} ({exc.strerror or exc})") from None
     url = url_of(sock)
     print(f"shockbench serve: listening on {url} (API {url}/api/v1, docs {url}/docs)", flush=True)
-    print(f"shockbench serve: data in {settings.data_dir}, database {database.safe_url}", flush=True)
+    print(
+        f"shockbench serve: lane {settings.lane!r}, data in {settings.data_dir}, "
+        f"database {database.safe_url}",
+        flush=True,
+    )
     if generated_key is not None:
         print(
             "shockbench serve: no keys file, so this operator key was generated for this run; send it as "
@@ -151,6 +158,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         "eusama_pass_from_percent, eusama_fail_below_percent, imbalance_check_above_percent, "
         "imbalance_fail_above_percent); default: EGEA SPECSUS2018 and EUSAMA practice (README)",
     )
+    p.add_argument(
+        "--lane",
+        default=None,
+        help="this instance's lane: stamped on its sweeps, jobs and tests, its scheduler runs only its "
+        "own (default: the host name)",
+    )
     p.add_argument("--data", default="shockbench-data", help="data directory (default ./shockbench-data)")
     p.add_argument("--database", default=None, help="SQLAlchemy URL (default: SQLite in the data directory)")
     p.add_argument("--max-upload-mb", type=float, default=64.0, help="upload size limit in MiB (default 64)")
@@ -168,6 +181,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         "(default 30)",
     )
     p.add_argument("--worker-nice", type=int, default=5, help="nice increment of the worker (default 5)")
+    p.add_argument(
+        "--job-lease-s",
+        type=float,
+        default=30.0,
+        help="a job's claim in the shared queue lasts this long unless renewed; another instance runs "
+        "the job again after it if this one dies (default 30)",
+    )
     p.add_argument("--log-level", default="info", choices=["critical", "error", "warning", "info", "debug"])
     p.set_defaults(handler=run_serve)
 

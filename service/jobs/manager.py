@@ -23,7 +23,6 @@ import contextlib
 import logging
 import math
 import time
-from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -42,6 +41,7 @@ from service.jobs.messages import (
     WorkerReady,
 )
 from service.jobs.process import WorkerProcess, describe_exit
+from service.store.job_queue import DEFAULT_LEASE_S, JobQueue
 from service.store.jobs import JobRecord, JobStore
 from service.store.models import JobStatus
 
@@ -63,6 +63,11 @@ class WorkerSettings:
     cancel_grace_s: float = 5.0
     """A running job that has not stopped this long after a cancel is stopped by killing its worker."""
     stop_timeout_s: float = 5.0
+    lease_s: float = DEFAULT_LEASE_S
+    """A job's claim lasts this long unless renewed (every third of it); an instance that died loses its
+    jobs to the others after it (service.store.job_queue)."""
+    poll_s: float = 1.0
+    """With nothing to run, the queue is looked at this often (a job submitted on another instance)."""
 
 
 @dataclass
@@ -103,15 +108,18 @@ class JobManager:
         store: JobStore,
         settings: WorkerSettings = WorkerSettings(),
         completing: Callable[[str, dict], dict] | None = None,
+        instance: str | None = None,
     ) -> None:
         """completing(kind, result): what to store as a succeeded job's result (the service adds the
-        verdict an identification's figures earn under its configured thresholds)."""
+        verdict an identification's figures earn under its configured thresholds). instance: this
+        service's name in the shared queue (its lane; default the store's lane)."""
         self.store = store
         self.settings = settings
         self.completing = completing
+        self.queue = JobQueue(store.db, instance or store.lane or "default", settings.lease_s)
+        self._queued = 0  # the queue's length as last counted (status answers from memory)
         self.broker = EventBroker()
         self.restarts = 0
-        self._queue: deque[int] = deque()
         self._wakeup = asyncio.Event()
         self._worker_up = asyncio.Event()
         self._events: asyncio.Queue[tuple[int, FromWorker | WorkerExited]] = asyncio.Queue()
@@ -127,22 +135,24 @@ class JobManager:
     # life cycle
 
     async def start(self) -> list[int]:
-        """Recover from a previous run (running jobs -> failed, queued jobs resumed in order), start the
-        worker and the tasks. Returns the ids of the jobs marked failed."""
+        """Take back what this instance's previous run held (run again; failed after too many attempts),
+        start the worker and the tasks. Returns the ids of the jobs marked failed."""
         self._loop = asyncio.get_running_loop()
-        failed = await asyncio.to_thread(self.store.recover_interrupted)
-        for job_id in failed:
-            log.warning("job %d was running when the service stopped; marked failed", job_id)
-        self._queue.extend(await asyncio.to_thread(self.store.queued_ids))
-        if self._queue:
-            log.info("resuming %d queued job(s)", len(self._queue))
-            self._wakeup.set()
+        reclaimed = await asyncio.to_thread(self.queue.reclaim_own)
+        for job_id in reclaimed.requeued:
+            log.warning("job %d was running when this lane's service stopped; it runs again", job_id)
+        for job_id in reclaimed.failed:
+            log.warning("job %d: %s; marked failed", job_id, "its service stopped each time it ran")
+        self._queued = await asyncio.to_thread(self.queue.queued_count)
+        if self._queued:
+            log.info("%d queued job(s) waiting", self._queued)
         await self._start_worker()
         self._tasks = [
             asyncio.create_task(self._pump(), name="job-events"),
             asyncio.create_task(self._dispatch(), name="job-dispatcher"),
+            asyncio.create_task(self._keep(), name="job-leases"),
         ]
-        return failed
+        return reclaimed.failed
 
     async def stop(self) -> None:
         """Stop the tasks and the worker. A job still running is put back in the queue: the next start
@@ -154,7 +164,7 @@ class JobManager:
         if self._kill_timer is not None:
             self._kill_timer.cancel()
         if self._current is not None:
-            await asyncio.to_thread(self.store.requeue, self._current.job_id)
+            await asyncio.to_thread(self.store.requeue, self._current.job_id, self.queue.instance)
             self._current = None
         if self._worker is not None:
             await asyncio.to_thread(self._worker.process.stop, self.settings.stop_timeout_s)
@@ -187,7 +197,9 @@ class JobManager:
     # what the API calls
 
     def enqueue(self, record: JobRecord) -> None:
-        self._queue.append(record.id)
+        """A job was stored as queued: look at the queue now (it is the database's; any instance's
+        dispatcher may take it)."""
+        self._queued += 1
         self._wakeup.set()
 
     async def cancel(self, job_id: int) -> JobRecord | None:
@@ -201,15 +213,21 @@ class JobManager:
             self._request_cancel(current)
             return record
         if await asyncio.to_thread(self.store.cancel, job_id, "cancelled before it ran"):
-            with contextlib.suppress(ValueError):
-                self._queue.remove(job_id)
+            self._queued = max(0, self._queued - 1)
             record = await asyncio.to_thread(self.store.get, job_id)
             if record is not None:
                 self.broker.publish(JobEvent("finished", job_id, record=record))
             return record
-        # it went from queued to running meanwhile: the dispatcher passes the request on
+        # running: here (it went from queued to running meanwhile; the dispatcher passes the request on),
+        # or on another instance, which sees the request at its next lease renewal
         self._cancel_requests.add(job_id)
+        await asyncio.to_thread(self.queue.request_cancel, job_id)
         return await asyncio.to_thread(self.store.get, job_id)
+
+    def runs_here(self, job_id: int) -> bool:
+        """The job is this instance's current one (its events come through this broker)."""
+        current = self._current
+        return current is not None and current.job_id == job_id
 
     def live_progress(self, job_id: int) -> Progress | None:
         current = self._current
@@ -223,7 +241,7 @@ class JobManager:
             worker_ready=worker is not None and worker.ready,
             worker_pid=worker.process.pid if worker is not None else None,
             worker_restarts=self.restarts,
-            queue_length=len(self._queue),
+            queue_length=self._queued,
             current_job_id=current.job_id if current else None,
             current_kind=current.kind if current else None,
             current_progress=current.progress if current else None,
@@ -231,22 +249,26 @@ class JobManager:
 
     # dispatcher
 
-    async def _next(self) -> int:
-        """The next job, left in the queue (and counted there) until it runs."""
-        while not self._queue:
+    async def _next(self) -> JobRecord:
+        """The next job, claimed from the shared queue (running here from now on)."""
+        while True:
             self._wakeup.clear()
-            await self._wakeup.wait()
-        return self._queue[0]
+            try:
+                record = await asyncio.to_thread(self.queue.claim_next)
+            except Exception:  # the database away for a moment: try again at the next look
+                log.exception("could not look at the job queue")
+                record = None
+            if record is not None:
+                self._queued = max(0, self._queued - 1)
+                return record
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(self._wakeup.wait(), self.settings.poll_s)
 
     async def _dispatch(self) -> None:
         assert self._loop is not None
         while True:
-            job_id = await self._next()
-            record = await asyncio.to_thread(self.store.start, job_id)
-            with contextlib.suppress(ValueError):
-                self._queue.remove(job_id)
-            if record is None:
-                continue  # cancelled while queued
+            record = await self._next()
+            job_id = record.id
             # from here to the send no job is invisible: it is `current` as soon as it left the queue
             current = _Current(job_id, record.kind, 0, self._loop.create_future())
             self._current = current
@@ -300,6 +322,36 @@ class JobManager:
             )
             worker.process.kill()
 
+    # leases
+
+    async def _keep(self) -> None:
+        """Every third of the lease: renew the running job's claim (and hear a cancel asked on another
+        instance), take back jobs whose instance died, count the queue."""
+        while True:
+            await asyncio.sleep(self.settings.lease_s / 3)
+            try:
+                await self._keep_once()
+            except Exception:  # the database away for a moment: the next round tries again
+                log.exception("lease upkeep failed")
+
+    async def _keep_once(self) -> None:
+        current = self._current
+        if current is not None:
+            renewal = await asyncio.to_thread(self.queue.renew, current.job_id)
+            if not renewal.held:
+                log.warning(
+                    "job %d: this instance lost its claim (lease ran out); stopping it here", current.job_id
+                )
+                self._request_cancel(current)
+            elif renewal.cancel_requested:
+                self._request_cancel(current)
+        reclaimed = await asyncio.to_thread(self.queue.reclaim_expired)
+        for job_id in reclaimed.requeued:
+            log.warning("job %d: its instance stopped renewing its claim; back in the queue", job_id)
+        self._queued = await asyncio.to_thread(self.queue.queued_count)
+        if self._queued:
+            self._wakeup.set()
+
     # worker messages
 
     async def _pump(self) -> None:
@@ -336,7 +388,9 @@ class JobManager:
             now = time.monotonic()
             if now - current.persisted_at >= self.settings.persist_interval_s:
                 current.persisted_at = now
-                await asyncio.to_thread(self.store.set_progress, current.job_id, message.progress.as_dict())
+                await asyncio.to_thread(
+                    self.store.set_progress, current.job_id, message.progress.as_dict(), self.queue.instance
+                )
         elif isinstance(message, JobSucceeded):
             await self._finish(
                 current, JobStatus.SUCCEEDED, result=message.result, artefacts=message.artefacts
@@ -366,12 +420,27 @@ class JobManager:
             if status is JobStatus.SUCCEEDED:
                 if self.completing is not None:
                     result = self.completing(current.kind, result or {})
-                await asyncio.to_thread(self.store.succeed, job_id, result or {}, artefacts or {}, progress)
+                written = await asyncio.to_thread(
+                    self.store.succeed, job_id, result or {}, artefacts or {}, progress, self.queue.instance
+                )
             elif status is JobStatus.FAILED:
-                await asyncio.to_thread(self.store.fail, job_id, reason or "failed", progress)
+                written = await asyncio.to_thread(
+                    self.store.fail, job_id, reason or "failed", progress, self.queue.instance
+                )
             else:
-                await asyncio.to_thread(
-                    self.store.cancel, job_id, reason or "cancelled", running=True, progress=progress
+                written = await asyncio.to_thread(
+                    self.store.cancel,
+                    job_id,
+                    reason or "cancelled",
+                    running=True,
+                    progress=progress,
+                    owner=self.queue.instance,
+                )
+            if not written:
+                log.warning(
+                    "job %d %s here, but its claim was taken over meanwhile: not written",
+                    job_id,
+                    status.value,
                 )
             record = await asyncio.to_thread(self.store.get, job_id)
             if record is not None:
@@ -392,8 +461,9 @@ class JobManager:
                 await self._finish(current, JobStatus.CANCELLED, reason="cancelled (its worker was stopped)")
             elif not current.started:  # the worker never took it: not the job's fault, run it again
                 try:
-                    await asyncio.to_thread(self.store.requeue, current.job_id)
-                    self._queue.appendleft(current.job_id)
+                    await asyncio.to_thread(self.store.requeue, current.job_id, self.queue.instance)
+                    self._queued += 1
+                    self._wakeup.set()
                 finally:
                     self._current = None
                     current.done.set_result(None)

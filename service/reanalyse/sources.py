@@ -20,8 +20,12 @@ from __future__ import annotations
 import hashlib
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from estimator.errors import UserError
+
+if TYPE_CHECKING:
+    from service.store.database import Database
 
 RECORDING_SUFFIXES = (".csv", ".h5", ".hdf5")
 HDF5_SUFFIXES = (".h5", ".hdf5")
@@ -90,6 +94,27 @@ def items_in_folder(folder: Path, out: Path | None = None) -> list[Item]:
     return items
 
 
+def _check_schema(database: Database) -> None:
+    """SourceError unless the database's schema is the one this shockbench reads (read only here: an
+    older one is upgraded by `shockbench db upgrade`, not by a re-analysis)."""
+    from service.store.schema import current_revision, head_revision, known_revisions
+
+    with database.engine.connect() as connection:
+        revision = current_revision(connection)
+    if revision is None:
+        raise SourceError(f"database {database.safe_url}: no shockbench tables")
+    if revision not in known_revisions():
+        raise SourceError(
+            f"database {database.safe_url}: schema revision {revision} is newer than this shockbench "
+            f"knows (newest {head_revision()}): upgrade shockbench"
+        )
+    if revision != head_revision():
+        raise SourceError(
+            f"database {database.safe_url}: schema revision {revision} is older than this shockbench "
+            f"reads ({head_revision()}): run `shockbench db upgrade --database URL` first"
+        )
+
+
 def items_in_database(url: str) -> list[Item]:
     """Every complete sweep stored in the database at `url`, oldest first, named sweep-<id>."""
     from sqlalchemy.engine import make_url
@@ -110,6 +135,7 @@ def items_in_database(url: str) -> list[Item]:
     store = SweepStore(database)
     sweeps = []
     try:
+        _check_schema(database)
         while True:
             page, total = store.list_sweeps(status=SweepStatus.COMPLETE, limit=SWEEP_PAGE, offset=len(sweeps))
             sweeps += page

@@ -2,7 +2,8 @@
 
 SQLite by default (a file in the data directory: embedded, no server to install), opened in WAL mode so
 that readers never wait for the writer; any other SQLAlchemy URL (e.g. postgresql+psycopg://...) works
-unchanged with the same models. Tables are created when missing.
+unchanged with the same models. The schema is Alembic's (service.store.schema): `upgrade_schema` creates
+it in a new database, upgrades an older one, and refuses one a newer shockbench wrote.
 """
 
 from __future__ import annotations
@@ -18,7 +19,6 @@ from sqlalchemy.exc import ArgumentError, NoSuchModuleError, SQLAlchemyError
 from sqlalchemy.orm import Session, sessionmaker
 
 from estimator.errors import UserError
-from service.store.models import Base
 
 DATABASE_FILE = "shockbench.sqlite3"
 
@@ -66,9 +66,14 @@ class Database:
     def safe_url(self) -> str:
         return self.url.render_as_string(hide_password=True)
 
-    def create_tables(self) -> None:
+    def upgrade_schema(self) -> tuple[str | None, str]:
+        """Create or upgrade the tables to the newest schema revision; (revision before, after). A
+        DatabaseError (one line) when the server cannot be reached, SchemaError when the database is
+        newer than this shockbench."""
+        from service.store.schema import upgrade
+
         try:
-            Base.metadata.create_all(self.engine)
+            return upgrade(self.engine)
         except SQLAlchemyError as exc:
             raise DatabaseError(f"database {self.safe_url}: {str(exc).splitlines()[0]}") from None
 

@@ -18,7 +18,8 @@ from sqlalchemy import func, select, update
 from service.store.database import Database
 from service.store.models import JobRow, JobStatus, utcnow
 
-RESTART_REASON = "service restarted while the job ran"
+RESTART_REASON = "its service stopped each time it ran"
+"""Why a job whose instance died while running it, attempt after attempt, is failed (job_queue)."""
 
 
 @dataclass(frozen=True)
@@ -33,6 +34,8 @@ class JobFiles:
 @dataclass(frozen=True)
 class JobRecord:
     id: int
+    lane: str
+    """The lane it belongs to ("" for rows from before lanes)."""
     kind: str
     status: JobStatus
     options: dict[str, Any]
@@ -49,11 +52,16 @@ class JobRecord:
     created_at: datetime
     started_at: datetime | None
     finished_at: datetime | None
+    claimed_by: str | None = None
+    """The instance (lane) that runs or ran it."""
+    attempts: int = 0
+    """How many times it was begun (more than 1: an instance died while running it)."""
 
     @classmethod
     def of(cls, row: JobRow) -> JobRecord:
         return cls(
             id=row.id,
+            lane=row.lane,
             kind=row.kind,
             status=JobStatus(row.status),
             options=dict(row.options or {}),
@@ -70,12 +78,16 @@ class JobRecord:
             created_at=row.created_at,
             started_at=row.started_at,
             finished_at=row.finished_at,
+            claimed_by=row.claimed_by,
+            attempts=row.attempts or 0,
         )
 
 
 class JobStore:
-    def __init__(self, database: Database) -> None:
+    def __init__(self, database: Database, lane: str = "") -> None:
+        """lane: stamped on every row this store creates (the service's `--lane`)."""
         self.db = database
+        self.lane = lane
 
     def create(
         self,
@@ -91,6 +103,7 @@ class JobStore:
         uploaded files into the job's folder) and says where; if it raises, no job is created."""
         with self.db.transaction() as session:
             row = JobRow(
+                lane=self.lane,
                 kind=kind,
                 status=JobStatus.QUEUED.value,
                 options=options,
@@ -117,11 +130,19 @@ class JobStore:
             return JobRecord.of(row) if row is not None else None
 
     def list_jobs(
-        self, *, status: JobStatus | None = None, kind: str | None = None, limit: int = 50, offset: int = 0
+        self,
+        *,
+        status: JobStatus | None = None,
+        kind: str | None = None,
+        lane: str | None = None,
+        limit: int = 50,
+        offset: int = 0,
     ) -> tuple[list[JobRecord], int]:
         """Newest first, and the total count that matches."""
         query = select(JobRow)
         count = select(func.count()).select_from(JobRow)
+        if lane is not None:
+            query, count = query.where(JobRow.lane == lane), count.where(JobRow.lane == lane)
         if status is not None:
             query, count = (
                 query.where(JobRow.status == status.value),
@@ -151,41 +172,62 @@ class JobStore:
             query = select(JobRow.id).where(JobRow.status == JobStatus.QUEUED.value).order_by(JobRow.id)
             return list(session.scalars(query).all())
 
-    def _transition(self, job_id: int, from_status: tuple[JobStatus, ...], **values: Any) -> bool:
+    def _transition(
+        self, job_id: int, from_status: tuple[JobStatus, ...], owner: str | None = None, **values: Any
+    ) -> bool:
+        """One conditional UPDATE: from one of `from_status` (and, with `owner`, only while that instance
+        holds the claim: one whose lease was taken over must not write the job's end)."""
+        where = [JobRow.id == job_id, JobRow.status.in_([s.value for s in from_status])]
+        if owner is not None:
+            where.append(JobRow.claimed_by == owner)
         with self.db.transaction() as session:
-            done = session.execute(
-                update(JobRow)
-                .where(JobRow.id == job_id, JobRow.status.in_([s.value for s in from_status]))
-                .values(**values)
-            )
+            done = session.execute(update(JobRow).where(*where).values(**values))
             return done.rowcount == 1
 
-    def mark_running(self, job_id: int) -> bool:
-        """queued -> running; False when the job is no longer queued (cancelled meanwhile)."""
+    def mark_running(self, job_id: int, owner: str | None = None) -> bool:
+        """queued -> running (one more attempt, claimed by `owner`); False when the job is no longer queued
+        (cancelled meanwhile). The service claims jobs through service.store.job_queue instead."""
         return self._transition(
-            job_id, (JobStatus.QUEUED,), status=JobStatus.RUNNING.value, started_at=utcnow(), progress=None
+            job_id,
+            (JobStatus.QUEUED,),
+            status=JobStatus.RUNNING.value,
+            started_at=utcnow(),
+            progress=None,
+            claimed_by=owner,
+            attempts=JobRow.attempts + 1,
         )
 
-    def requeue(self, job_id: int) -> bool:
-        """running -> queued: the job never really started (its worker died before taking it), or the
-        service is stopping and will resume it at its next start."""
+    def requeue(self, job_id: int, owner: str | None = None) -> bool:
+        """running -> queued, not counted as an attempt: the job never really started (its worker died
+        before taking it), or the service is stopping and another instance, or its next start, resumes
+        it."""
         return self._transition(
-            job_id, (JobStatus.RUNNING,), status=JobStatus.QUEUED.value, started_at=None, progress=None
+            job_id,
+            (JobStatus.RUNNING,),
+            owner,
+            status=JobStatus.QUEUED.value,
+            started_at=None,
+            progress=None,
+            claimed_by=None,
+            lease_until=None,
+            attempts=JobRow.attempts - 1,
         )
 
-    def start(self, job_id: int) -> JobRecord | None:
-        """mark_running, then the job as it now is; None when it was no longer queued."""
-        return self.get(job_id) if self.mark_running(job_id) else None
-
-    def set_progress(self, job_id: int, progress: dict[str, Any]) -> None:
-        self._transition(job_id, (JobStatus.RUNNING,), progress=progress)
+    def set_progress(self, job_id: int, progress: dict[str, Any], owner: str | None = None) -> None:
+        self._transition(job_id, (JobStatus.RUNNING,), owner, progress=progress)
 
     def succeed(
-        self, job_id: int, result: dict[str, Any], artefacts: dict[str, Any], progress: dict[str, Any] | None
+        self,
+        job_id: int,
+        result: dict[str, Any],
+        artefacts: dict[str, Any],
+        progress: dict[str, Any] | None,
+        owner: str | None = None,
     ) -> bool:
         return self._transition(
             job_id,
             (JobStatus.RUNNING,),
+            owner,
             status=JobStatus.SUCCEEDED.value,
             result=result,
             artefacts=artefacts,
@@ -193,11 +235,13 @@ class JobStore:
             finished_at=utcnow(),
         )
 
-    def fail(self, job_id: int, reason: str, progress: dict[str, Any] | None = None) -> bool:
+    def fail(
+        self, job_id: int, reason: str, progress: dict[str, Any] | None = None, owner: str | None = None
+    ) -> bool:
         values: dict[str, Any] = {"status": JobStatus.FAILED.value, "error": reason, "finished_at": utcnow()}
         if progress is not None:
             values["progress"] = progress
-        return self._transition(job_id, (JobStatus.QUEUED, JobStatus.RUNNING), **values)
+        return self._transition(job_id, (JobStatus.QUEUED, JobStatus.RUNNING), owner, **values)
 
     def cancel(
         self,
@@ -206,6 +250,7 @@ class JobStore:
         *,
         running: bool = False,
         progress: dict[str, Any] | None = None,
+        owner: str | None = None,
     ) -> bool:
         """Queued (or, with running=True, running) -> cancelled."""
         allowed = (JobStatus.QUEUED, JobStatus.RUNNING) if running else (JobStatus.QUEUED,)
@@ -216,19 +261,4 @@ class JobStore:
         }
         if progress is not None:
             values["progress"] = progress
-        return self._transition(job_id, allowed, **values)
-
-    def recover_interrupted(self, reason: str = RESTART_REASON) -> list[int]:
-        """At start-up: jobs left 'running' by a crash or a kill of the service are marked failed with the
-        reason. (Queued jobs stay queued and are resumed in order.)"""
-        with self.db.transaction() as session:
-            ids = list(
-                session.scalars(select(JobRow.id).where(JobRow.status == JobStatus.RUNNING.value)).all()
-            )
-            if ids:
-                session.execute(
-                    update(JobRow)
-                    .where(JobRow.id.in_(ids))
-                    .values(status=JobStatus.FAILED.value, error=reason, finished_at=utcnow())
-                )
-            return ids
+        return self._transition(job_id, allowed, owner, **values)

@@ -11,7 +11,7 @@ from datetime import UTC, datetime
 from enum import StrEnum
 from typing import Any
 
-from sqlalchemy import JSON, Boolean, DateTime, ForeignKey, Index, Integer, String, Text
+from sqlalchemy import JSON, Boolean, DateTime, ForeignKey, Index, Integer, String, Text, false
 from sqlalchemy.engine import Dialect
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
 from sqlalchemy.types import TypeDecorator
@@ -80,10 +80,12 @@ class SweepRow(Base):
     """A sweep on the bench (filled in by the acquisition layer). The recording stays in its file."""
 
     __tablename__ = "sweeps"
-    __table_args__ = {"sqlite_autoincrement": True}  # noqa: RUF012 - SQLAlchemy API; ids are never reused
+    __table_args__ = (Index("ix_sweeps_lane", "lane"), {"sqlite_autoincrement": True})  # ids never reused
 
     id: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=True)
     bench: Mapped[str] = mapped_column(String(100), default="default")
+    lane: Mapped[str] = mapped_column(String(100), default="", server_default="")
+    """The lane (`serve --lane`) whose bench ran it; "" for rows from before lanes."""
     status: Mapped[str] = mapped_column(String(16), default=SweepStatus.REQUESTED.value)
     settings: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
     """Sweep settings as submitted (frequencies, amplitude, duration ...)."""
@@ -105,10 +107,16 @@ class JobRow(Base):
     the data directory) or a sweep's recording; the result is the estimator's JSON."""
 
     __tablename__ = "jobs"
-    __table_args__ = (Index("ix_jobs_status", "status"), {"sqlite_autoincrement": True})
+    __table_args__ = (
+        Index("ix_jobs_status", "status"),
+        Index("ix_jobs_lane", "lane"),
+        {"sqlite_autoincrement": True},
+    )
 
     id: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=True)
     """Increasing: the submission order, which is the order jobs run in (FIFO)."""
+    lane: Mapped[str] = mapped_column(String(100), default="", server_default="")
+    """The lane it was submitted on; "" for rows from before lanes."""
     kind: Mapped[str] = mapped_column(String(16), default=JobKind.IDENTIFY.value)
     status: Mapped[str] = mapped_column(String(16), default=JobStatus.QUEUED.value)
     options: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
@@ -128,6 +136,14 @@ class JobRow(Base):
     created_at: Mapped[datetime] = mapped_column(default=utcnow)
     started_at: Mapped[datetime | None] = mapped_column(default=None)
     finished_at: Mapped[datetime | None] = mapped_column(default=None)
+    claimed_by: Mapped[str | None] = mapped_column(String(100), default=None)
+    """The instance (its lane) running it; set when claimed (service.store.job_queue)."""
+    lease_until: Mapped[datetime | None] = mapped_column(default=None)
+    """The claim holds until then unless renewed; past it, any instance may run the job again."""
+    attempts: Mapped[int] = mapped_column(Integer, default=0, server_default="0")
+    """How many times it was begun: a job whose instance keeps dying is failed after a few."""
+    cancel_requested: Mapped[bool] = mapped_column(Boolean, default=False, server_default=false())
+    """Cancel asked while it runs (on any instance); the running instance sees it at its next renewal."""
 
 
 class ScheduleRow(Base):
@@ -135,10 +151,16 @@ class ScheduleRow(Base):
     that is None, as soon as the bench is free. One test runs at a time per bench."""
 
     __tablename__ = "schedules"
-    __table_args__ = (Index("ix_schedules_bench_status", "bench", "status"), {"sqlite_autoincrement": True})
+    __table_args__ = (
+        Index("ix_schedules_bench_status", "bench", "status"),
+        Index("ix_schedules_lane", "lane"),
+        {"sqlite_autoincrement": True},
+    )
 
     id: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=True)
     bench: Mapped[str] = mapped_column(String(100), default="default")
+    lane: Mapped[str] = mapped_column(String(100), default="", server_default="")
+    """The lane whose scheduler runs it; "" for rows from before lanes."""
     vehicle_file: Mapped[str] = mapped_column(Text)
     sweep_settings: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
     job_options: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)

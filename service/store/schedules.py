@@ -26,6 +26,8 @@ FINISHED = (ScheduleStatus.DONE, ScheduleStatus.FAILED, ScheduleStatus.CANCELLED
 @dataclass(frozen=True)
 class ScheduleRecord:
     id: int
+    lane: str
+    """The lane it belongs to ("" for rows from before lanes)."""
     bench: str
     status: ScheduleStatus
     vehicle_file: str
@@ -49,6 +51,7 @@ class ScheduleRecord:
     def of(cls, row: ScheduleRow) -> ScheduleRecord:
         return cls(
             id=row.id,
+            lane=row.lane,
             bench=row.bench,
             status=ScheduleStatus(row.status),
             vehicle_file=row.vehicle_file,
@@ -66,8 +69,10 @@ class ScheduleRecord:
 
 
 class ScheduleStore:
-    def __init__(self, database: Database) -> None:
+    def __init__(self, database: Database, lane: str = "") -> None:
+        """lane: stamped on every row this store creates (the service's `--lane`)."""
         self.db = database
+        self.lane = lane
 
     def create(
         self,
@@ -83,6 +88,7 @@ class ScheduleStore:
         raises, no test is created."""
         with self.db.transaction() as session:
             row = ScheduleRow(
+                lane=self.lane,
                 bench=bench,
                 vehicle_file="",
                 sweep_settings=sweep_settings,
@@ -103,11 +109,18 @@ class ScheduleStore:
             return ScheduleRecord.of(row) if row is not None else None
 
     def list_tests(
-        self, *, status: ScheduleStatus | None = None, limit: int = 50, offset: int = 0
+        self,
+        *,
+        status: ScheduleStatus | None = None,
+        lane: str | None = None,
+        limit: int = 50,
+        offset: int = 0,
     ) -> tuple[list[ScheduleRecord], int]:
         """Newest first, and the total count that matches."""
         query = select(ScheduleRow)
         count = select(func.count()).select_from(ScheduleRow)
+        if lane is not None:
+            query, count = query.where(ScheduleRow.lane == lane), count.where(ScheduleRow.lane == lane)
         if status is not None:
             query = query.where(ScheduleRow.status == status.value)
             count = count.where(ScheduleRow.status == status.value)
@@ -116,18 +129,23 @@ class ScheduleStore:
             return [ScheduleRecord.of(r) for r in rows], int(session.scalar(count) or 0)
 
     def running(self, bench: str) -> ScheduleRecord | None:
-        """The test this bench is running, if any (at most one: `claim_next` sees to it)."""
+        """The test this lane's bench is running, if any (at most one: `claim_next` sees to it)."""
         with self.db.sessions() as session:
             row = session.scalars(
                 select(ScheduleRow)
-                .where(ScheduleRow.bench == bench, ScheduleRow.status == ScheduleStatus.RUNNING.value)
+                .where(
+                    ScheduleRow.lane == self.lane,
+                    ScheduleRow.bench == bench,
+                    ScheduleRow.status == ScheduleStatus.RUNNING.value,
+                )
                 .order_by(ScheduleRow.id)
                 .limit(1)
             ).first()
             return ScheduleRecord.of(row) if row is not None else None
 
     def claim_next(self, bench: str, now: datetime) -> ScheduleRecord | None:
-        """The next due test of this bench, marked running; None when none is due or one already runs.
+        """The next due test of this lane's bench, marked running (another lane's tests are its own
+        scheduler's); None when none is due or one already runs.
         Due: `run_at` has come, or it has none. Order: by when each became due (its `run_at`, else when
         it was submitted), then by id."""
         due_since = func.coalesce(ScheduleRow.run_at, ScheduleRow.created_at)
@@ -135,13 +153,18 @@ class ScheduleStore:
             busy = session.scalar(
                 select(func.count())
                 .select_from(ScheduleRow)
-                .where(ScheduleRow.bench == bench, ScheduleRow.status == ScheduleStatus.RUNNING.value)
+                .where(
+                    ScheduleRow.lane == self.lane,
+                    ScheduleRow.bench == bench,
+                    ScheduleRow.status == ScheduleStatus.RUNNING.value,
+                )
             )
             if busy:
                 return None
             candidates = session.scalars(
                 select(ScheduleRow.id)
                 .where(
+                    ScheduleRow.lane == self.lane,
                     ScheduleRow.bench == bench,
                     ScheduleRow.status == ScheduleStatus.WAITING.value,
                     (ScheduleRow.run_at.is_(None)) | (ScheduleRow.run_at <= now),

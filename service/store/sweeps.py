@@ -29,6 +29,8 @@ def finished(status: SweepStatus) -> bool:
 @dataclass(frozen=True)
 class SweepRecord:
     id: int
+    lane: str
+    """The lane it belongs to ("" for rows from before lanes)."""
     bench: str
     status: SweepStatus
     settings: dict[str, Any]
@@ -50,6 +52,7 @@ class SweepRecord:
     def of(cls, row: SweepRow) -> SweepRecord:
         return cls(
             id=row.id,
+            lane=row.lane,
             bench=row.bench,
             status=SweepStatus(row.status),
             settings=dict(row.settings or {}),
@@ -65,8 +68,10 @@ class SweepRecord:
 
 
 class SweepStore:
-    def __init__(self, database: Database) -> None:
+    def __init__(self, database: Database, lane: str = "") -> None:
+        """lane: stamped on every row this store creates (the service's `--lane`)."""
         self.db = database
+        self.lane = lane
 
     def create(
         self,
@@ -80,7 +85,11 @@ class SweepStore:
         vehicle file path); if it raises, no sweep is created."""
         with self.db.transaction() as session:
             row = SweepRow(
-                bench=bench, status=SweepStatus.REQUESTED.value, settings=settings, operator=operator
+                lane=self.lane,
+                bench=bench,
+                status=SweepStatus.REQUESTED.value,
+                settings=settings,
+                operator=operator,
             )
             session.add(row)
             session.flush()
@@ -99,6 +108,7 @@ class SweepStore:
         *,
         status: SweepStatus | None = None,
         vehicle_id: str | None = None,
+        lane: str | None = None,
         limit: int = 50,
         offset: int = 0,
     ) -> tuple[list[SweepRecord], int]:
@@ -109,6 +119,8 @@ class SweepStore:
         if status is not None:
             query = query.where(SweepRow.status == status.value)
             count = count.where(SweepRow.status == status.value)
+        if lane is not None:
+            query, count = query.where(SweepRow.lane == lane), count.where(SweepRow.lane == lane)
         if vehicle_id is not None:
             same = func.lower(SweepRow.settings["vehicle_id"].as_string()) == vehicle_id.lower()
             query, count = query.where(same), count.where(same)

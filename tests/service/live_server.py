@@ -1,12 +1,16 @@
-"""Running the service in-process, for tests and benchmarks: the real uvicorn server on a free loopback
-port in a background thread (`LiveServer`), a deadline-bounded `wait_until`, and simulated input files
-(`simulated_inputs`) whose truth is known.
+"""Running the service for tests and benchmarks: in-process, the real uvicorn server on a free loopback
+port in a background thread (`LiveServer`); as its own process, `shockbench serve` on a free loopback port
+(`serve_process`); a deadline-bounded `wait_until`; and simulated input files (`simulated_inputs`) whose
+truth is known.
 
 It lives under tests/ (it was service/api/testing.py): it needs httpx, which only the test extra installs,
 so it is no part of the installed product. Benchmarks put tests/service on sys.path to use it."""
 
 from __future__ import annotations
 
+import re
+import subprocess
+import sys
 import tempfile
 import threading
 import time
@@ -23,6 +27,10 @@ from fastapi import FastAPI
 from service.api.server import ServiceServer, bind, url_of
 
 T = TypeVar("T")
+
+ROOT = Path(__file__).resolve().parents[2]
+SERVE_STARTUP_TIMEOUT_S = 180.0
+"""Interpreter, imports, worker and input checker start-up of `serve` on a loaded 2-core machine."""
 
 
 def wait_until(condition: Callable[[], T | None], timeout_s: float, what: str, poll_s: float = 0.05) -> T:
@@ -78,6 +86,57 @@ class LiveServer:
         if self._server is not None and self._thread is not None:
             self._server.stop()
             self._thread.join(timeout=30)
+
+
+@dataclass
+class ServeProcess:
+    """`shockbench serve` running as its own process, its stdout and stderr in `log`."""
+
+    process: subprocess.Popen[bytes]
+    url: str
+    log: Path
+
+    def client(self, key: str) -> httpx.Client:
+        """An httpx client of the service sending `key` as its Bearer key."""
+        return httpx.Client(base_url=self.url, headers={"Authorization": f"Bearer {key}"}, timeout=60)
+
+    def answers(self, key: str) -> dict[str, Any] | None:
+        """GET /status once the service answers with its worker ready, else None (fails if it exited)."""
+        assert self.process.poll() is None, f"serve exited:\n{self.log.read_text()}"
+        try:
+            with self.client(key) as client:
+                status: dict[str, Any] = client.get("/api/v1/status", timeout=5).json()
+        except httpx.TransportError:
+            return None
+        return status if status["worker"]["ready"] else None
+
+    def stop(self) -> None:
+        """Kill it if it still runs."""
+        if self.process.poll() is None:
+            self.process.kill()
+            self.process.wait(30)
+
+
+def serve_process(folder: Path, name: str, *args: str) -> ServeProcess:
+    """Start `python -m service.cli.serve --port 0 ARGS` (from the repository's root, its output in
+    folder/NAME.log) and wait until it says which URL it listens on."""
+    log = folder / f"{name}.log"
+    command = [sys.executable, "-m", "service.cli.serve", "--port", "0", *args]
+    with log.open("w") as out:
+        process = subprocess.Popen(command, cwd=ROOT, stdout=out, stderr=subprocess.STDOUT)
+
+    def listening() -> str | None:
+        assert process.poll() is None, f"serve exited early:\n{log.read_text()}"
+        match = re.search(r"listening on (http://\S+)", log.read_text())
+        return match.group(1) if match else None
+
+    try:
+        url = wait_until(listening, SERVE_STARTUP_TIMEOUT_S, "serve listening", 0.1)
+    except BaseException:
+        process.kill()
+        process.wait(30)
+        raise
+    return ServeProcess(process, url, log)
 
 
 @dataclass(frozen=True)

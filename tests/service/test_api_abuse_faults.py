@@ -16,20 +16,17 @@ The measured times to stop are printed (run with -s to see them; README fault ta
 from __future__ import annotations
 
 import os
-import re
 import signal
-import subprocess
-import sys
 import time
 from collections.abc import Iterator
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import httpx
 import pytest
+from live_server import SERVE_STARTUP_TIMEOUT_S as STARTUP_TIMEOUT_S
+from live_server import ServeProcess, serve_process, wait_until
 from live_server import wait_for_status as wait_for
-from live_server import wait_until
 
 from daq.bench_config import write_bench_config
 from daq.formats.vehicle_file import format_vehicle
@@ -39,23 +36,10 @@ from service.bench_control import SERVICE_STOPPED
 from service.simulated_bench import SimulatedBench, vehicle_preset
 from service.store.sweeps import RESTART_REASON
 
-ROOT = Path(__file__).resolve().parents[2]
 OPERATOR = "operator-key-0123456789"
 AUTH = {"Authorization": f"Bearer {OPERATOR}"}
-STARTUP_TIMEOUT_S = 180.0
-"""Interpreter, imports, worker and input checker start-up on a loaded 2-core machine."""
 VEHICLE_TOML = format_vehicle(vehicle_preset("quarter-car").known)
 SWEEP = {"duration_s": 20.0, "settle_s": 0.5, "vehicle_toml": VEHICLE_TOML}
-
-
-@dataclass
-class Service:
-    process: subprocess.Popen[bytes]
-    url: str
-    log: Path
-
-    def client(self) -> httpx.Client:
-        return httpx.Client(base_url=self.url, headers=AUTH, timeout=60)
 
 
 @pytest.fixture
@@ -75,39 +59,20 @@ def folder(tmp_path: Path, bench: SimulatedBench) -> Path:
     return tmp_path
 
 
-def serve(folder: Path, name: str) -> Service:
-    """Start `python -m service.cli.serve --config` and wait until it answers with its worker ready."""
-    log = folder / f"{name}.log"
-    command = [
-        sys.executable, "-m", "service.cli.serve", "--port", "0", "--config", str(folder / "bench.toml"),
-        "--data", str(folder / "data"), "--keys", str(folder / "keys.toml"), "--log-level", "info",
-    ]  # fmt: skip
-    with log.open("w") as out:
-        process = subprocess.Popen(command, cwd=ROOT, stdout=out, stderr=subprocess.STDOUT)
-
-    def listening() -> str | None:
-        assert process.poll() is None, f"serve exited early:\n{log.read_text()}"
-        match = re.search(r"listening on (http://\S+)", log.read_text())
-        return match.group(1) if match else None
-
-    url = wait_until(listening, STARTUP_TIMEOUT_S, "serve listening", 0.1)
-    return Service(process, url, log)
+def serve(folder: Path, name: str) -> ServeProcess:
+    """Start `shockbench serve --config` on this test's bench and keys (it listens; not yet ready)."""
+    config, data, keys = (str(folder / file) for file in ("bench.toml", "data", "keys.toml"))
+    options = ("--config", config, "--data", data, "--keys", keys, "--log-level", "info")
+    return serve_process(folder, name, *options)
 
 
-def answers(service: Service) -> dict[str, Any] | None:
+def answers(service: ServeProcess) -> dict[str, Any] | None:
     """The status once the service answers with its worker ready, else None."""
-    assert service.process.poll() is None, f"serve exited:\n{service.log.read_text()}"
-    try:
-        status: dict[str, Any] = httpx.get(f"{service.url}/api/v1/status", headers=AUTH, timeout=5).json()
-    except httpx.TransportError:
-        return None
-    return status if status["worker"]["ready"] else None
+    return service.answers(OPERATOR)
 
 
-def stop(service: Service) -> None:
-    if service.process.poll() is None:
-        service.process.kill()
-        service.process.wait(30)
+def stop(service: ServeProcess) -> None:
+    service.stop()
 
 
 def plate(bench: SimulatedBench) -> ExciterState:
@@ -144,7 +109,7 @@ def test_sigterm_mid_sweep_fails_it_as_service_stopped_with_the_plate_stopped_an
     service = serve(folder, "serve")
     try:
         wait_until(lambda: answers(service), STARTUP_TIMEOUT_S, "service ready", 0.2)
-        with service.client() as client:
+        with service.client(OPERATOR) as client:
             sweep = sweeping(client, bench, SWEEP)
         before = len(bench.exciter.commands)
         service.process.send_signal(signal.SIGTERM)
@@ -166,7 +131,7 @@ def test_sigterm_mid_sweep_fails_it_as_service_stopped_with_the_plate_stopped_an
     restarted = serve(folder, "restarted")
     try:
         wait_until(lambda: answers(restarted), STARTUP_TIMEOUT_S, "service ready", 0.2)
-        with restarted.client() as client:
+        with restarted.client(OPERATOR) as client:
             record = client.get(f"/api/v1/sweeps/{sweep['id']}").json()
     finally:
         stop(restarted)
@@ -190,7 +155,7 @@ def test_a_killed_worker_fails_its_job_and_leaves_the_sweep_alone(
     service = serve(folder, "serve")
     try:
         status = wait_until(lambda: answers(service), STARTUP_TIMEOUT_S, "service ready", 0.2)
-        with service.client() as client:
+        with service.client(OPERATOR) as client:
             files = {"recording": inputs.recording.read_bytes(), "vehicle": inputs.vehicle.read_bytes()}
             job = client.post("/api/v1/jobs", files=files, data={"solver": "de", "generations": "200000"})
             assert job.status_code == 201, job.text
@@ -229,7 +194,7 @@ def test_sigkill_mid_sweep_the_drive_watchdog_stops_the_plate_and_a_restart_fail
     service = serve(folder, "serve")
     try:
         wait_until(lambda: answers(service), STARTUP_TIMEOUT_S, "service ready", 0.2)
-        with service.client() as client:
+        with service.client(OPERATOR) as client:
             sweep = sweeping(client, bench, SWEEP)
         before = len(bench.exciter.commands)
         service.process.kill()
@@ -252,7 +217,7 @@ def test_sigkill_mid_sweep_the_drive_watchdog_stops_the_plate_and_a_restart_fail
     restarted = serve(folder, "restarted")
     try:
         wait_until(lambda: answers(restarted), STARTUP_TIMEOUT_S, "service ready", 0.2)
-        with restarted.client() as client:
+        with restarted.client(OPERATOR) as client:
             record = client.get(f"/api/v1/sweeps/{sweep['id']}").json()
     finally:
         stop(restarted)
@@ -267,7 +232,7 @@ def test_sigkill_with_a_silent_watchdog_the_restarted_service_stops_the_plate_be
     service = serve(folder, "serve")
     try:
         wait_until(lambda: answers(service), STARTUP_TIMEOUT_S, "service ready", 0.2)
-        with service.client() as client:
+        with service.client(OPERATOR) as client:
             sweeping(client, bench, {**SWEEP, "duration_s": 300.0})
         service.process.kill()
         service.process.wait(30)

@@ -11,20 +11,25 @@ from typing import Any
 
 import httpx
 import pytest
+import sqlalchemy as sa
 from live_server import LiveServer, SimulatedInputs, wait_for_status, wait_until
 
 from service.access import KeyRing, Role
 from service.api import ServiceSettings, create_app
 from service.api.server import SHUTDOWN_GRACE_S
 from service.store import Database, JobStatus, JobStore
+from service.store.job_queue import DEFAULT_MAX_ATTEMPTS
 from service.store.jobs import RESTART_REASON, JobFiles
+from service.store.models import JobRow
 
 OPERATOR = "operator-key-0123456789"
 AUTH = {"Authorization": f"Bearer {OPERATOR}"}
 
 
-def settings_for(data_dir: Path) -> ServiceSettings:
-    return ServiceSettings(data_dir=data_dir, keys=KeyRing({OPERATOR: Role.OPERATOR}))
+def settings_for(data_dir: Path, database_url: str | None = None) -> ServiceSettings:
+    return ServiceSettings(
+        data_dir=data_dir, keys=KeyRing({OPERATOR: Role.OPERATOR}), database_url=database_url
+    )
 
 
 def finished(client: httpx.Client, job_id: int, timeout_s: float = 120) -> dict[str, Any]:
@@ -37,9 +42,11 @@ def upload(inputs: SimulatedInputs) -> dict[str, bytes]:
     return {"recording": inputs.recording.read_bytes(), "vehicle": inputs.vehicle.read_bytes()}
 
 
-def test_restarting_the_server_keeps_all_jobs_and_results(tmp_path: Path, inputs: SimulatedInputs) -> None:
+def test_restarting_the_server_keeps_all_jobs_and_results(
+    tmp_path: Path, inputs: SimulatedInputs, database_url: str
+) -> None:
     with (
-        LiveServer(create_app(settings_for(tmp_path))) as server,
+        LiveServer(create_app(settings_for(tmp_path, database_url))) as server,
         httpx.Client(base_url=server.url, headers=AUTH) as client,
     ):
         succeeded = client.post("/api/v1/jobs", files=upload(inputs), data={"output_error": "false"}).json()
@@ -50,7 +57,7 @@ def test_restarting_the_server_keeps_all_jobs_and_results(tmp_path: Path, inputs
     assert before[succeeded["id"]]["status"] == "succeeded"
 
     with (
-        LiveServer(create_app(settings_for(tmp_path))) as server,
+        LiveServer(create_app(settings_for(tmp_path, database_url))) as server,
         httpx.Client(base_url=server.url, headers=AUTH) as client,
     ):
         after = {j: client.get(f"/api/v1/jobs/{j}").json() for j in before}
@@ -59,13 +66,14 @@ def test_restarting_the_server_keeps_all_jobs_and_results(tmp_path: Path, inputs
         assert client.get("/api/v1/jobs").json()["total"] == 2
 
 
-def test_a_crash_leaves_running_jobs_failed_with_the_reason_and_queued_jobs_resumed(
+def test_after_a_crash_running_jobs_run_again_until_they_have_had_their_tries(
     tmp_path: Path, inputs: SimulatedInputs
 ) -> None:
-    """The database as a crashed service leaves it: one job running, one queued."""
+    """The database as a crashed service leaves it: one job running (its first try), one running for the
+    third time (it took the service down twice before), one queued."""
     settings = settings_for(tmp_path)
     database = Database(settings.resolved_database_url)
-    database.create_tables()
+    database.upgrade_schema()
     store = JobStore(database)
 
     def place(job_id: int) -> JobFiles:
@@ -75,8 +83,15 @@ def test_a_crash_leaves_running_jobs_failed_with_the_reason_and_queued_jobs_resu
         shutil.copy(inputs.vehicle, folder / "vehicle.toml")
         return JobFiles(folder / "recording.csv", folder / "vehicle.toml", folder)
 
+    lane = settings.lane
     cut_off = store.create("identify", {"output_error": False}, place)
-    assert store.mark_running(cut_off.id)
+    assert store.mark_running(cut_off.id, owner=lane)
+    poison = store.create("identify", {"output_error": False}, place)
+    for _ in range(DEFAULT_MAX_ATTEMPTS):
+        assert store.mark_running(poison.id, owner=lane)
+        if _ < DEFAULT_MAX_ATTEMPTS - 1:
+            with database.transaction() as session:  # cut off again: back to queued, the try counted
+                session.execute(sa.update(JobRow).where(JobRow.id == poison.id).values(status="queued"))
     waiting = store.create("identify", {"output_error": False}, place)
     database.dispose()
 
@@ -84,10 +99,17 @@ def test_a_crash_leaves_running_jobs_failed_with_the_reason_and_queued_jobs_resu
         LiveServer(create_app(settings)) as server,
         httpx.Client(base_url=server.url, headers=AUTH) as client,
     ):
-        failed = client.get(f"/api/v1/jobs/{cut_off.id}").json()
+        failed = client.get(f"/api/v1/jobs/{poison.id}").json()
         assert failed["status"] == "failed" and failed["error"] == RESTART_REASON
+        again = finished(client, cut_off.id)
+        assert again["status"] == "succeeded", again["error"]
         resumed = finished(client, waiting.id)
         assert resumed["status"] == "succeeded", resumed["error"]
+    database = Database(settings.resolved_database_url)
+    try:
+        assert JobStore(database).get(cut_off.id).attempts == 2  # type: ignore[union-attr]
+    finally:
+        database.dispose()
 
 
 def test_stopping_the_server_puts_the_running_job_back_in_the_queue_and_ends_event_streams(
@@ -130,9 +152,9 @@ def test_stopping_the_server_puts_the_running_job_back_in_the_queue_and_ends_eve
     assert record is not None and record.status is JobStatus.QUEUED and record.started_at is None
 
 
-def test_state_changes_have_one_winner(tmp_path: Path) -> None:
-    database = Database(f"sqlite:///{tmp_path / 'db.sqlite3'}")
-    database.create_tables()
+def test_state_changes_have_one_winner(tmp_path: Path, database_url: str) -> None:
+    database = Database(database_url)
+    database.upgrade_schema()
     store = JobStore(database)
     files = JobFiles(tmp_path / "r.csv", tmp_path / "v.toml", tmp_path)
     job = store.create("identify", {}, lambda _id: files, submitted_by="abc")
@@ -152,9 +174,9 @@ def test_state_changes_have_one_winner(tmp_path: Path) -> None:
     database.dispose()
 
 
-def test_a_job_whose_input_cannot_be_placed_is_not_created(tmp_path: Path) -> None:
-    database = Database(f"sqlite:///{tmp_path / 'db.sqlite3'}")
-    database.create_tables()
+def test_a_job_whose_input_cannot_be_placed_is_not_created(tmp_path: Path, database_url: str) -> None:
+    database = Database(database_url)
+    database.upgrade_schema()
     store = JobStore(database)
 
     def refuse(_job_id: int) -> JobFiles:

@@ -209,7 +209,7 @@ def test_sweep_then_identification_job_finds_the_true_curve(server: LiveServer, 
 def test_without_a_bench_sweeps_answer_503_and_restart_fails_running_sweeps(tmp_path: Path) -> None:
     settings = ServiceSettings(data_dir=tmp_path, keys=KeyRing({OPERATOR: Role.OPERATOR}))
     database = Database(settings.resolved_database_url)
-    database.create_tables()
+    database.upgrade_schema()
     store = SweepStore(database)
     cut_off = store.create("bench", {}, lambda i: (tmp_path / f"{i}.h5", tmp_path / f"{i}.toml"))
     store.mark_running(cut_off.id)

@@ -228,7 +228,7 @@ def test_every_complete_sweep_of_a_database_with_the_doctor(
 
     url = f"sqlite:///{tmp_path / 'shockbench.sqlite3'}"
     database = Database(url)
-    database.create_tables()
+    database.upgrade_schema()
     store = SweepStore(database)
     sweeps = tmp_path / "sweeps"
     sweeps.mkdir()

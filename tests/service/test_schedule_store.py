@@ -1,14 +1,15 @@
-"""The scheduled-test store on its own: which test is due, in what order, one running per bench, and that
-everything survives reopening the database (a restart)."""
+"""The scheduled-test store on its own, on SQLite and on a real PostgreSQL server: which test is due, in
+what order, one running per bench, and that everything survives reopening the database (a restart)."""
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from datetime import UTC, datetime, timedelta
 from pathlib import Path
 
 import pytest
 
-from service.store.database import Database, default_database_url
+from service.store.database import Database
 from service.store.models import ScheduleStatus
 from service.store.schedules import ScheduleStore
 from service.store.sweeps import SweepStore
@@ -18,10 +19,11 @@ T0 = datetime.now(UTC).replace(microsecond=0) + timedelta(days=1)
 
 
 @pytest.fixture
-def database(tmp_path: Path) -> Database:
-    database = Database(default_database_url(tmp_path))
-    database.create_tables()
-    return database
+def database(database_url: str) -> Iterator[Database]:
+    database = Database(database_url)
+    database.upgrade_schema()
+    yield database
+    database.dispose()
 
 
 @pytest.fixture
@@ -74,9 +76,11 @@ def test_due_tests_run_one_at_a_time_earliest_due_first(
     assert timed is not None and timed.id == later
 
 
-def test_only_waiting_tests_cancel_and_everything_survives_a_reopen(tmp_path: Path) -> None:
-    database = Database(default_database_url(tmp_path))
-    database.create_tables()
+def test_only_waiting_tests_cancel_and_everything_survives_a_reopen(
+    tmp_path: Path, database_url: str
+) -> None:
+    database = Database(database_url)
+    database.upgrade_schema()
     store = ScheduleStore(database)
     waiting = add(store, tmp_path, T0)
     running = add(store, tmp_path, None)
@@ -86,7 +90,7 @@ def test_only_waiting_tests_cancel_and_everything_survives_a_reopen(tmp_path: Pa
         store.finish(running, ScheduleStatus.CANCELLED)
     database.dispose()
 
-    reopened = ScheduleStore(Database(default_database_url(tmp_path)))
+    reopened = ScheduleStore(Database(database_url))
     tests, total = reopened.list_tests()
     assert total == 2 and [t.id for t in tests] == [running, waiting]
     assert tests[1].run_at == T0 and tests[1].run_at.tzinfo is not None

@@ -6,6 +6,10 @@ final event named for the outcome, `succeeded`, `failed` or `cancelled`, whose d
 result or reason. A comment line every 15 s keeps proxies from closing a quiet stream. For a job already
 finished the stream is `state` then the final event. When the service stops, open streams end with a
 `closing` event (reconnect, or poll). Polling GET /jobs/{id} gives the same information.
+
+Any instance answers for any job: a job another instance runs (the shared queue) has no events here, so
+while the stream waits it reads the job from the database every POLL_S and sends what changed there (its
+start, its progress as persisted, its end).
 """
 
 from __future__ import annotations
@@ -27,6 +31,8 @@ from service.api.stream_limit import HeldStreamingResponse
 from service.jobs.broker import JobEvent
 
 KEEPALIVE_S = 15.0
+POLL_S = 1.0
+"""While no event comes, the job is read from the database this often (it may run on another instance)."""
 
 router = APIRouter(tags=["jobs"])
 
@@ -71,11 +77,32 @@ async def job_events(
             if record.status.finished:
                 yield sse(record.status.value, job_out(request, record).model_dump(mode="json"), next_id())
                 return
+            seen, quiet_s = record, 0.0
             while True:
                 try:
-                    event: JobEvent = await asyncio.wait_for(queue.get(), KEEPALIVE_S)
+                    event: JobEvent = await asyncio.wait_for(queue.get(), POLL_S)
                 except TimeoutError:
-                    yield ": keep-alive\n\n"
+                    quiet_s += POLL_S
+                    if services.manager.runs_here(job_id):  # its events come through the broker
+                        if quiet_s >= KEEPALIVE_S:
+                            yield ": keep-alive\n\n"
+                            quiet_s = 0.0
+                        continue
+                    now = await asyncio.to_thread(services.jobs.get, job_id)
+                    if now is not None and now.status.finished:
+                        yield sse(now.status.value, job_out(request, now).model_dump(mode="json"), next_id())
+                        return
+                    if now is not None and now.status != seen.status:
+                        yield sse("state", job_out(request, now).model_dump(mode="json"), next_id())
+                        seen, quiet_s = now, 0.0
+                    elif now is not None and now.progress and now.progress != seen.progress:
+                        progress = ProgressOut.of(now.progress)
+                        data = {"job_id": job_id, **(progress.model_dump(mode="json") if progress else {})}
+                        yield sse("progress", data, next_id())
+                        seen, quiet_s = now, 0.0
+                    if quiet_s >= KEEPALIVE_S:
+                        yield ": keep-alive\n\n"
+                        quiet_s = 0.0
                     continue
                 if event.name == "closing":
                     yield sse("closing", {"job_id": job_id, "reason": "the service is stopping"}, next_id())

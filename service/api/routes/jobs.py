@@ -122,12 +122,18 @@ def router() -> APIRouter:
         _principal: Viewer,
         status: JobStatus | None = None,
         kind: Annotated[str | None, Query(max_length=32)] = None,
+        lane: Annotated[str | None, Query(max_length=100, description="only this lane's")] = None,
         limit: PageLimit = 50,
         offset: PageOffset = 0,
     ) -> JobList:
         """Jobs, newest first, without their results."""
         records, total = await asyncio.to_thread(
-            request.app.state.services.jobs.list_jobs, status=status, kind=kind, limit=limit, offset=offset
+            request.app.state.services.jobs.list_jobs,
+            status=status,
+            kind=kind,
+            lane=lane,
+            limit=limit,
+            offset=offset,
         )
         jobs = [job_out(request, r, with_result=False) for r in records]
         return JobList(jobs=jobs, total=total, limit=limit, offset=offset)

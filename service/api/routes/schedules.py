@@ -13,7 +13,7 @@ from datetime import datetime
 from pathlib import Path as FilePath
 from typing import Annotated
 
-from fastapi import APIRouter, Path, Request, Response
+from fastapi import APIRouter, Path, Query, Request, Response
 from pydantic import AwareDatetime, BaseModel, ConfigDict, Field
 
 from service.api.auth import Admin, Viewer
@@ -60,6 +60,7 @@ class ScheduleLinks(BaseModel):
 
 class ScheduleOut(BaseModel):
     id: int
+    lane: str = Field(description="the lane whose scheduler runs it")
     bench: str
     status: ScheduleStatus = Field(description="waiting, running, done, failed or cancelled")
     run_at: datetime | None = Field(None, description="when it is due; null: when the bench is free")
@@ -79,6 +80,7 @@ class ScheduleOut(BaseModel):
         base = f"{API_PREFIX}/schedules/{record.id}"
         return cls(
             id=record.id,
+            lane=record.lane,
             bench=record.bench,
             status=record.status,
             run_at=record.run_at,
@@ -186,12 +188,13 @@ async def list_tests(
     request: Request,
     _principal: Viewer,
     status: ScheduleStatus | None = None,
+    lane: Annotated[str | None, Query(max_length=100, description="only this lane's")] = None,
     limit: PageLimit = 50,
     offset: PageOffset = 0,
 ) -> ScheduleList:
-    """Scheduled tests, newest first."""
+    """Scheduled tests, newest first (of every lane, or of `lane`)."""
     records, total = await asyncio.to_thread(
-        _store(request).list_tests, status=status, limit=limit, offset=offset
+        _store(request).list_tests, status=status, lane=lane, limit=limit, offset=offset
     )
     return ScheduleList(tests=[ScheduleOut.of(r) for r in records], total=total, limit=limit, offset=offset)
 

@@ -43,6 +43,7 @@ async def get_status(request: Request, _principal: Viewer) -> StatusOut:
     )
     return StatusOut(
         version=services.version,
+        lane=services.settings.lane,
         uptime_s=time.monotonic() - services.started_at,
         worker=WorkerOut(
             alive=s.worker_alive, ready=s.worker_ready, pid=s.worker_pid, restarts=s.worker_restarts

@@ -65,6 +65,7 @@ class SweepTestOut(BaseModel):
 
 class SweepOut(BaseModel):
     id: int
+    lane: str = Field(description="the lane whose bench ran it")
     bench: str
     status: SweepStatus = Field(description="requested, running, complete, failed or aborted")
     settings: SweepSettingsOut = Field(description="the sweep settings and settle_s as submitted")
@@ -92,6 +93,7 @@ class SweepOut(BaseModel):
         base = f"{API_PREFIX}/sweeps/{record.id}"
         return cls(
             id=record.id,
+            lane=record.lane,
             bench=record.bench,
             status=record.status,
             settings=SweepSettingsOut.model_validate(record.settings),
@@ -207,12 +209,18 @@ async def list_sweeps(
     _principal: Viewer,
     status: SweepStatus | None = None,
     vehicle_id: Annotated[str | None, Query(min_length=1, max_length=40)] = None,
+    lane: Annotated[str | None, Query(max_length=100, description="only this lane's")] = None,
     limit: PageLimit = 50,
     offset: PageOffset = 0,
 ) -> SweepList:
     """Sweeps, newest first; `vehicle_id`: only that vehicle's tests (case does not matter)."""
     records, total = await asyncio.to_thread(
-        _store(request).list_sweeps, status=status, vehicle_id=vehicle_id, limit=limit, offset=offset
+        _store(request).list_sweeps,
+        status=status,
+        vehicle_id=vehicle_id,
+        lane=lane,
+        limit=limit,
+        offset=offset,
     )
     sweeps = await sweep_outs(request, records)
     return SweepList(sweeps=sweeps, total=total, limit=limit, offset=offset)

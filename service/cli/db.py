@@ -1,0 +1,41 @@
+"""`shockbench db upgrade`: bring a database's schema to this shockbench's newest revision (Alembic,
+service.store.schema), keeping every row. `serve` does the same at start; this command lets an operator
+upgrade a shared PostgreSQL once, before the lanes' services are updated."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+
+def run_db_upgrade(args: argparse.Namespace) -> int:
+    from service.store.database import Database, default_database_url
+    from service.store.schema import head_revision
+
+    database = Database(args.database or default_database_url(Path(args.data).resolve()))
+    try:
+        before, after = database.upgrade_schema()
+    finally:
+        database.dispose()
+    if before == after:
+        print(f"database {database.safe_url}: already at schema revision {after} (the newest)")
+    else:
+        print(f"database {database.safe_url}: schema {before or 'empty'} -> {after}")
+    assert after == head_revision()
+    return 0
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "db",
+        help="database schema: upgrade",
+        description="The service's database. `db upgrade` brings its schema to the newest revision this "
+        "shockbench knows, keeping every row; a database a newer shockbench wrote is refused.",
+    )
+    actions = p.add_subparsers(dest="action", required=True, metavar="ACTION")
+    upgrade = actions.add_parser("upgrade", help="create or upgrade the schema to the newest revision")
+    upgrade.add_argument("--database", default=None, help="SQLAlchemy URL (default: SQLite in --data)")
+    upgrade.add_argument(
+        "--data", default="shockbench-data", help="data directory (default ./shockbench-data)"
+    )
+    upgrade.set_defaults(handler=run_db_upgrade)
