@@ -8,9 +8,10 @@ DIR/<name>.identify.json (and .diagnose.json) holds
      "result": what `shockbench identify --json` (`diagnose --json`) prints}
 
 A re-run skips an analysis whose file exists with the same input digest and options. DIR/summary.csv has
-one row per recording: name, status (ok/failed), reason (one line per failed analysis, joined by "; "),
-the identified masses (kg), the output-error gap (m), EUSAMA (%, "left/right" for an axle), the seconds
-spent, the recording's path and, with the doctor, its conclusion.
+one row per recording: name, status (ok/failed), reason ("identify: why", "identify, diagnose: why" when
+both failed alike; different reasons joined by "; "), the identified masses (kg), the output-error gap (m),
+EUSAMA (%, "left/right" for an axle), the seconds spent, the recording's path and, with the doctor, its
+conclusion.
 """
 
 from __future__ import annotations
@@ -106,7 +107,11 @@ def _eusama(inspection: Mapping[str, Any]) -> str:
 
 def summary_row(item: Item, done: Mapping[Analysis, Done]) -> dict[str, str]:
     """The summary's row of one recording from its analyses (identify's figures, the doctor's words)."""
-    failed = [f"{analysis.value}: {d.reason}" for analysis, d in done.items() if d.document is None]
+    reasons: dict[str, list[str]] = {}  # the same reason for both analyses (an unreadable file) said once
+    for analysis, d in done.items():
+        if d.document is None:
+            reasons.setdefault(str(d.reason), []).append(analysis.value)
+    failed = [f"{', '.join(analyses)}: {reason}" for reason, analyses in reasons.items()]
     seconds = sum(float(d.document.get("seconds", 0.0)) for d in done.values() if d.document is not None)
     row = dict.fromkeys(COLUMNS, "")
     row |= {

@@ -254,6 +254,7 @@ def test_every_complete_sweep_of_a_database_with_the_doctor(
     assert "nothing missing" in rows["sweep-1"]["diagnosis"]
     assert (out / "sweep-1.identify.json").is_file() and (out / "sweep-1.diagnose.json").is_file()
     assert rows["sweep-2"]["status"] == "failed" and "2.h5" in rows["sweep-2"]["reason"]
+    assert rows["sweep-2"]["reason"].startswith("identify, diagnose: ")  # one reason, said once
 
 
 def test_bad_input_is_one_line(archive: Path, tmp_path: Path) -> None:
