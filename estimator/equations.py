@@ -30,6 +30,7 @@ import numpy as np
 from estimator.damper import hat_basis
 from estimator.digital_filters import first_order_filter
 from estimator.errors import InvalidValueError
+from estimator.order_statistics import quantile
 from estimator.recording import AXLE_CHANNELS, QUARTER_CAR_CHANNELS, Recording
 from estimator.signals import FilterChoice, Kinematics, choose_filters, derivative, kinematics, lowpass
 from estimator.vehicle import TyreModel, VehicleConstant, VehicleParameters
@@ -173,7 +174,7 @@ def select_samples(n: int, sample_time_s: float, nsample: int | None) -> np.ndar
 
 
 def velocity_grid(velocity_m_s: np.ndarray, points: int) -> np.ndarray:
-    lo, hi = np.quantile(velocity_m_s, [GRID_QUANTILE, 1.0 - GRID_QUANTILE])
+    lo, hi = quantile(velocity_m_s, [GRID_QUANTILE, 1.0 - GRID_QUANTILE])
     if not hi > lo:
         raise InvalidValueError(
             "the suspension barely moved: no velocity range to identify a damper curve on"

@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from estimator.digital_filters import analytic_signal
+from estimator.order_statistics import median
 
 PHASE_MIN_FREQUENCY_HZ = 5.0
 PHASE_WINDOW_S = 0.5
@@ -64,18 +65,21 @@ def phase_shift_min_deg(
     window, step = int(PHASE_WINDOW_S / sample_time_s), int(PHASE_STEP_S / sample_time_s)
     force = force_N - np.mean(force_N)
     amplitude = np.abs(analytic)
-    best = np.nan
-    for start in range(0, plate_m.size - window, step):
-        sl = slice(start, start + window)
-        if np.median(frequency[sl]) < min_frequency_Hz or np.median(amplitude[sl]) < 0.2 * np.max(amplitude):
-            continue
-        a_plate = np.mean(plate_m[sl] * reference[sl])
-        a_force = np.mean(force[sl] * reference[sl])
-        if abs(a_plate) == 0:
-            continue
-        shift = 180.0 - abs(np.degrees(np.angle(a_force / a_plate)))
-        best = shift if np.isnan(best) else min(best, shift)
-    return float(best)
+    starts = np.arange(0, plate_m.size - window, step)
+    if starts.size == 0:
+        return float("nan")
+    windows = starts[:, None] + np.arange(window)  # every window at once
+    skipped = (median(frequency[windows], axis=1) < min_frequency_Hz) | (
+        median(amplitude[windows], axis=1) < 0.2 * np.max(amplitude)
+    )
+    kept = windows[~skipped]
+    a_plate = np.mean(plate_m[kept] * reference[kept], axis=1)
+    a_force = np.mean(force[kept] * reference[kept], axis=1)
+    usable = np.abs(a_plate) != 0
+    if not np.any(usable):
+        return float("nan")
+    shifts = 180.0 - np.abs(np.degrees(np.angle(a_force[usable] / a_plate[usable])))
+    return float(np.min(shifts))
 
 
 def equivalent_damping(force_N: np.ndarray, velocity_m_s: np.ndarray) -> float:

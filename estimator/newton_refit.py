@@ -23,6 +23,7 @@ import numpy as np
 
 from estimator.equations import TYRE_DAMPING, LinearResiduals, maxwell_regressor
 from estimator.linear_algebra import cholesky_factor, cholesky_solve
+from estimator.order_statistics import median
 from estimator.vehicle import coefficient_from_relaxation_time, relaxation_time_from_coefficient
 
 LOG_TAU_STEP = 1e-3
@@ -89,7 +90,7 @@ class _Problem:
         e = self.equations
         r = (a @ theta + self.offset).reshape(e, -1)
         norms = np.sqrt(np.square(r).sum(axis=0))
-        norms = np.maximum(norms, 1e-9 * max(float(np.median(norms)), 1e-300))
+        norms = np.maximum(norms, 1e-9 * max(float(median(norms)), 1e-300))
         unit = r / norms
         columns = a.reshape(e, -1, a.shape[1])
         second: list[tuple[int, int, float]] = []

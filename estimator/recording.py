@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from estimator.errors import InvalidValueError
+from estimator.order_statistics import median
 
 QUARTER_CAR_CHANNELS = ("x_s", "x_t", "x_r")
 AXLE_CHANNELS = ("x_s_l", "x_s_r", "x_t_l", "x_t_r", "x_r_l", "x_r_r")
@@ -36,7 +37,7 @@ class Recording:
                 raise InvalidValueError(f"channel {name} has non-finite values")
             self.channels[name] = arr
         steps = np.diff(self.time_s)
-        dt = float(np.median(steps))
+        dt = float(median(steps))
         if dt <= 0 or np.max(np.abs(steps - dt)) > 1e-3 * dt:
             bad = int(np.argmax(np.abs(steps - dt))) + 1
             raise InvalidValueError(

@@ -38,6 +38,7 @@ import numpy as np
 from estimator.equations import TYRE_DAMPING, LinearResiduals, maxwell_regressor
 from estimator.linear_algebra import cholesky_factor, cholesky_solve
 from estimator.newton_refit import newton_refit
+from estimator.order_statistics import median
 from estimator.solvers.exact import ExactSolution, solve_exact
 from estimator.vehicle import coefficient_from_relaxation_time, relaxation_time_from_coefficient
 
@@ -182,7 +183,7 @@ def fit_relaxation_time(
         previous, objective = objective, float(norms.sum())
         if previous - objective <= max(tolerance, NEWTON_HANDOVER) * objective:
             break
-        floor = 1e-9 * max(float(np.median(norms)), 1e-300)
+        floor = 1e-9 * max(float(median(norms)), 1e-300)
         weights = 1.0 / np.maximum(norms, floor)
     tau = float(np.exp(log_tau))
     theta = problem.theta(z)

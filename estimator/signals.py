@@ -30,6 +30,7 @@ from functools import lru_cache
 import numpy as np
 
 from estimator.digital_filters import butterworth_lowpass_sos, sosfiltfilt, welch_density
+from estimator.order_statistics import median
 
 SNR_DB = 20.0
 KINEMATICS_CUTOFF_RATIO = 2.0
@@ -65,7 +66,7 @@ def choose_filters(channels: dict[str, np.ndarray], sample_time_s: float) -> Fil
     for name, x in channels.items():
         f, p = _welch(x, fs)
         top = f >= 0.6 * f[-1]
-        floor = float(np.median(p[top])) if np.any(top) else float(np.min(p))
+        floor = float(median(p[top])) if np.any(top) else float(np.min(p))
         floors.append(floor)
         above = np.nonzero(p > floor * 10 ** (SNR_DB / 10))[0]
         edge = float(f[above[-1]]) if above.size else MIN_CUTOFF_HZ
@@ -74,7 +75,7 @@ def choose_filters(channels: dict[str, np.ndarray], sample_time_s: float) -> Fil
             # the excitation's top: where the plate's density falls 20 dB under its peak, searched upwards
             strong = np.nonzero(p > p.max() * 1e-2)[0]
             plate_tops.append(float(f[strong[-1]]) if strong.size else edge)
-    noise_density = float(np.median(floors))  # m²/Hz, one-sided
+    noise_density = float(median(floors))  # m²/Hz, one-sided
     band_edge = float(max(edges))
     excitation_top = float(max(plate_tops)) if plate_tops else band_edge
     return FilterChoice(

@@ -18,9 +18,11 @@ carries on with inf/NaN); callers treat both as a diverged model.
 Which compiled code runs (the kernel's source is estimator/simulation_kernel_numba.py):
 - the extension built ahead of time, `estimator/_simulation_kernel_aot_<digest>` (numba's pycc, built by
   service/kernel_build.py: `shockbench demo` or `python -m service.kernel_build`), when it exists for the
-  present source (the digest is of this file and the kernel's). Loading it takes milliseconds: it needs
-  neither numba nor its cache. A process that only runs one identify would otherwise spend 1-3 s importing
-  numba and loading the cached kernel (numba's typing registries), about 100 times the simulation itself;
+  present source (the digest is of the sources of KERNEL_MODULES: this file, the kernel's and that of
+  estimator.digital_filters' compiled filters, which the extension also holds). Loading it takes
+  milliseconds: it needs neither numba nor its cache. A process that only runs one identify would
+  otherwise spend 1-3 s importing numba and loading the cached kernel (numba's typing registries), about
+  100 times the simulation itself;
 - otherwise numba's just-in-time compile, cached on disk (cache=True: the compile, 10-30 s, is paid once
   per machine and source version; later processes load it from the cache).
 This module imports numba only in the second case.
@@ -33,6 +35,7 @@ import importlib
 import importlib.util
 from collections.abc import Callable
 from functools import cache
+from types import ModuleType
 
 import numpy as np
 
@@ -66,13 +69,19 @@ TYRE_CODES = {TyreModel.MAXWELL: 0, TyreModel.KELVIN_VOIGT: 1, TyreModel.SPRING:
 STATE_SLOTS = 10
 """The kernel carries every model's state in 10 slots (the axle's); a quarter car leaves the last 5 at 0."""
 
-KERNEL_MODULES = ("estimator.simulation_kernel", "estimator.simulation_kernel_numba")
+KERNEL_MODULES = (
+    "estimator.simulation_kernel",
+    "estimator.simulation_kernel_numba",
+    "estimator.filter_kernel_numba",
+)
+"""The modules the extension is built from (its digest covers their source)."""
 EXTENSION_PREFIX = "_simulation_kernel_aot_"
 
 
 def source_digest() -> str:
-    """The kernel's version: a digest of the source of this module (the table layout) and of the kernel's,
-    as the import system reads them (the kernel module is not imported: that would import numba)."""
+    """The kernel's version: a digest of the source of this module (the table layout) and of the kernels'
+    (KERNEL_MODULES), as the import system reads them (the kernel modules are not imported: that would
+    import numba)."""
     digest = hashlib.sha256()
     for name in KERNEL_MODULES:
         spec = importlib.util.find_spec(name)
@@ -89,16 +98,33 @@ def extension_name() -> str:
 
 
 @cache
+def _extension() -> ModuleType | None:
+    """The extension built ahead of time for the present source, or None where there is none (not built
+    for this source, or for this Python / numpy)."""
+    try:
+        return importlib.import_module(f"estimator.{extension_name()}")
+    except ImportError:
+        return None
+
+
+@cache
 def _kernel() -> tuple[str, Callable[..., None]]:
     """("extension" or "numba", the kernel's integrate function): the extension built ahead of time when
     it exists for the present source, else numba's just-in-time compile (loaded from its on-disk cache)."""
-    try:
-        extension = importlib.import_module(f"estimator.{extension_name()}")
+    extension = _extension()
+    if extension is not None:
         return "extension", extension.integrate
-    except ImportError:  # not built for this source (or for this Python / numpy): numba compiles it
-        from estimator.simulation_kernel_numba import _integrate
+    from estimator.simulation_kernel_numba import _integrate
 
-        return "numba", _integrate
+    return "numba", _integrate
+
+
+def compiled_filters() -> ModuleType | None:
+    """The extension whose `recursion` and `zero_phase` run estimator.digital_filters' recursive filters
+    (source: estimator/filter_kernel_numba.py), or None without an extension for the present source.
+    digital_filters then uses LAPACK instead: it does not import numba, whose import and cache load cost a
+    fresh process more than its filtering."""
+    return _extension()
 
 
 def kernel_in_use() -> str:

@@ -23,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from estimator.damper import TanhCurve
+from estimator.order_statistics import median
 
 OUTLIER_SIGMAS = 5.0
 OUTLIER_FLOOR_FRACTION = 0.15
@@ -49,7 +50,7 @@ class TanhFit:
 
 
 def _robust_sigma(residual: np.ndarray) -> float:
-    return float(MAD_TO_SIGMA * np.median(np.abs(residual - np.median(residual))))
+    return float(MAD_TO_SIGMA * median(np.abs(residual - median(residual))))
 
 
 def _model(params: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -155,8 +156,8 @@ def _linear_fits(
         gram = np.einsum("kni,knj->kij", weighted, basis) + ridge
         coef = np.linalg.solve(gram, np.einsum("kni,n->ki", weighted, f)[:, :, None])[:, :, 0]
         r = f - np.einsum("kni,ki->kn", basis, coef)
-        centred = r - np.median(r, axis=1, keepdims=True)
-        sigma = np.maximum(MAD_TO_SIGMA * np.median(np.abs(centred), axis=1, keepdims=True), floor)
+        centred = r - median(r, axis=1, keepdims=True)
+        sigma = np.maximum(MAD_TO_SIGMA * median(np.abs(centred), axis=1, keepdims=True), floor)
         u = r / (TUKEY_C * sigma)
         weights = np.clip(1.0 - u**2, 0.0, None) ** 2 + 1e-6
     r2 = np.sort(r**2, axis=1)

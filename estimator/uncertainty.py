@@ -46,6 +46,7 @@ import numpy as np
 
 from estimator.equations import TYRE_DAMPING, LinearResiduals, maxwell_regressor
 from estimator.newton_refit import newton_refit
+from estimator.order_statistics import median
 from estimator.signals import FilterChoice
 from estimator.vehicle import coefficient_from_relaxation_time, relaxation_time_from_coefficient
 
@@ -144,13 +145,13 @@ def confidence_intervals(
             matrix = np.concatenate([matrix, extra[:, :, None]], axis=2)
     e, n, p = matrix.shape
     norms = np.linalg.norm(residual, axis=0)
-    norms = np.maximum(norms, 1e-9 * max(float(np.median(norms)), 1e-300))
+    norms = np.maximum(norms, 1e-9 * max(float(median(norms)), 1e-300))
     unit = residual / norms
     score = np.einsum("enp,en->np", matrix, unit)  # ψ_i, (n, p)
     scaled = matrix / np.sqrt(norms)[None, :, None]
     flat = scaled.reshape(e * n, p)
     bread = flat.T @ flat - (score / norms[:, None]).T @ score
-    spacing_s = float(np.median(np.diff(system.sample_index))) * sample_time_s
+    spacing_s = float(median(np.diff(system.sample_index))) * sample_time_s
     block_s = max(BLOCK_EQUATION_PERIODS / system.filters.equation_cutoff_Hz, MIN_BLOCK_S)
     length = int(np.clip(round(block_s / spacing_s), 1, max(n // 4, 1)))
     cumulative = np.vstack([np.zeros((1, p)), np.cumsum(score, axis=0)])

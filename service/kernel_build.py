@@ -1,5 +1,6 @@
 """Build the output-error simulation kernel ahead of time: numba's pycc compiles
-estimator/simulation_kernel_numba.py's `_integrate` into the Python extension
+estimator/simulation_kernel_numba.py's `_integrate` (and estimator/filter_kernel_numba.py's recursive filters)
+into the Python extension
 `estimator/_simulation_kernel_aot_<digest>` that estimator.simulation_kernel loads when its digest matches the
 present source (see that module). `shockbench demo` runs this once; so can an install script:
 
@@ -25,8 +26,14 @@ KERNEL_FOLDER = Path(simulation_kernel.__file__).resolve().parent
 
 
 def build_extension(module_name: str, output_dir: Path) -> Path:
-    """Compile the kernel into the extension `module_name` (exporting `integrate`) in output_dir; returns
-    the extension's path."""
+    """Compile the kernels into the extension `module_name` (exporting `integrate` and the filters'
+    `recursion` and `zero_phase`) in output_dir; returns the extension's path."""
+    from estimator.filter_kernel_numba import (
+        RECURSION_SIGNATURE,
+        ZERO_PHASE_SIGNATURE,
+        _recursion,
+        _zero_phase,
+    )
     from estimator.simulation_kernel_numba import INTEGRATE_SIGNATURE, _integrate
 
     with warnings.catch_warnings():
@@ -37,6 +44,8 @@ def build_extension(module_name: str, output_dir: Path) -> Path:
         compiler.output_dir = str(output_dir)
         compiler.verbose = False
         compiler.export("integrate", INTEGRATE_SIGNATURE)(_integrate.py_func)
+        compiler.export("recursion", RECURSION_SIGNATURE)(_recursion.py_func)
+        compiler.export("zero_phase", ZERO_PHASE_SIGNATURE)(_zero_phase.py_func)
         compiler.compile()
     built = [path for path in output_dir.iterdir() if path.name.startswith(module_name + ".")]
     if not built:
@@ -63,6 +72,7 @@ def compile_ahead() -> str:
         if not stale.name.startswith(name + "."):
             stale.unlink(missing_ok=True)
     importlib.invalidate_caches()
+    simulation_kernel._extension.cache_clear()
     simulation_kernel._kernel.cache_clear()
     simulation_kernel.warm()
     return simulation_kernel.kernel_in_use()

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import os
-import tempfile
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -13,6 +12,8 @@ from typing import IO
 @contextmanager
 def atomic_write(path: Path | str, mode: str = "w", newline: str | None = "") -> Iterator[IO]:
     """Open a temporary file in the target's folder; on success it replaces `path`, on error it vanishes."""
+    import tempfile  # here: readers import this module too, and tempfile costs a few ms to import
+
     target = Path(path)
     fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".part", dir=target.parent or Path("."))
     try:

@@ -27,11 +27,11 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
-from scipy.interpolate import PchipInterpolator
 
 from estimator.damper import PiecewiseLinearCurve
 from estimator.doctor.model import FitSettings, FittedModel, Reference, fit
 from estimator.doctor.noise import ChannelNoise
+from estimator.doctor.pchip import Pchip
 from estimator.recording import Recording
 
 SMOOTH_POINTS = 240
@@ -45,16 +45,15 @@ def smooth_curve(curve: PiecewiseLinearCurve) -> PiecewiseLinearCurve:
     tabulated densely over three times the curve's velocity span."""
     lo, hi = float(curve.velocity_m_s[0]), float(curve.velocity_m_s[-1])
     span = hi - lo
-    interpolator = PchipInterpolator(curve.velocity_m_s, curve.force_N, extrapolate=False)
-    slope = interpolator.derivative()
+    interpolator = Pchip.through(curve.velocity_m_s, curve.force_N)
     inside = np.linspace(lo, hi, SMOOTH_POINTS)
     outside = np.array([lo - span, hi + span])
     grid = np.concatenate([outside[:1], inside, outside[1:]])
     force = np.concatenate(
         [
-            [float(interpolator(lo)) - float(slope(lo)) * span],
-            interpolator(inside),
-            [float(interpolator(hi)) + float(slope(hi)) * span],
+            [float(interpolator.value(lo)) - float(interpolator.slope(lo)) * span],
+            interpolator.value(inside),
+            [float(interpolator.value(hi)) + float(interpolator.slope(hi)) * span],
         ]
     )
     return PiecewiseLinearCurve(grid, force)

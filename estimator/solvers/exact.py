@@ -18,6 +18,7 @@ import numpy as np
 
 from estimator.equations import LinearResiduals
 from estimator.linear_algebra import cholesky_factor, cholesky_solve
+from estimator.order_statistics import median
 
 
 @dataclass(frozen=True)
@@ -97,7 +98,7 @@ def solve_exact(
         if previous - objective <= tolerance * objective:
             break
         previous = objective
-        floor = 1e-9 * max(float(np.median(norms)), 1e-300)
+        floor = 1e-9 * max(float(median(norms)), 1e-300)
         z = _weighted_least_squares(a_scaled, c, np.repeat(1.0 / np.maximum(norms, floor), e))
     theta = z / column_scale
     objective = float(system.objective(theta))

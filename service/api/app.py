@@ -27,7 +27,7 @@ from service.api.input_check import CHECKER
 from service.api.limits import BodyTimeout, UploadSizeLimit
 from service.api.methods import AllowedMethods
 from service.api.results import verdict_of
-from service.api.routes import bench, events, jobs, live, schedules, status, sweeps
+from service.api.routes import bench, events, jobs, live, schedules, status, sweeps, vehicles
 from service.api.scheduler import InspectionScheduler
 from service.api.schemas import API_PREFIX
 from service.api.settings import ServiceSettings
@@ -193,6 +193,7 @@ def api_router() -> APIRouter:
     router.include_router(live.router)
     router.include_router(sweeps.router)
     router.include_router(schedules.router)
+    router.include_router(vehicles.router)
     return router
 
 

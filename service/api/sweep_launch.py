@@ -67,6 +67,10 @@ class SweepSettingsIn(BaseModel):
         return self.model_dump(mode="json", include={*SETTINGS_FIELDS, "settle_s"})
 
 
+VEHICLE_ID_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9 .\-]*$"
+"""A vehicle id (VIN or registration): letters, digits, spaces, dots and dashes, 1-40 characters."""
+VEHICLE_ID_MAX_LENGTH = 40
+
 TEST_FIELDS = ("vehicle_id", "tyre_pressure_bar", "operator_name")
 """What the operator records about the test, stored with the sweep's settings (not used by the sweep)."""
 
@@ -81,8 +85,8 @@ class SweepIn(SweepSettingsIn):
     vehicle_id: str | None = Field(
         None,
         min_length=1,
-        max_length=40,
-        pattern=r"^[A-Za-z0-9][A-Za-z0-9 .\-]*$",
+        max_length=VEHICLE_ID_MAX_LENGTH,
+        pattern=VEHICLE_ID_PATTERN,
         description="the vehicle's VIN or registration: letters, digits, spaces, dots and dashes",
     )
     tyre_pressure_bar: float | None = Field(None, ge=0.5, le=10, description="tyre pressure measured (bar)")

@@ -6,6 +6,29 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+from service.cli.errors import CliError
+
+if TYPE_CHECKING:
+    from service.store.database import Database
+
+
+def open_database(url: str | None, data: str) -> Database:
+    """The service's database for a command that reads it (`history`, `verify`): `url`, else the SQLite
+    file in the data directory `data`. One line (exit 2) when there is no database there, or its schema is
+    not this shockbench's newest (service.store.schema.require_newest). The caller disposes of it."""
+    from service.store.database import DATABASE_FILE, Database, default_database_url
+
+    if url is None and not (Path(data) / DATABASE_FILE).is_file():
+        raise CliError(f"no database in {data!r} (no {DATABASE_FILE}); name one with --database or --data")
+    database = Database(url or default_database_url(Path(data).resolve()))
+    try:
+        database.require_newest_schema()
+    except BaseException:
+        database.dispose()
+        raise
+    return database
 
 
 def run_db_upgrade(args: argparse.Namespace) -> int:

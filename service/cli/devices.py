@@ -16,10 +16,7 @@ from __future__ import annotations
 
 import argparse
 import json
-import logging
-import signal
 import sys
-import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -34,6 +31,9 @@ VEHICLE_PRESET_NAMES = ("quarter-car", "axle")
 PROBE_TIMEOUT_S = 0.5
 
 if TYPE_CHECKING:
+    import signal
+    import threading
+
     from daq.bench_config import BenchConfig
     from daq.probe import DeviceReport
 
@@ -165,6 +165,9 @@ def _can_bus(url: str | None, exciter: str) -> tuple[str | None, str | None]:
 def _stop_on_signals() -> Iterator[threading.Event]:
     """An event that SIGINT and SIGTERM set (instead of KeyboardInterrupt / termination), for a clean stop.
     Handlers can only be installed from the main thread; elsewhere the event is only set by the caller."""
+    import signal  # here and in _quiet_logger: every command imports this module, few need these
+    import threading
+
     stop = threading.Event()
     previous: dict[signal.Signals, Any] = {}
     if threading.current_thread() is threading.main_thread():
@@ -221,6 +224,8 @@ def run_probe(args: argparse.Namespace) -> int:
 
 @contextmanager
 def _quiet_logger(name: str) -> Iterator[None]:
+    import logging
+
     logger = logging.getLogger(name)
     level = logger.level
     logger.setLevel(logging.CRITICAL + 1)

@@ -9,12 +9,8 @@
 
 from __future__ import annotations
 
-import datetime as dt
 import os
-import secrets
 import sys
-import tempfile
-import traceback
 from collections.abc import Callable
 from pathlib import Path
 
@@ -34,11 +30,17 @@ LOG_DIR_ENV = "SHOCKBENCH_LOG_DIR"
 
 
 def bug_log_dir() -> Path:
+    import tempfile  # here and below: only when a bug is reported (every command imports this module)
+
     return Path(os.environ.get(LOG_DIR_ENV) or tempfile.gettempdir())
 
 
 def write_bug_log(command: str, exc: BaseException) -> Path:
     """Write the traceback of `exc` to a new file named by a fresh error id; returns its path."""
+    import datetime as dt
+    import secrets
+    import traceback
+
     error_id = secrets.token_hex(6)
     folder = bug_log_dir()
     folder.mkdir(parents=True, exist_ok=True)
@@ -68,6 +70,8 @@ def run_command(command: str, handler: Callable[[], int], *, say_interrupted: bo
         try:
             where = f"the traceback is in {write_bug_log(command, exc)}"
         except OSError as log_error:  # no place for the log: the traceback goes to stderr, not lost
+            import traceback
+
             traceback.print_exception(exc, file=sys.stderr)
             where = f"the traceback is above (no log file: {one_line(log_error)})"
         print(

@@ -17,16 +17,31 @@ from service.cli import (
     devices,
     diagnose,
     export,
+    history,
     identify,
     reanalyse,
     serve,
     simulate,
     sweep,
     validate,
+    verify,
 )
 from service.cli.errors import run_command
 
-MODULES = (simulate, identify, diagnose, validate, devices, sweep, export, serve, db, reanalyse)
+MODULES = (
+    simulate,
+    identify,
+    diagnose,
+    validate,
+    devices,
+    sweep,
+    export,
+    serve,
+    db,
+    history,
+    verify,
+    reanalyse,
+)
 
 
 def build_parser() -> argparse.ArgumentParser:

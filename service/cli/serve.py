@@ -13,21 +13,22 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import ipaddress
-import logging
 import sys
-import tomllib
 from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from estimator.verdict import ThresholdsError, VerdictThresholds
-from service.access import KeyRing, load_keys
 from service.cli.errors import EXIT_FAILED, CliError, run_command
+
+if TYPE_CHECKING:
+    from estimator.verdict import VerdictThresholds
 
 DEFAULT_PORT = 8000
 
 
 def is_loopback(host: str) -> bool:
+    import ipaddress  # here: every command imports this module
+
     if host == "localhost":
         return True
     try:
@@ -53,6 +54,10 @@ def run_serve(args: argparse.Namespace) -> int:
         raise CliError("--max-streams-per-key must be at least 1")
     if args.body_timeout_s is not None and not 0 < args.body_timeout_s <= 3600:
         raise CliError("--body-timeout-s must lie in (0, 3600]")
+    import logging
+
+    from service.access import KeyRing, load_keys  # here, not at the top: every command imports this module
+
     verdict = load_verdict_thresholds(Path(args.verdict_thresholds)) if args.verdict_thresholds else None
     generated_key = None
     if args.keys is not None:
@@ -116,6 +121,10 @@ def run_serve(args: argparse.Namespace) -> int:
 
 def load_verdict_thresholds(path: Path) -> VerdictThresholds:
     """The [verdict] table of a TOML file (CliError, one line naming the file and the problem)."""
+    import tomllib
+
+    from estimator.verdict import ThresholdsError, VerdictThresholds
+
     if not path.is_file():
         raise CliError(f"{path}: no such verdict thresholds file")
     try:

@@ -22,7 +22,7 @@ import numpy as np
 from estimator.bandwidth import InsufficientBandwidthError, check_bandwidth
 from estimator.recording import Recording
 from estimator.vehicle import VehicleParameters
-from service.jobs.context import InputError
+from service.jobs.input_error import InputError
 
 
 @dataclass(frozen=True)

@@ -11,18 +11,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from estimator.errors import UserError
 from estimator.recording import Recording
 from estimator.solvers.differential_evolution import DEProgress
 from estimator.vehicle import VehicleParameters
+from service.jobs.input_error import InputError
 from service.jobs.messages import Progress
-
-
-class InputError(UserError, ValueError):
-    """Submitted input that cannot run; `field` names the form field to blame (the API's 422 names it)."""
-
-    def __init__(self, field: str | None, message: str) -> None:
-        super().__init__(message, field=field)
 
 
 def check_recording_fits(recording: Recording, vehicle: VehicleParameters) -> None:

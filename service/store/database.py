@@ -77,6 +77,16 @@ class Database:
         except SQLAlchemyError as exc:
             raise DatabaseError(f"database {self.safe_url}: {str(exc).splitlines()[0]}") from None
 
+    def require_newest_schema(self) -> str:
+        """For a command that only reads: the schema revision when it is the newest this shockbench knows;
+        else SchemaError (empty, older: `shockbench db upgrade`, newer), DatabaseError when unreachable."""
+        from service.store.schema import require_newest
+
+        try:
+            return require_newest(self.engine)
+        except SQLAlchemyError as exc:
+            raise DatabaseError(f"database {self.safe_url}: {str(exc).splitlines()[0]}") from None
+
     @contextmanager
     def transaction(self) -> Iterator[Session]:
         """A session in a transaction: committed on success, rolled back on error."""

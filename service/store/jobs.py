@@ -14,9 +14,11 @@ from pathlib import Path
 from typing import Any
 
 from sqlalchemy import func, select, update
+from sqlalchemy.orm import Session
 
 from service.store.database import Database
 from service.store.models import JobRow, JobStatus, utcnow
+from service.store.result_chain import append_link
 
 RESTART_REASON = "its service stopped each time it ran"
 """Why a job whose instance died while running it, attempt after attempt, is failed (job_queue)."""
@@ -173,15 +175,24 @@ class JobStore:
             return list(session.scalars(query).all())
 
     def _transition(
-        self, job_id: int, from_status: tuple[JobStatus, ...], owner: str | None = None, **values: Any
+        self,
+        job_id: int,
+        from_status: tuple[JobStatus, ...],
+        owner: str | None = None,
+        *,
+        then: Callable[[Session, int], object] | None = None,
+        **values: Any,
     ) -> bool:
         """One conditional UPDATE: from one of `from_status` (and, with `owner`, only while that instance
-        holds the claim: one whose lease was taken over must not write the job's end)."""
+        holds the claim: one whose lease was taken over must not write the job's end); when it changed
+        the row, `then(session, job_id)` in the same transaction."""
         where = [JobRow.id == job_id, JobRow.status.in_([s.value for s in from_status])]
         if owner is not None:
             where.append(JobRow.claimed_by == owner)
         with self.db.transaction() as session:
             done = session.execute(update(JobRow).where(*where).values(**values))
+            if done.rowcount == 1 and then is not None:
+                then(session, job_id)
             return done.rowcount == 1
 
     def mark_running(self, job_id: int, owner: str | None = None) -> bool:
@@ -224,10 +235,13 @@ class JobStore:
         progress: dict[str, Any] | None,
         owner: str | None = None,
     ) -> bool:
+        """running -> succeeded with the result, chained to the lane's previous result in the same
+        transaction (service.store.result_chain)."""
         return self._transition(
             job_id,
             (JobStatus.RUNNING,),
             owner,
+            then=append_link,
             status=JobStatus.SUCCEEDED.value,
             result=result,
             artefacts=artefacts,

@@ -1,4 +1,4 @@
-"""The tables: jobs (identification and diagnosis), sweeps and scheduled tests.
+"""The tables: jobs (identification and diagnosis), sweeps, scheduled tests, and the result chain.
 
 SQLAlchemy 2.x declarative models with portable column types only (strings, integers, floats, booleans,
 JSON, timestamps), so the same models work on SQLite and PostgreSQL. Statuses are stored as their string
@@ -11,7 +11,18 @@ from datetime import UTC, datetime
 from enum import StrEnum
 from typing import Any
 
-from sqlalchemy import JSON, Boolean, DateTime, ForeignKey, Index, Integer, String, Text, false
+from sqlalchemy import (
+    JSON,
+    Boolean,
+    DateTime,
+    ForeignKey,
+    Index,
+    Integer,
+    String,
+    Text,
+    UniqueConstraint,
+    false,
+)
 from sqlalchemy.engine import Dialect
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
 from sqlalchemy.types import TypeDecorator
@@ -175,3 +186,26 @@ class ScheduleRow(Base):
     created_at: Mapped[datetime] = mapped_column(default=utcnow)
     started_at: Mapped[datetime | None] = mapped_column(default=None)
     finished_at: Mapped[datetime | None] = mapped_column(default=None)
+
+
+class ResultChainRow(Base):
+    """One link of a lane's result chain (service.store.result_chain): the content hash of a succeeded job's
+    result, chained to the lane's previous link, appended in the transaction that stores the result."""
+
+    __tablename__ = "result_chain"
+    __table_args__ = (
+        UniqueConstraint("job_id", name="uq_result_chain_job"),
+        UniqueConstraint("lane", "previous_hash", name="uq_result_chain_lane_previous"),  # no forks
+        Index("ix_result_chain_lane_id", "lane", "id"),
+        {"sqlite_autoincrement": True},
+    )
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=True)
+    """Increasing along each lane's chain (appends are serialized per lane)."""
+    lane: Mapped[str] = mapped_column(String(100))
+    job_id: Mapped[int] = mapped_column(ForeignKey("jobs.id"))
+    previous_hash: Mapped[str] = mapped_column(String(64))
+    """The lane's previous link's hash; 64 zeros for its first."""
+    hash: Mapped[str] = mapped_column(String(64))
+    """sha256 (hex) of the canonical record (service.store.result_chain.link_hash)."""
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)

@@ -13,6 +13,8 @@ already hold an inspection station's results, without losing a row, on SQLite an
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 from alembic.config import Config
@@ -59,13 +61,45 @@ def current_revision(connection: Connection) -> str | None:
     return revision
 
 
+@contextmanager
+def sqlite_foreign_keys_off(connection: Connection) -> Iterator[None]:
+    """On SQLite, foreign keys unenforced while the migrations run, enforced again after (elsewhere, nothing).
+
+    Alembic alters an SQLite table by copying it and dropping the original (batch mode), and SQLite refuses
+    to drop a table that rows of another still reference (a result's chain link, a scheduled test's job)
+    while foreign keys are enforced; the copy keeps every id, so the references hold again at the end,
+    which `upgrade` checks (PRAGMA foreign_key_check) before it commits. The pragma only takes effect
+    outside a transaction, hence the commits around it."""
+    if connection.dialect.name != "sqlite":
+        yield
+        return
+    connection.exec_driver_sql("PRAGMA foreign_keys=OFF")
+    connection.commit()
+    try:
+        yield
+    finally:
+        connection.rollback()
+        connection.exec_driver_sql("PRAGMA foreign_keys=ON")
+        connection.commit()
+
+
+def _check_foreign_keys(connection: Connection) -> None:
+    if connection.dialect.name == "sqlite":
+        broken = connection.exec_driver_sql("PRAGMA foreign_key_check").all()
+        if broken:
+            raise SchemaError(
+                f"the migration left {len(broken)} rows of {broken[0][0]} referring to rows that do not "
+                "exist; upgrade refused"
+            )
+
+
 def upgrade(engine: Engine, to: str | None = None) -> tuple[str | None, str]:
     """Bring the database to revision `to` (default: the newest). Returns (revision before, after).
     SchemaError when the database's revision is unknown here (a newer shockbench wrote it)."""
     from alembic import command  # imported when needed: the CLI's --help stays light
 
     target = to or head_revision()
-    with engine.begin() as connection:
+    with engine.connect() as connection, sqlite_foreign_keys_off(connection), connection.begin():
         before = current_revision(connection)
         if before is not None and before not in known_revisions():
             raise SchemaError(
@@ -76,6 +110,29 @@ def upgrade(engine: Engine, to: str | None = None) -> tuple[str | None, str]:
         if before == BASELINE and MigrationContext.configure(connection).get_current_revision() is None:
             command.stamp(config, BASELINE)
         command.upgrade(config, target)
+        _check_foreign_keys(connection)
         after = current_revision(connection)
     assert after is not None
     return before, after
+
+
+def require_newest(engine: Engine) -> str:
+    """For a command that only reads: the database's revision when it is this shockbench's newest; else a
+    SchemaError (one line) saying what to do: an empty database has nothing to read, an older one needs
+    `shockbench db upgrade`, a newer one a newer shockbench."""
+    head = head_revision()
+    with engine.connect() as connection:
+        revision = current_revision(connection)
+    if revision is None:
+        raise SchemaError("the database holds no shockbench tables (wrong --database or --data?)")
+    if revision not in known_revisions():
+        raise SchemaError(
+            f"database schema revision {revision} is newer than this shockbench knows (newest {head}): "
+            "upgrade shockbench"
+        )
+    if revision != head:
+        raise SchemaError(
+            f"database schema revision {revision} is older than this shockbench's ({head}): run "
+            "`shockbench db upgrade` first"
+        )
+    return revision

@@ -13,7 +13,7 @@ from datetime import datetime
 from pathlib import Path
 from typing import Any
 
-from sqlalchemy import func, select, update
+from sqlalchemy import ColumnElement, func, select, update
 
 from service.store.database import Database
 from service.store.models import SweepRow, SweepStatus, utcnow
@@ -24,6 +24,12 @@ UNFINISHED = (SweepStatus.REQUESTED, SweepStatus.RUNNING)
 
 def finished(status: SweepStatus) -> bool:
     return status not in UNFINISHED
+
+
+def of_vehicle(vehicle_id: str) -> ColumnElement[bool]:
+    """The condition "the sweep tested this vehicle": the `vehicle_id` stored in its settings, compared
+    without regard to case (on SQLite and PostgreSQL alike)."""
+    return func.lower(SweepRow.settings["vehicle_id"].as_string()) == vehicle_id.lower()
 
 
 @dataclass(frozen=True)
@@ -122,7 +128,7 @@ class SweepStore:
         if lane is not None:
             query, count = query.where(SweepRow.lane == lane), count.where(SweepRow.lane == lane)
         if vehicle_id is not None:
-            same = func.lower(SweepRow.settings["vehicle_id"].as_string()) == vehicle_id.lower()
+            same = of_vehicle(vehicle_id)
             query, count = query.where(same), count.where(same)
         with self.db.sessions() as session:
             rows = session.scalars(query.order_by(SweepRow.id.desc()).limit(limit).offset(offset)).all()

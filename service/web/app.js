@@ -173,6 +173,13 @@ async function openSweep({ id }, { identify = false } = {}) {
       return;
     }
     let jobId = sweep.latest_job_id;
+    for (let look = 0; jobId === null && !identify && look < 10; look += 1) {
+      // a sweep another client started (the line's scheduler) gets its job from that client: a moment
+      await pause(500);
+      sweep = await api(`/sweeps/${id}`);
+      if (!current()) return;
+      jobId = sweep.latest_job_id;
+    }
     if (jobId === null && identify) {
       status.textContent = `identifying sweep ${id}…`;
       jobId = (await api(`/sweeps/${id}/jobs`, { method: "POST", body: {} })).id;

@@ -92,12 +92,27 @@ function showVerdict(verdict) {
   }));
 }
 
+/** The test's record in words: tyre pressure, operator, sweep settings (the title names the vehicle, the
+ * history says when). */
+function record(sweep) {
+  const test = sweep.test ?? {};
+  const settings = sweep.settings ?? {};
+  const parts = [
+    test.tyre_pressure_bar ? `tyre pressure ${test.tyre_pressure_bar} bar` : null,
+    test.operator_name ? `operator ${test.operator_name}` : null,
+    settings.duration_s ? `sweep ${settings.start_Hz}-${settings.stop_Hz} Hz over ${settings.duration_s} s, ` +
+      `±${fmt(settings.amplitude_m * 1000, "mm", 2)}` : null,
+  ];
+  return parts.filter(Boolean).join("; ");
+}
+
 /** The result view for `sweep` and its succeeded identify `job`. */
 export function showResult(sweep, job) {
   const result = job.result;
   $("result").hidden = false;
   $("result-title").textContent = `Result of sweep ${sweep.id}` +
     (sweep.test?.vehicle_id ? ` — vehicle ${sweep.test.vehicle_id}` : "");
+  $("result-record").textContent = record(sweep);
   $("result-curves").replaceChildren(...result.curves.map(curveSvg));
   rows($("model-figures"), modelFigures(result));
   const lane = laneFigures(result.inspection);
@@ -120,6 +135,7 @@ export function showResult(sweep, job) {
 export function showPending(sweep, message) {
   $("result").hidden = false;
   $("result-title").textContent = `Sweep ${sweep.id}`;
+  $("result-record").textContent = record(sweep);
   $("result-curves").replaceChildren(Object.assign(document.createElement("p"), { textContent: message }));
   rows($("model-figures"), []);
   rows($("lane-figures"), []);

@@ -1,13 +1,18 @@
 """estimator.digital_filters against scipy.signal, whose definitions it follows: random signals with fixed
 seeds, the cutoffs and rates identify uses (and the extremes it may choose), 1-D and several columns along
-any axis; equal to 1e-12 relative (scipy.signal stays the reference; identify no longer imports it)."""
+any axis; equal to 1e-12 relative (scipy.signal stays the reference; identify no longer imports it).
+
+Every test runs with both recursions: the compiled one of the extension built ahead of time (built here by
+compile_ahead when the tree has none for the present source) and the LAPACK fallback used without it."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 from scipy import signal
+from scipy.linalg import lapack
 
+import estimator.digital_filters as digital_filters
 from estimator.digital_filters import (
     analytic_signal,
     butterworth_lowpass_sos,
@@ -15,8 +20,38 @@ from estimator.digital_filters import (
     sosfiltfilt,
     welch_density,
 )
+from estimator.simulation_kernel import compiled_filters
+from service.kernel_build import compile_ahead
 
 RELATIVE_TOLERANCE = 1e-12
+
+
+@pytest.fixture(scope="module")
+def extension():
+    """The extension with the compiled filters, built by compile_ahead if missing."""
+    assert compile_ahead() == "extension"
+    kernels = compiled_filters()
+    assert kernels is not None
+    return kernels
+
+
+@pytest.fixture(autouse=True, params=["compiled", "lapack"])
+def filters(request, monkeypatch, extension) -> str:
+    """Runs the test with the extension's filters, then with numpy and LAPACK's (no extension)."""
+    chosen = extension if request.param == "compiled" else None
+    monkeypatch.setattr(digital_filters, "compiled_filters", lambda: chosen)
+    return request.param
+
+
+def lapack_recursion(a1: float, a2: float, right: np.ndarray) -> np.ndarray:
+    """The reference: y[n] + a1·y[n−1] + a2·y[n−2] = right[n] by LAPACK's banded triangular solve."""
+    band = np.empty((3, right.shape[0]))
+    band[0], band[1], band[2] = 1.0, a1, a2
+    solution, info = lapack.dtbtrs(band, right, uplo="L", trans="N", diag="U")
+    assert info == 0
+    return solution
+
+
 CUTOFFS = [(1000.0, 30.0), (1000.0, 5.0), (1000.0, 400.0), (500.0, 60.0), (2000.0, 5.0), (100.0, 12.5)]
 
 
@@ -87,3 +122,39 @@ def test_welch_density_equals_scipy(samples: int, segment: int) -> None:
 def test_analytic_signal_equals_hilbert(samples: int) -> None:
     x = np.random.default_rng(samples).standard_normal(samples)
     assert relative_difference(analytic_signal(x), signal.hilbert(x)) < RELATIVE_TOLERANCE
+
+
+def test_compiled_recursion_equals_lapack(extension) -> None:
+    """The extension's recursion against LAPACK's dtbtrs on 300 random stable second- and first-order
+    recursions (poles of radius up to 0.9995), 1-3000 samples, 1-40 columns, column-major or not."""
+    rng = np.random.default_rng(15)
+    worst = 0.0
+    for _ in range(300):
+        samples, columns = int(rng.integers(1, 3000)), int(rng.integers(1, 40))
+        radius, angle = rng.uniform(0.0, 0.9995), rng.uniform(0.0, np.pi)
+        a1, a2 = (-2.0 * radius * np.cos(angle), radius**2) if rng.random() < 0.7 else (-radius, 0.0)
+        right = rng.standard_normal((samples, columns)) * rng.uniform(1e-6, 1e6)
+        right = np.asfortranarray(right) if rng.random() < 0.8 else right
+        reference = lapack_recursion(a1, a2, np.asfortranarray(right))
+        extension.recursion(a1, a2, right)
+        worst = max(worst, relative_difference(right, reference))
+    assert worst < RELATIVE_TOLERANCE
+
+
+def test_doctor_sized_filtering_same_with_both_paths(monkeypatch, extension) -> None:
+    """The doctor's multi-column uses, each with the extension's filters and with LAPACK's: a damper
+    basis of 30 s at 500 Hz, 45 columns, low-passed by sosfiltfilt (blocks of 16 columns), and 200 AR(1)
+    noise draws of 6000 samples through first_order_filter."""
+    rng = np.random.default_rng(2026)
+    basis = np.cumsum(rng.standard_normal((15001, 45)), axis=0)
+    draws = rng.standard_normal((200, 6000))
+    sos = butterworth_lowpass_sos(4, 25.0, 500.0)
+    results = {}
+    for name, chosen in [("compiled", extension), ("lapack", None)]:
+        monkeypatch.setattr(digital_filters, "compiled_filters", lambda chosen=chosen: chosen)
+        results[name] = (sosfiltfilt(sos, basis, axis=0), first_order_filter((1.0, 0.0), -0.93, draws))
+    for compiled, reference in zip(results["compiled"], results["lapack"], strict=True):
+        assert relative_difference(compiled, reference) < RELATIVE_TOLERANCE
+    assert relative_difference(results["compiled"][0], signal.sosfiltfilt(sos, basis, axis=0)) < (
+        RELATIVE_TOLERANCE
+    )

@@ -68,10 +68,13 @@ def test_without_an_extension_for_the_present_source_numba_runs_the_kernel(monke
     numba's just-in-time kernel instead of running a stale one."""
     other_source = simulation_kernel.EXTENSION_PREFIX + "0" * 16
     monkeypatch.setattr(simulation_kernel, "extension_name", lambda: other_source)
+    simulation_kernel._extension.cache_clear()
     LOADER.cache_clear()
     try:
         assert LOADER()[0] == "numba"
+        assert simulation_kernel.compiled_filters() is None  # the filters solve with LAPACK then
     finally:
+        simulation_kernel._extension.cache_clear()
         LOADER.cache_clear()
 
 

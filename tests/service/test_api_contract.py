@@ -37,7 +37,7 @@ OPERATION_IDS = {
     "start_sweep", "list_sweeps", "get_sweep", "abort_sweep", "get_sweep_recording_csv",
     "submit_sweep_identify", "schedule_test", "list_scheduled_tests", "get_scheduled_test",
     "cancel_scheduled_test", "whoami", "bench_live", "get_sweep_recording_h5",
-    "submit_sweep_diagnose",
+    "submit_sweep_diagnose", "get_vehicle_results",
 }  # fmt: skip
 DOWNLOADS = {
     ("/api/v1/jobs/{job_id}/plot.png", "image/png"),

@@ -13,6 +13,7 @@ from alembic.migration import MigrationContext
 
 from service.store.database import Database
 from service.store.models import Base
+from service.store.result_chain import verify_chain
 from service.store.schema import BASELINE, SchemaError, head_revision, upgrade
 
 
@@ -52,7 +53,8 @@ def test_a_database_of_the_previous_schema_keeps_every_row(database_url: str) ->
             c.execute(
                 sa.text(
                     "INSERT INTO schedules (bench, vehicle_file, sweep_settings, job_options, status, "
-                    "created_at) VALUES ('lane bench', 'v.toml', '{}', '{}', 'waiting', :t)"
+                    "sweep_id, job_id, created_at) VALUES ('lane bench', 'v.toml', '{}', '{}', 'waiting', "
+                    "1, 1, :t)"
                 ),
                 {"t": now},
             )
@@ -90,5 +92,69 @@ def test_a_newer_schema_is_refused_in_one_line(database_url: str) -> None:
             database.upgrade_schema()
         assert str(refused.value).count("\n") == 0
         assert "9999 is newer than this shockbench knows" in str(refused.value)
+    finally:
+        database.dispose()
+
+
+def test_a_lanes_database_gains_the_result_chain_with_every_row_kept_and_its_results_chained(
+    database_url: str,
+) -> None:
+    """0002 (lanes) -> 0003 (result chain) and on: nothing is lost, and the results stored before the chain
+    existed are chained per lane in the order they finished, so that `verify` holds at once. On SQLite the
+    later revisions copy the jobs table, which rows of other tables refer to (chain links, a scheduled
+    test): foreign keys are unenforced while the migrations run and checked at the end."""
+    database = Database(database_url)
+    times = [datetime(2026, 11, day, 9, 30, 0, 123456, tzinfo=UTC) for day in (1, 2, 3, 4)]
+    try:
+        upgrade(database.engine, to="0002")
+        with database.engine.begin() as c:
+            c.execute(
+                sa.text(
+                    "INSERT INTO sweeps (bench, lane, status, settings, complete, created_at) "
+                    "VALUES ('b', 'north', 'complete', '{\"vehicle_id\": \"AB-12\"}', true, :t)"
+                ),
+                {"t": times[0]},
+            )
+            for lane, status, finished, result in (
+                ("north", "succeeded", times[2], '{"gap_m": 2e-05, "inspection": {"eusama_percent": 61.5}}'),
+                ("south", "succeeded", times[1], '{"gap_m": 3e-05}'),
+                ("north", "succeeded", times[1], '{"gap_m": 1e-05}'),
+                ("north", "failed", times[3], None),
+            ):
+                c.execute(
+                    sa.text(
+                        "INSERT INTO jobs (lane, kind, status, options, input_source, recording_path, "
+                        "vehicle_path, sweep_id, output_dir, result, artefacts, created_at, finished_at) "
+                        "VALUES (:lane, 'identify', :status, '{\"points\": 20}', 'sweep', 'r.h5', 'v.toml', "
+                        "1, 'out', :result, '{}', :t, :f)"
+                    ),
+                    {"lane": lane, "status": status, "result": result, "t": times[0], "f": finished},
+                )
+            c.execute(  # a scheduled test done: it refers to its sweep and its job
+                sa.text(
+                    "INSERT INTO schedules (bench, lane, vehicle_file, sweep_settings, job_options, "
+                    "status, sweep_id, job_id, created_at) "
+                    "VALUES ('b', 'north', 'v.toml', '{}', '{}', 'done', 1, 1, :t)"
+                ),
+                {"t": times[0]},
+            )
+        assert database.upgrade_schema() == ("0002", head_revision())
+        with database.engine.connect() as c:
+            jobs = c.execute(sa.text("SELECT id, lane, status, result FROM jobs ORDER BY id")).all()
+            links = c.execute(sa.text("SELECT lane, job_id FROM result_chain ORDER BY id")).all()
+            sweep = c.execute(sa.text("SELECT lane, settings FROM sweeps")).one()
+            schedule = c.execute(sa.text("SELECT sweep_id, job_id, status FROM schedules")).one()
+        assert tuple(schedule) == (1, 1, "done")
+        assert [(j.id, j.lane, j.status) for j in jobs] == [
+            (1, "north", "succeeded"),
+            (2, "south", "succeeded"),
+            (3, "north", "succeeded"),
+            (4, "north", "failed"),
+        ]
+        assert "61.5" in str(jobs[0].result) and jobs[3].result is None
+        assert sweep.lane == "north" and "AB-12" in str(sweep.settings)
+        assert [(link.lane, link.job_id) for link in links] == [("north", 3), ("north", 1), ("south", 2)]
+        report = verify_chain(database)
+        assert (report.problem, report.results, report.lanes) == (None, 3, 2)
     finally:
         database.dispose()

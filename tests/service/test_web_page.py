@@ -14,6 +14,7 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
+import headless_chromium
 import pytest
 from headless_chromium import Chromium, chromium_driver, console_errors, find_chromium, set_viewport
 from live_server import ROOT, SERVE_STARTUP_TIMEOUT_S, ServeProcess, serve_process, wait_until
@@ -163,6 +164,7 @@ def test_an_operator_runs_a_test_and_reads_curve_figures_and_verdict(
     verdict = page.testid("result-verdict")
     assert verdict.get_attribute("data-outcome") in ("pass", "fail", "check"), verdict.text
     assert "estimate" in page.by_id("result").text.lower()
+    assert "tyre pressure 2.2 bar; operator A. Tester" in page.by_id("result-record").text
     SCREENSHOT.parent.mkdir(exist_ok=True)
     assert page.driver.save_screenshot(str(SCREENSHOT)), SCREENSHOT
 
@@ -248,7 +250,8 @@ def test_a_viewer_sees_no_enabled_control_and_the_api_refuses_it(page: Page, ser
     assert not page.by_id("abort-sweep").is_enabled()
     assert not page.by_id("run-doctor").is_enabled()
     assert not page.by_id("schedules-title").is_displayed()
-    page.driver.execute_script("document.getElementById('start-form').requestSubmit()")
+    page.fill("vehicle-id", "VIEWER-1")
+    page.driver.execute_script("document.getElementById('start-form').requestSubmit()")  # Enter in a field
     with service.client(VIEWER) as client:
         refused = client.post("/api/v1/sweeps", json={"vehicle_toml": VEHICLE_TOML, "duration_s": 2})
         assert refused.status_code == 403
@@ -361,3 +364,13 @@ def test_an_axle_result_shows_left_and_right_curves_and_figures(page: Page) -> N
     assert page.testid("result-verdict").get_attribute("data-outcome") == "fail"
     assert "37.5%" in page.testid("result-verdict").text
     assert "Anti-roll bar 18 kN/m" in page.by_id("model-figures").text
+
+
+def test_without_chromium_the_tests_skip_except_in_ci(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(headless_chromium.shutil, "which", lambda _name: None)
+    monkeypatch.delenv("CI", raising=False)
+    with pytest.raises(pytest.skip.Exception, match="chromium and chromium-driver not installed"):
+        find_chromium()
+    monkeypatch.setenv("CI", "1")
+    with pytest.raises(pytest.fail.Exception, match="CI is set, so the browser tests must run"):
+        find_chromium()
