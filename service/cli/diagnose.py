@@ -55,19 +55,19 @@ def _progress(p: DiagnoseProgress) -> None:
 def run_diagnose(args: argparse.Namespace) -> int:
     from daq.formats.recording_csv import read_recording_csv
     from daq.formats.vehicle_file import read_vehicle
-    from estimator.doctor.diagnose import DiagnoseOptions, diagnose
+    from estimator.doctor.diagnose import DiagnoseOptions
     from estimator.identify import check_curve_points
-    from service.jobs.context import check_recording_fits
+    from service.analysis import diagnose_recording
 
     report = Path(args.report) if args.report else None
     if report is not None and report.exists() and not report.is_dir():
         raise CliError(f"--report {report}: exists and is not a folder")
     recording = read_recording_csv(args.recording)
     vehicle = read_vehicle(args.vehicle)
-    check_recording_fits(recording, vehicle)  # the job's submit check: bad input, one line, exit 2
     check_curve_points(args.points, "--points")  # identify's limits, as the diagnose job's options
     options = DiagnoseOptions(tyre=TyreModel(args.tyre), points=args.points)
-    result = diagnose(recording, vehicle, options, progress=None if args.json else _progress)
+    # the job's submit check first (bad input: one line, exit 2)
+    result = diagnose_recording(recording, vehicle, options, progress=None if args.json else _progress)
     if report is not None:
         from service.doctor_report import write_report  # matplotlib: only for a report (0.3-1 s to import)
 

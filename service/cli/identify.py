@@ -185,15 +185,14 @@ def options_from_args(args: argparse.Namespace, vehicle: VehicleParameters) -> I
 def run_identify(args: argparse.Namespace) -> int:
     from daq.formats.recording_csv import read_recording_csv
     from daq.formats.vehicle_file import read_vehicle
-    from estimator.identify import Solver, identify
-    from service.jobs.bounds import check_physical_bounds
+    from estimator.identify import Solver
+    from service.analysis import identify_recording
 
     recording = read_recording_csv(args.recording)
     vehicle = read_vehicle(args.vehicle)
-    check_physical_bounds(recording, vehicle)  # the service's submit check (InputError, one line)
     options = options_from_args(args, vehicle)
     progress = _ProgressLine() if options.solver is Solver.DE and not args.json else None
-    result = identify(recording, vehicle, options, progress=progress)
+    result = identify_recording(recording, vehicle, options, progress=progress)  # the service's checks first
     for warning in result.warnings:
         print(f"shockbench identify: warning: {warning}", file=sys.stderr)
     plot = (

@@ -19,6 +19,7 @@ from service.cli import (
     export,
     history,
     identify,
+    reanalyse,
     serve,
     simulate,
     sweep,
@@ -27,7 +28,20 @@ from service.cli import (
 )
 from service.cli.errors import run_command
 
-MODULES = (simulate, identify, diagnose, validate, devices, sweep, export, serve, db, history, verify)
+MODULES = (
+    simulate,
+    identify,
+    diagnose,
+    validate,
+    devices,
+    sweep,
+    export,
+    serve,
+    db,
+    history,
+    verify,
+    reanalyse,
+)
 
 
 def build_parser() -> argparse.ArgumentParser:
