@@ -105,7 +105,10 @@ def openapi_document() -> dict:
     return create_app(ServiceSettings(data_dir=Path("unused"), keys=KeyRing({ADMIN: Role.ADMIN}))).openapi()
 
 
-schema = schemathesis.openapi.from_dict(openapi_document())
+LIVE_STREAM = "bench_live"
+"""GET /bench/live streams until the client leaves, and schemathesis reads a body to its end: it is left
+out here (tests/service/test_api_operator.py reads it, test_api_contract.py checks its documented events)."""
+schema = schemathesis.openapi.from_dict(openapi_document()).exclude(operation_id=LIVE_STREAM)
 schema.config.generation.update(modes=[GenerationMode.POSITIVE, GenerationMode.NEGATIVE])
 
 
