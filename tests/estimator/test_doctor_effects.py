@@ -226,3 +226,30 @@ def test_an_effect_and_the_lift_off_it_comes_with_are_both_named(label: str, see
         key = f"{label.split('_')[0]}_stiffness_N_per_m"
         error = float(step.parameters[key]) / _true_rate(case, label) - 1.0
         assert abs(error) <= STIFFNESS_ACCURACY, line
+
+
+def test_a_wrong_rate_is_named_where_the_gap_is_already_at_the_floor(hit_rate) -> None:
+    """Benchmark draw tyre_stiffness 26 (car, valve model, tyre stated x0.75, no lift-off): the rate is found
+    right and the equations demand it, but the gap of the model without it is already what a complete model
+    leaves; it was "nothing missing" before _Doctor.at_the_floor."""
+    case, recording, vehicle, _ = _world("tyre_stiffness", 26, BENCHMARK_SWEEP_S)
+    result = diagnose(recording, vehicle, DiagnoseOptions(max_steps=MAX_STEPS))  # type: ignore[arg-type]
+    step = next((s for s in result.steps if s.effect == "tyre_stiffness"), None)
+    error = (
+        float(step.parameters["tyre_stiffness_N_per_m"]) / _true_rate(case, "tyre_stiffness") - 1.0
+        if step
+        else 1.0
+    )
+    hit = (
+        result.effects_named == ["tyre_stiffness"]
+        and not result.unexplained
+        and abs(error) <= STIFFNESS_ACCURACY
+    )
+    hit_rate(
+        "independent world: a wrong rate named at the floor",
+        f"{_line(case, result)}; {result.conclusion}",
+        hit,
+    )
+    assert hit, result.conclusion
+    assert result.gap_after_m <= 1.1 * result.expected_gap_m
+    assert result.residual_ratio <= 1.0
