@@ -155,7 +155,8 @@ def sentence(effect: EffectInstance, evidence: Evidence, gap_before_m: float, ga
     if evidence.detail:
         parts.append(evidence.detail)
     parts.append(
-        f"with {effect.label} the gap falls from {gap_before_m * 1e6:.1f} µm to {gap_after_m * 1e6:.1f} µm"
+        f"with {effect.label} the gap {'falls' if gap_after_m < gap_before_m else 'goes'} from "
+        f"{gap_before_m * 1e6:.1f} µm to {gap_after_m * 1e6:.1f} µm"
         if np.isfinite(gap_before_m)
         else f"with {effect.label} the model no longer diverges: gap {gap_after_m * 1e6:.1f} µm"
     )

@@ -196,15 +196,21 @@ class FittedModel:
             STIFFNESS_UNKNOWNS[VehicleConstant.TYRE]
         )
 
-    def _standard_errors(self) -> dict[str, float]:
-        """Standard errors of the stiffness corrections and the friction the model has (sandwich covariance
-        with a block long-run variance of the score, estimator.uncertainty); empty when it has none."""
-        tested = [*STIFFNESS_UNKNOWNS.values(), "coulomb_friction_N"]
-        names = [n for n in tested if n in self.system.parameter_names]
-        if not names:
+    def standard_errors(self, names: list[str], rows: np.ndarray | None = None) -> dict[str, float]:
+        """Standard errors of the named unknowns of θ (those it has; channel parameters have none) from the
+        samples where `rows` is True (all when None): sandwich covariance with a block long-run variance
+        of the score (estimator.uncertainty)."""
+        present = [n for n in names if n in self.system.parameter_names]
+        if not present:
             return {}
-        intervals = confidence_intervals(self.system, self.theta, self.signals.sample_time_s)
-        return {n: float(intervals.standard_error[self.system.parameter_names.index(n)]) for n in names}
+        system = restrict(self.system, rows) if rows is not None else self.system
+        intervals = confidence_intervals(system, self.theta, self.signals.sample_time_s)
+        return {n: float(intervals.standard_error[system.parameter_names.index(n)]) for n in present}
+
+    def _standard_errors(self) -> dict[str, float]:
+        """Standard errors of the stiffness corrections and the friction the model has (the unknowns the
+        catalog tests against them); empty when it has none."""
+        return self.standard_errors([*STIFFNESS_UNKNOWNS.values(), "coulomb_friction_N"])
 
     def context(self) -> FitContext:
         dt = self.signals.sample_time_s
@@ -245,8 +251,11 @@ class FittedModel:
     def parameters(self, effect: EffectInstance) -> dict[str, float | str]:
         return CATALOG[effect.name].report(effect, self.effect_values(effect), self.context())
 
-    def implausible(self, effect: EffectInstance) -> str | None:
-        return CATALOG[effect.name].implausible(self.effect_values(effect), self.context())
+    def implausible(self, effect: EffectInstance, significance: bool = True) -> str | None:
+        """Why the fitted effect cannot be what it says (catalog's Effect.implausible; significance: with
+        its test of the value against its standard error)."""
+        context = self.context() if significance else replace(self.context(), standard_error={})
+        return CATALOG[effect.name].implausible(self.effect_values(effect), context)
 
 
 BUILD_CACHE_ENTRIES = 8
