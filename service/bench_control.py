@@ -22,6 +22,7 @@ from pathlib import Path
 
 from daq.bench_config import BenchConfig
 from daq.live_view import LiveView
+from daq.sources.laser_source import SourceStatistics
 from daq.sweep.model import SweepOutcome, SweepProgress, SweepRequest
 from daq.sweep.pacing import Pacing, RealtimePacing, SimulatedPacing
 from daq.sweep.plan import SweepPlan, plan_sweep
@@ -79,6 +80,7 @@ class BenchController:
         self._thread: threading.Thread | None = None
         self._sweep_id: str | None = None
         self._progress: SweepProgress | None = None
+        self._last_progress: SweepProgress | None = None  # kept after the sweep: what the devices delivered
         self._abort = threading.Event()
         self._emergency = threading.Event()
         self._service_stopping = False
@@ -148,8 +150,26 @@ class BenchController:
             )
 
     def devices(self) -> list[dict[str, str]]:
-        """What the configuration names (a live check of each device is `shockbench probe`'s job)."""
-        return list(self._devices)
+        """What the configuration names, each with its `state` in words: the exciter's phase and frequency,
+        each laser's samples, rate and last error, while a sweep runs; after one, what the last sweep got
+        from each (a live check of an idle device is `shockbench probe`'s job)."""
+        with self._lock:
+            busy, progress = self._thread is not None, self._progress or self._last_progress
+        sources = {s.name: s for s in progress.sources} if progress is not None else {}
+        found = []
+        for device in self._devices:
+            state = dict(device)
+            if device["kind"] == "exciter":
+                moving = busy and progress is not None
+                state["state"] = (
+                    f"{progress.phase.value} at {progress.frequency_Hz:.2f} Hz"
+                    if moving and progress
+                    else "stopped"
+                )
+            else:
+                state["state"] = _laser_state(sources.get(device["name"]), busy)
+            found.append(state)
+        return found
 
     @staticmethod
     def _configured_devices(config: BenchConfig) -> list[dict[str, str]]:
@@ -209,6 +229,7 @@ class BenchController:
     def _on_progress(self, progress: SweepProgress) -> None:
         with self._lock:
             self._progress = progress
+            self._last_progress = progress
 
     def _run(self, sweep_id: str, plan: SweepPlan, out_path: Path, done: SweepDone) -> None:
         outcome: SweepOutcome | None = None
@@ -259,3 +280,13 @@ class BenchController:
             return "emergency stop requested from the running sweep"
         asyncio.run(self._direct_command(emergency=True))
         return "emergency stop sent to the drive"
+
+
+def _laser_state(stats: SourceStatistics | None, busy: bool) -> str:
+    """A laser's state in words, from what it delivered in the running (or last) sweep."""
+    if stats is None:
+        return "waiting for the sweep's connection" if busy else "idle (not read since the service started)"
+    delivered = f"{stats.samples} samples at {stats.achieved_rate_Hz:.0f} Hz"
+    trouble = f", {stats.failed_reads} failed reads" if stats.failed_reads else ""
+    error = f", last error: {stats.last_error}" if stats.last_error else ""
+    return f"{'reading' if busy else 'idle; last sweep'}: {delivered}{trouble}{error}"

@@ -75,6 +75,8 @@ class SweepProgress:
     frequency_Hz: float
     rows: int
     gap_rows: int
+    sources: tuple[SourceStatistics, ...] = ()
+    """What each laser has delivered so far (samples, rate, failed reads, last error)."""
 
     @property
     def fraction(self) -> float:

@@ -478,5 +478,6 @@ class _SweepRun:
                 frequency_Hz=self.frequency_Hz,
                 rows=stats.rows if stats else 0,
                 gap_rows=stats.gap_rows if stats else 0,
+                sources=tuple(source.statistics() for source in self.sources),
             )
         )

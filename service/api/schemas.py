@@ -277,6 +277,9 @@ class LiveStateEvent(BaseModel):
     busy: bool = Field(description="a sweep is running")
     sweep_id: int | None = Field(None, description="the running sweep")
     progress: SweepProgressOut | None = Field(None, description="the running sweep's latest progress")
+    devices: list[dict[str, str]] = Field(
+        default_factory=list, description="GET /bench/devices: each device with its `state` in words"
+    )
 
 
 class LiveSamplesEvent(BaseModel):

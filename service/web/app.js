@@ -76,12 +76,7 @@ async function loadBench() {
     $("bench-model").textContent = bench.model;
     onState({ busy: bench.busy, sweep_id: bench.sweep_id, progress: bench.progress });
     const { devices } = await api("/bench/devices");
-    $("devices").replaceChildren(...devices.map((d) => {
-      const item = document.createElement("li");
-      const where = [d.channel, d.head].filter(Boolean).join(", ");
-      item.textContent = `${d.name}: ${d.kind}${where ? ` (${where})` : ""} — ${d.url}`;
-      return item;
-    }));
+    renderDevices(devices);
   } catch (error) {
     $("bench-name").textContent = error.message;
   }
@@ -94,7 +89,25 @@ function notePhase(phase) {
   if (!phases.includes(phase)) seen.phases = [...phases, phase].join(" ");
 }
 
-function onState({ busy, sweep_id: sweepId, progress }) {
+/** Each configured device and its state in words (the live stream's `state` events carry them too). */
+function renderDevices(devices) {
+  $("devices").replaceChildren(...devices.map((d) => {
+    const item = document.createElement("li");
+    const where = [d.channel, d.head].filter(Boolean).join(", ");
+    item.textContent = `${d.name}: ${d.kind}${where ? ` (${where})` : ""} — ${d.url}`;
+    if (d.state) {
+      const state = document.createElement("div");
+      state.className = "device-state";
+      state.dataset.testid = "device-state";
+      state.textContent = d.state;
+      item.append(state);
+    }
+    return item;
+  }));
+}
+
+function onState({ busy, sweep_id: sweepId, progress, devices }) {
+  if (devices && devices.length) renderDevices(devices);
   const moving = busy && progress && progress.phase !== "done";
   $("bench-status").textContent = busy
     ? `Bench busy: sweep ${sweepId ?? "?"}${progress ? `, ${progress.phase}` : ""}`

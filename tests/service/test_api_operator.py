@@ -77,8 +77,14 @@ def test_live_stream_then_record_search_download_job_and_verdict(
     with httpx.stream("GET", f"{server.url}/api/v1/bench/live", headers=headers, timeout=60) as stream:
         assert stream.headers["content-type"].startswith("text/event-stream")
         lines = stream.iter_lines()
-        first = next(events(lines))
-        assert first == ("state", {"busy": False, "sweep_id": None, "progress": None})
+        name, first = next(events(lines))
+        assert name == "state" and (first["busy"], first["sweep_id"], first["progress"]) == (
+            False,
+            None,
+            None,
+        )
+        assert {d["kind"] for d in first["devices"]} == {"exciter", "laser"}
+        assert all(d["state"] for d in first["devices"])
         started = client.post("/api/v1/sweeps", json={**SHORT, **TEST})
         assert started.status_code == 201, started.text
         sweep = started.json()
@@ -93,7 +99,15 @@ def test_live_stream_then_record_search_download_job_and_verdict(
                 seen["x_t"] += data["channels"]["x_t"]
                 seen["sweep_ids"].add(data["sweep_id"])
     assert seen["sweep_ids"] == {sweep["id"]}
-    assert any(s["busy"] and s["progress"] and s["progress"]["phase"] == "sweeping" for s in seen["states"])
+    sweeping = [
+        s for s in seen["states"] if s["busy"] and s["progress"] and s["progress"]["phase"] == "sweeping"
+    ]
+    assert sweeping
+    during = {d["kind"]: d["state"] for d in sweeping[-1]["devices"]}
+    assert during["exciter"].startswith("sweeping at ") and during["laser"].startswith("reading: ")
+    after = client.get("/api/v1/bench/devices").json()["devices"]
+    lasers = [d["state"] for d in after if d["kind"] == "laser"]
+    assert lasers and all(state.startswith("idle; last sweep: ") for state in lasers)
     t_s = np.array(seen["t_s"])
     assert np.allclose(np.diff(t_s), 0.01)  # every 10th row of 1 kHz: each once, in order, none lost
     assert t_s[-1] > SHORT["duration_s"]

@@ -154,6 +154,8 @@ def test_an_operator_runs_a_test_and_reads_curve_figures_and_verdict(
     page.wait(lambda: int(chart.get_attribute("data-points") or 0) > 0, "samples in the live chart")
     page.wait(lambda: int(chart.get_attribute("data-frames") or 0) >= 3, "the live chart redrawn")
     page.wait(lambda: plate_pixels(page) > 100, "the plate's trace drawn")
+    states = [e.text for e in page.driver.find_elements("css selector", "[data-testid=device-state]")]
+    assert any(state.startswith(("reading: ", "idle; last sweep: ")) for state in states), states
 
     page.wait(lambda: page.testid("result-curve").find_elements("css selector", "svg"), "the curve", WAIT_S)
     curve = page.testid("result-curve")

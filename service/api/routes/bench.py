@@ -33,7 +33,7 @@ def require_bench(request: Request) -> BenchController:
 class DevicesOut(BaseModel):
     devices: list[dict[str, str]] = Field(
         description="what the bench configuration names: name, kind (exciter, laser), url (and channel, "
-        "head for a laser)"
+        "head for a laser), and state: in words, what it does or delivered in the running or last sweep"
     )
 
 

@@ -84,7 +84,9 @@ async def bench_live(request: Request, principal: Viewer) -> StreamingResponse:
                 yield _sse("closing", json.dumps({"reason": "the service is stopping"}), sequence)
                 return
             state = bench_out(bench)
-            data = LiveStateEvent(busy=state.busy, sweep_id=state.sweep_id, progress=state.progress)
+            data = LiveStateEvent(
+                busy=state.busy, sweep_id=state.sweep_id, progress=state.progress, devices=bench.devices()
+            )
             phase = (state.sweep_id, state.progress.phase if state.progress else None)
             now = time.monotonic()
             if repr(phase) != last_state or now - last_sent >= STATE_EVERY_S:
