@@ -93,7 +93,6 @@ async function addSchedule(event) {
   const status = $("schedule-status");
   const at = $("schedule-at").value;
   const body = sweepBody();
-  for (const name of ["vehicle_id", "tyre_pressure_bar", "operator_name"]) delete body[name];
   if (at) body.run_at = new Date(at).toISOString();
   try {
     const test = await api("/schedules", { method: "POST", body });

@@ -276,11 +276,17 @@ def test_the_page_is_labelled_and_fits_a_tablet(page: Page) -> None:
         assert page.testid("emergency-stop").is_displayed()
 
 
-def test_an_admin_schedules_a_test_and_cancels_it(page: Page) -> None:
+def test_an_admin_schedules_a_test_and_cancels_it(page: Page, service: ServeProcess) -> None:
     page.sign_in(ADMIN)
     page.wait(lambda: page.by_id("schedules-title").is_displayed(), "the schedules shown to an admin")
     page.driver.execute_script("document.getElementById('schedule-at').value = '2099-01-01T06:30'")
+    page.by_id("vehicle-id").clear()
+    page.by_id("vehicle-id").send_keys("SCHED 42")
     page.by_id("schedule-form").find_element("css selector", "button[type=submit]").click()
+    page.wait(lambda: "scheduled" in page.by_id("schedule-status").text, "the test scheduled")
+    with service.client(VIEWER) as client:
+        newest = client.get("/api/v1/schedules").json()["tests"][0]
+    assert newest["test"]["vehicle_id"] == "SCHED 42"  # the test's record goes with the schedule
     cancel = page.wait(
         lambda: page.by_id("schedule-body").find_elements("css selector", "button"),
         "a waiting test to cancel",

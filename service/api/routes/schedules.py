@@ -20,6 +20,7 @@ from service.api.auth import Admin, Viewer
 from service.api.contract import created
 from service.api.errors import ApiError, responses
 from service.api.routes.bench import require_bench
+from service.api.routes.sweeps import SweepTestOut
 from service.api.schemas import API_PREFIX, IdentifyOptionsOut, PageLimit, PageOffset, SweepSettingsOut
 from service.api.settings import ServiceSettings
 from service.api.sweep_launch import SweepIn, plan_request
@@ -65,6 +66,7 @@ class ScheduleOut(BaseModel):
     status: ScheduleStatus = Field(description="waiting, running, done, failed or cancelled")
     run_at: datetime | None = Field(None, description="when it is due; null: when the bench is free")
     sweep_settings: SweepSettingsOut = Field(description="the sweep as submitted (without the vehicle file)")
+    test: SweepTestOut = Field(description="the vehicle id, tyre pressure and operator its sweep will carry")
     job_options: IdentifyOptionsOut = Field(description="options of the identification job")  # type: ignore[valid-type]
     sweep_id: int | None = Field(None, description="its sweep, once started")
     job_id: int | None = Field(None, description="its identification job, once the sweep completed")
@@ -85,6 +87,7 @@ class ScheduleOut(BaseModel):
             status=record.status,
             run_at=record.run_at,
             sweep_settings=SweepSettingsOut.model_validate(record.sweep_settings),
+            test=SweepTestOut.model_validate(record.sweep_settings),
             job_options=IdentifyOptionsOut.model_validate(record.job_options),
             sweep_id=record.sweep_id,
             job_id=record.job_id,
