@@ -57,10 +57,10 @@ from typing import TypeVar
 
 import numpy as np
 
-from estimator.doctor.catalog import CATALOG, SIGNIFICANCE_Z, EffectInstance, EffectName
-from estimator.doctor.columns import restrict
+from estimator.doctor.catalog import CATALOG, EffectInstance, EffectName
 from estimator.doctor.evidence import gather, sentence
 from estimator.doctor.expected import plausible_truth, refit_on, smooth_truth, synthetic_recording
+from estimator.doctor.judging import Judging
 from estimator.doctor.model import (
     FitSettings,
     FittedModel,
@@ -70,8 +70,20 @@ from estimator.doctor.model import (
     starting_structure,
 )
 from estimator.doctor.noise import measure_noise
-from estimator.doctor.residuals import Localisation, effective_samples, locate, sweep_frequency_Hz
+from estimator.doctor.residuals import Localisation, locate, sweep_frequency_Hz
 from estimator.doctor.result import CandidateScore, DiagnosisResult, DiagnosisStep
+from estimator.doctor.rounds import (
+    Candidates,
+    Played,
+    RoundState,
+    Simulated,
+    added_unknowns,
+    bic_difference,
+    blocks_of,
+    heldout_objective,
+    mark_chosen,
+    simulated_column,
+)
 from estimator.doctor.simulation import BatchOutputError, simulate_models
 from estimator.identify import IdentifyOptions, identify
 from estimator.recording import Recording
@@ -140,105 +152,7 @@ class DiagnoseProgress:
     stage: str
 
 
-@dataclass
-class _Candidates:
-    """One round's fits: trials (every candidate, channel effects after one Gauss-Newton step), their
-    objective ratios, the ones kept by the screen, those fitted fully and on the fitting blocks only."""
-
-    trials: dict[EffectInstance, FittedModel]
-    ratios: dict[EffectInstance, float]
-    kept: list[EffectInstance]
-    full: dict[EffectInstance, FittedModel]
-    held: dict[EffectInstance, FittedModel]
-    bases: dict[EffectInstance, tuple[FittedModel, FittedModel]]
-    """Candidates compared with a base other than the current model (coulomb_friction: the current
-    structure on the friction grid, see _Doctor.like_bases): that base fitted on all samples and on the
-    fitting blocks."""
-
-
-@dataclass
-class _Simulated:
-    gap_m: float
-    residual: dict[str, np.ndarray]
-    predicted: dict[str, np.ndarray]
-
-
-@dataclass(frozen=True)
-class _State:
-    """Where the diagnosis stands: the structure so far, its fit on all samples and on the fitting blocks,
-    and its simulation (None before the first round)."""
-
-    structure: ModelStructure
-    current: FittedModel
-    held: FittedModel
-    simulated: _Simulated | None
-
-
-@dataclass
-class _Played:
-    """A round's outcome: every candidate's score, those that qualify, the fits, the current model's
-    simulation, each kept candidate's simulation, and the current model's held-out objective."""
-
-    scores: list[CandidateScore]
-    eligible: list[EffectInstance]
-    fits: _Candidates
-    simulated: _Simulated
-    outcomes: dict[EffectInstance, _Simulated]
-    heldout_base: float
-
-    @property
-    def gaps(self) -> dict[EffectInstance, float]:
-        return {i: s.gap_m for i, s in self.outcomes.items()}
-
-
-def _mark(scores: list[CandidateScore], chosen: EffectInstance, verdict: str) -> list[CandidateScore]:
-    return [s if s.effect != chosen.label else replace(s, verdict=verdict) for s in scores]
-
-
-def _column(batch: BatchOutputError, index: int, gaps: np.ndarray) -> _Simulated:
-    return _Simulated(
-        float(gaps[index]),
-        batch.column(index),
-        {name: p[:, index] for name, p in batch.predicted.items()},
-    )
-
-
-def _blocks(time_s: np.ndarray, block_s: float) -> np.ndarray:
-    """True on the even blocks (fitted), False on the odd ones (held out)."""
-    return (np.floor(time_s / block_s).astype(int) % 2) == 0
-
-
-def _heldout_objective(model: FittedModel, fitted_rows: np.ndarray) -> float:
-    return float(restrict(model.system, ~fitted_rows).objective(model.theta))
-
-
-PLATE_CENTRE_FROM = 0.4
-"""The plate's centre is its mean where the sweep is above this fraction of its top frequency (many cycles,
-so the mean of the sine is close to zero)."""
-
-
-def plate_centre_m(model: FittedModel, frequency_Hz: np.ndarray) -> float:
-    """RMS over the plate channels (as the model corrects them) of the centre the plate oscillates about.
-    The plate is driven about the static position, so this is zero unless the plate's zero is off; it
-    tells apart candidates that tie in the equations (an offset of the wheel sensor and the opposite offset
-    of the plate sensor give the same tyre deflection)."""
-    top = model.system.filters.excitation_top_Hz
-    fast = np.nan_to_num(frequency_Hz) >= PLATE_CENTRE_FROM * top
-    plates = [x for name, x in model.signals.recording.channels.items() if name.startswith("x_r")]
-    centres = [float(np.mean(x[fast])) if np.any(fast) else float(np.mean(x)) for x in plates]
-    return float(np.sqrt(np.mean(np.square(centres))))
-
-
-def _bic_change(current: _Simulated, gap_m: float, added_unknowns: int) -> float:
-    if not np.isfinite(current.gap_m):
-        return -np.inf if np.isfinite(gap_m) else np.inf
-    if not np.isfinite(gap_m):
-        return np.inf
-    n_eff = sum(effective_samples(r) for r in current.residual.values())
-    return float(n_eff * np.log(gap_m**2 / current.gap_m**2) + added_unknowns * np.log(n_eff))
-
-
-class _Doctor:
+class _Doctor(Judging):
     def __init__(
         self,
         recording: Recording,
@@ -305,10 +219,10 @@ class _Doctor:
         start_labels = structure.labels
         self.report(0, "identifying the starting model")
         current = fit(self.reference, structure)
-        rows = _blocks(self.recording.time_s[current.system.sample_index], options.block_s)
+        rows = blocks_of(self.recording.time_s[current.system.sample_index], options.block_s)
         current_held = fit(self.reference, structure, rows, warm=current)
-        state = _State(structure, current, current_held, None)
-        initial: _Simulated | None = None
+        state = RoundState(structure, current, current_held, None)
+        initial: Simulated | None = None
         located_before: Localisation | None = None
         steps: list[DiagnosisStep] = []
         rounds: list[list[CandidateScore]] = []
@@ -322,7 +236,7 @@ class _Doctor:
                 located_before = locate(current, initial.residual, initial.gap_m)
             chosen = self.choose(played.eligible, played.gaps, played.fits.full)
             if chosen is not None:
-                rounds.append(_mark(played.scores, chosen, "named"))
+                rounds.append(mark_chosen(played.scores, chosen, "named"))
                 named, state = self.advance(state, played, chosen, rows)
                 steps.append(named)
                 continue
@@ -335,10 +249,10 @@ class _Doctor:
                 f"named with {second.label}: the two together shrink the gap from "
                 f"{state.simulated.gap_m * 1e6:.1f} µm to {then.gaps[second] * 1e6:.1f} µm"
             )
-            rounds.append(_mark(played.scores, first, together))
+            rounds.append(mark_chosen(played.scores, first, together))
             named, state = self.advance(state, played, first, rows)
             steps.append(named)
-            rounds.append(_mark(then.scores, second, "named"))
+            rounds.append(mark_chosen(then.scores, second, "named"))
             named, state = self.advance(state, then, second, rows)
             steps.append(named)
         assert state.simulated is not None and initial is not None and located_before is not None
@@ -347,7 +261,7 @@ class _Doctor:
         floor = self.at_the_floor(state, played, expected, residual_ratio)
         if floor is not None:
             instance, share = floor
-            rounds[-1] = _mark(
+            rounds[-1] = mark_chosen(
                 rounds[-1],
                 instance,
                 f"named: with it the equations hold as a complete model's do (objective {share:.2f} of "
@@ -371,7 +285,7 @@ class _Doctor:
             current,
         )
 
-    def play(self, state: _State, step: int, instances: list[EffectInstance], rows: np.ndarray) -> _Played:
+    def play(self, state: RoundState, step: int, instances: list[EffectInstance], rows: np.ndarray) -> Played:
         """One round: every candidate fitted, the kept ones simulated (with the current model when it has
         not been simulated yet) and scored against the current model."""
         fits = self.fit_candidates(state.structure, state.current, rows, instances)
@@ -388,10 +302,10 @@ class _Doctor:
         simulated, offset = state.simulated, 0
         if simulated is None:
             assert batch is not None
-            simulated, offset = _column(batch, 0, gaps), 1
-        outcomes = {i: _column(batch, offset + k, gaps) for k, i in enumerate(fits.kept) if batch}
+            simulated, offset = simulated_column(batch, 0, gaps), 1
+        outcomes = {i: simulated_column(batch, offset + k, gaps) for k, i in enumerate(fits.kept) if batch}
         base_columns = {i: offset + len(fits.kept) + k for k, i in enumerate(based)}
-        heldout_base = _heldout_objective(state.held, rows)
+        heldout_base = heldout_objective(state.held, rows)
         scores, eligible = [], []
         for instance in instances:
             score, ok = self.score(
@@ -403,16 +317,18 @@ class _Doctor:
                 outcomes[instance].gap_m if instance in outcomes else None,
                 heldout_base,
                 rows,
-                _column(batch, base_columns[instance], gaps) if batch and instance in base_columns else None,
+                simulated_column(batch, base_columns[instance], gaps)
+                if batch and instance in base_columns
+                else None,
             )
             scores.append(score)
             if ok:
                 eligible.append(instance)
-        return _Played(scores, eligible, fits, simulated, outcomes, heldout_base)
+        return Played(scores, eligible, fits, simulated, outcomes, heldout_base)
 
     def advance(
-        self, state: _State, played: _Played, chosen: EffectInstance, rows: np.ndarray
-    ) -> tuple[DiagnosisStep, _State]:
+        self, state: RoundState, played: Played, chosen: EffectInstance, rows: np.ndarray
+    ) -> tuple[DiagnosisStep, RoundState]:
         """The step that names `chosen` in a played round, and the state with it added."""
         assert state.simulated is not None
         before, after = state.simulated, played.outcomes[chosen]
@@ -424,59 +340,16 @@ class _Doctor:
             gap_before_m=before.gap_m,
             gap_after_m=after.gap_m,
             evidence=sentence(chosen, evidence, before.gap_m, after.gap_m),
-            bic_change=_bic_change(before, after.gap_m, _added_unknowns(state.current, model)),
-            heldout_ratio=_heldout_objective(played.fits.held[chosen], rows) / played.heldout_base,
+            bic_change=bic_difference(before, after.gap_m, added_unknowns(state.current, model)),
+            heldout_ratio=heldout_objective(played.fits.held[chosen], rows) / played.heldout_base,
             located_after=locate(model, after.residual, after.gap_m),
             predicted_after=after.predicted,
         )
-        return named, _State(state.structure.with_effect(chosen), model, played.fits.held[chosen], after)
-
-    def strong_in_equations(self, instance: EffectInstance, played: _Played) -> bool:
-        """The candidate is physically possible, follows the residual, and lowers the objective by at least
-        strong_objective_reduction on all samples and on the held-out blocks (whatever its gap did)."""
-        options = self.options
-        score = next(s for s in played.scores if s.effect == instance.label)
-        model = played.fits.full[instance]
-        limit = 1.0 - options.strong_objective_reduction
-        return (
-            instance in played.outcomes
-            and np.isfinite(played.outcomes[instance].gap_m)
-            and max(score.objective_ratio, score.heldout_ratio or np.inf) <= limit
-            and (score.correlation or 0.0) >= options.min_correlation
-            and model.implausible(instance) is None
-        )
-
-    def at_the_floor(
-        self, state: _State, played: _Played, expected: float, residual_ratio: float
-    ) -> tuple[EffectInstance, float] | None:
-        """After the last round, a stiffness correction the equations demand but the gap cannot confirm
-        because the gap is already what a complete model leaves: strong in the equations
-        (strong_in_equations), its gap at or below the expected gap, and with it the objective at most that
-        of the complete models re-identified for the expected gap (residual ratio times its objective ratio
-        at most 1). Independent world (held-out draws, valve dampers, 2 ms or no lift-off): tyre rate
-        ×0.78, ×0.75 and spring rate ×0.78 found right (+28.1%, +33.6%, +26.7%) with objective 0.49-0.59 on
-        all samples and held out, but the gap moved by -4% to +8%, at the expected 277-364 µm; the final
-        model's residual ratio 1.43-1.95. The candidate and its share of a complete model's objective, or
-        None."""
-        if not np.isfinite(expected) or not np.isfinite(residual_ratio) or state.simulated is None:
-            return None
-        stiffness = (EffectName.SPRING_STIFFNESS, EffectName.TYRE_STIFFNESS)
-        shares = {
-            i: residual_ratio * played.fits.ratios[i]
-            for i in played.fits.kept
-            if i.name in stiffness
-            and self.strong_in_equations(i, played)
-            and played.gaps[i] <= expected
-            and residual_ratio * played.fits.ratios[i] <= 1.0
-        }
-        if not shares:
-            return None
-        best = min(shares, key=shares.__getitem__)
-        return best, shares[best]
+        return named, RoundState(state.structure.with_effect(chosen), model, played.fits.held[chosen], after)
 
     def look_ahead(
-        self, state: _State, played: _Played, step: int, rows: np.ndarray
-    ) -> tuple[EffectInstance, EffectInstance, _Played] | None:
+        self, state: RoundState, played: Played, step: int, rows: np.ndarray
+    ) -> tuple[EffectInstance, EffectInstance, Played] | None:
         """When no candidate qualifies alone: two missing effects can each leave the gap as it is while the
         other is missing (independent world: a tyre rate stated 27% too soft on a motorcycle that leaves the
         plate 2% of the time; tyre_stiffness lowered the objective to 0.49 of the model's, on held-out data
@@ -497,8 +370,8 @@ class _Doctor:
             return None
         options = self.options
         gap_m, model = then.gaps[second], then.fits.full[second]
-        heldout = _heldout_objective(then.fits.held[second], rows) / played.heldout_base
-        bic = _bic_change(state.simulated, gap_m, _added_unknowns(state.current, model))
+        heldout = heldout_objective(then.fits.held[second], rows) / played.heldout_base
+        bic = bic_difference(state.simulated, gap_m, added_unknowns(state.current, model))
         passes = (
             gap_m <= (1.0 - options.min_gap_reduction) * state.simulated.gap_m
             and heldout <= 1.0 - options.min_heldout_reduction
@@ -506,7 +379,7 @@ class _Doctor:
         )
         return (first, second, then) if passes else None
 
-    def expected(self, current: FittedModel, final: _Simulated) -> tuple[float, float]:
+    def expected(self, current: FittedModel, final: Simulated) -> tuple[float, float]:
         """The gap a model without missing effects leaves on this sweep and the final model's objective over
         that model's (estimator.doctor.expected): the mean over `expected_draws` synthetic recordings of the
         plausible truth read with the noise measured on the final model's output residual."""
@@ -541,7 +414,7 @@ class _Doctor:
         current: FittedModel,
         rows: np.ndarray,
         instances: list[EffectInstance],
-    ) -> _Candidates:
+    ) -> Candidates:
         """Every candidate fitted (channel effects one Gauss-Newton step first); those whose objective falls
         by at least screen_reduction fitted fully, and again on the fitting blocks only."""
         reference = self.reference
@@ -568,7 +441,7 @@ class _Doctor:
             kept,
         )
         held = self.each(lambda i: fit(reference, structure.with_effect(i), rows, warm=full[i]), kept)
-        return _Candidates(trials, ratios, kept, full, held, bases)
+        return Candidates(trials, ratios, kept, full, held, bases)
 
     def like_bases(
         self,
@@ -591,147 +464,6 @@ class _Doctor:
         held = fit(self.reference, structure, rows, warm=full, friction_grid=True)
         return {i: (full, held) for i in friction}
 
-    def score(
-        self,
-        instance: EffectInstance,
-        structure: ModelStructure,
-        current: FittedModel,
-        simulated: _Simulated,
-        fits: _Candidates,
-        gap_m: float | None,
-        heldout_base: float,
-        rows: np.ndarray,
-        like: _Simulated | None = None,
-    ) -> tuple[CandidateScore, bool]:
-        """A candidate's score and whether it qualifies to be named (criteria (a)-(f) of the module
-        docstring). like: the simulated base of a candidate with one (fits.bases): (a)-(c) then compare the
-        candidate with that base, and its gap must not exceed the current model's either."""
-        ratio, trial = fits.ratios[instance], fits.trials[instance]
-        now = simulated
-        if like is not None and instance in fits.bases:
-            base_full, base_held = fits.bases[instance]
-            current, simulated = base_full, like
-            heldout_base = _heldout_objective(base_held, rows)
-        full, held = fits.full.get(instance), fits.held.get(instance)
-        options = self.options
-        if full is None or held is None or gap_m is None:
-            verdict = f"screened out: the objective falls only {100 * (1 - ratio):.1f}%"
-            return CandidateScore(
-                instance.label, ratio, None, None, None, None, None, trial.parameters(instance), verdict
-            ), False
-        heldout = _heldout_objective(held, rows) / heldout_base
-        gap_ratio = (
-            gap_m / simulated.gap_m if np.isfinite(simulated.gap_m) else (0.0 if np.isfinite(gap_m) else 1.0)
-        )
-        bic = _bic_change(simulated, gap_m, _added_unknowns(current, full))
-        correlation = gather(instance, current, full, self.frequency).correlation
-        strong = (
-            ratio <= 1.0 - options.strong_objective_reduction
-            and gap_ratio <= 1.0 - options.strong_gap_reduction
-        )
-        reasons = []
-        # a candidate this strong on all samples, on held-out data and in the gap is no noise: its
-        # standard error (sandwich with a block long-run variance) then mostly measures what the model
-        # still lacks, not the noise (independent world, 27 N of friction on a motorcycle that lifts off:
-        # 24 N fitted, objective 0.63 and held-out 0.62 of the base's, gap -62%, standard error 10 N)
-        waived = strong and heldout <= 1.0 - options.strong_objective_reduction
-        implausible = full.implausible(instance, significance=not waived)
-        if implausible:
-            reasons.append(implausible)
-        if not np.isfinite(gap_m):
-            reasons.append("the model with it diverges")
-        elif gap_ratio > 1.0 - self.min_gap_reduction(instance, ratio, heldout):
-            reasons.append(
-                f"the gap falls only {100 * (1 - gap_ratio):.0f}%"
-                if gap_ratio < 1.0
-                else "the gap does not fall"
-            )
-        if simulated is not now and np.isfinite(gap_m) and gap_m > now.gap_m:
-            reasons.append("the gap is larger than the current model's")
-        if heldout > 1.0 - options.min_heldout_reduction:
-            reasons.append("no better on held-out data")
-        if bic > -options.bic_margin:
-            reasons.append("the information criterion does not favour it")
-        if correlation < options.min_correlation:
-            reasons.append(f"the residual does not follow its signal (correlation {correlation:.2f})")
-        spread = None
-        if not reasons:
-            spread, described = self.parameter_spread(instance, structure, full)
-            if spread is not None and spread > options.max_parameter_spread and not strong:
-                reasons.append(f"its parameter is not the same over the sweep ({described})")
-        verdict = "qualifies" if not reasons else "rejected: " + "; ".join(reasons)
-        score = CandidateScore(
-            instance.label,
-            ratio,
-            heldout,
-            gap_m,
-            gap_ratio,
-            bic,
-            correlation,
-            full.parameters(instance),
-            verdict,
-            spread,
-        )
-        return score, not reasons
-
-    def min_gap_reduction(self, instance: EffectInstance, ratio: float, heldout: float) -> float:
-        """Criterion (a)'s limit: min_gap_reduction, or stiffness_min_gap_reduction for a stiffness whose
-        equations improve strongly on all samples and on held-out data."""
-        options = self.options
-        stiffness = instance.name in (EffectName.SPRING_STIFFNESS, EffectName.TYRE_STIFFNESS)
-        strong = max(ratio, heldout) <= 1.0 - options.strong_objective_reduction
-        return options.stiffness_min_gap_reduction if stiffness and strong else options.min_gap_reduction
-
-    def parameter_spread(
-        self, instance: EffectInstance, structure: ModelStructure, full: FittedModel
-    ) -> tuple[float | None, str]:
-        """The effect fitted on the first and on the second half of the sweep: the largest difference of
-        its parameters relative to the whole-sweep value (None for an effect without parameters). A real
-        effect is the same over the whole sweep; a candidate that only stands in for something else (say a
-        resonance the model lacks) fits differently where that something is and where it is not."""
-        whole = full.effect_values(instance)
-        if not whole:
-            return None, ""
-        time_s = self.recording.time_s[full.system.sample_index]
-        first = time_s < np.median(time_s)
-
-        def half(rows: np.ndarray) -> tuple[dict[str, float], dict[str, float]]:
-            model = fit(self.reference, structure.with_effect(instance), rows, warm=full)
-            return model.effect_values(instance), model.standard_errors(list(whole), rows)
-
-        (a_values, a_errors), (b_values, b_errors) = self.map(half, (first, ~first))
-        spread, described = 0.0, ""
-        for name, value in whole.items():
-            a, b = a_values[name], b_values[name]
-            if name in a_errors and abs(a - b) <= SIGNIFICANCE_Z * np.hypot(a_errors[name], b_errors[name]):
-                continue  # the halves do not differ beyond what their own standard errors allow
-            relative = abs(a - b) / max(abs(value), 1e-300)
-            if relative >= spread:
-                spread, described = relative, f"{name} {a:.4g} in the first half, {b:.4g} in the second"
-        return spread, described
-
-    def choose(
-        self,
-        eligible: list[EffectInstance],
-        gaps: dict[EffectInstance, float],
-        full: dict[EffectInstance, FittedModel],
-    ) -> EffectInstance | None:
-        """The qualifying candidate with the smallest gap. Candidates whose gaps tie (within tie_tolerance)
-        are told apart by the equations: the one whose objective is lowest, as the gap of a simulation
-        carries the curve's discretisation and every other missing effect with it (independent world, a
-        wrong spring rate on a motorcycle that also lifts off: spring_stiffness objective 0.37, gap
-        156.0 µm; progressive_spring 0.58 and 154.8 µm, named first). Those the equations cannot tell apart
-        either (an offset of the wheel sensor and the opposite offset of the plate sensor) are told apart
-        by the plate."""
-        if not eligible:
-            return None
-        tolerance = 1.0 + self.options.tie_tolerance
-        best = min(gaps[i] for i in eligible)
-        tied = [i for i in eligible if gaps[i] <= best * tolerance]
-        lowest = min(full[i].objective for i in tied)
-        alike = [i for i in tied if full[i].objective <= lowest * tolerance]
-        return min(alike, key=lambda i: (plate_centre_m(full[i], self.frequency), gaps[i]))
-
     def conclude(
         self,
         residual_ratio: float,
@@ -739,8 +471,8 @@ class _Doctor:
         structure: ModelStructure,
         steps: list[DiagnosisStep],
         rounds: list[list[CandidateScore]],
-        initial: _Simulated,
-        final: _Simulated,
+        initial: Simulated,
+        final: Simulated,
         expected: float,
         located_before,
         final_model: FittedModel,
@@ -801,12 +533,6 @@ class _Doctor:
             sweep_frequency_Hz=self.frequency,
             final_model=final_model,
         )
-
-
-def _added_unknowns(current: FittedModel, candidate: FittedModel) -> int:
-    """How many more unknowns (θ and channel parameters) the candidate has than the current model."""
-    count = len(candidate.theta) + len(candidate.channel_values)
-    return count - len(current.theta) - len(current.channel_values)
 
 
 def _best_rejected(scores: list[CandidateScore]) -> str | None:
