@@ -74,6 +74,7 @@ async function loadBench() {
     const bench = await api("/bench");
     $("bench-name").textContent = `${bench.name}${bench.simulated ? " (simulated)" : ""}`;
     $("bench-model").textContent = bench.model;
+    $("bench-lane").textContent = (await api("/status")).lane;
     onState({ busy: bench.busy, sweep_id: bench.sweep_id, progress: bench.progress });
     const { devices } = await api("/bench/devices");
     renderDevices(devices);

@@ -31,6 +31,7 @@ export async function loadHistory(onOpen) {
       row.setAttribute("aria-label", `open the result of sweep ${sweep.id}`);
       cell(row, String(sweep.id));
       cell(row, when(sweep.created_at));
+      cell(row, sweep.lane || null);
       cell(row, sweep.test?.vehicle_id);
       cell(row, sweep.test?.operator_name);
       cell(row, sweep.status + (sweep.reason ? ` (${sweep.reason})` : ""));

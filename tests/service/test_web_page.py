@@ -154,6 +154,9 @@ def test_an_operator_runs_a_test_and_reads_curve_figures_and_verdict(
     page.wait(lambda: int(chart.get_attribute("data-points") or 0) > 0, "samples in the live chart")
     page.wait(lambda: int(chart.get_attribute("data-frames") or 0) >= 3, "the live chart redrawn")
     page.wait(lambda: plate_pixels(page) > 100, "the plate's trace drawn")
+    with service.client(VIEWER) as client:
+        lane = client.get("/api/v1/status").json()["lane"]
+    assert lane and page.testid("bench-lane").text == lane  # the lane this service runs
     states = [e.text for e in page.driver.find_elements("css selector", "[data-testid=device-state]")]
     assert any(state.startswith(("reading: ", "idle; last sweep: ")) for state in states), states
 
@@ -197,6 +200,7 @@ def test_an_operator_runs_a_test_and_reads_curve_figures_and_verdict(
     page.fill("history-filter", "WVW ZZZ 1JZ 3W386752")
     page.by_id("history-filter").send_keys(Keys.ENTER)
     page.wait(lambda: len(page.all_testid("history-row")) == 1, "the history filtered to the vehicle")
+    assert lane in page.all_testid("history-row")[0].text  # each test says which lane ran it
     page.driver.execute_script("document.getElementById('result').hidden = true")
     page.all_testid("history-row")[0].send_keys(Keys.ENTER)
     page.wait(lambda: page.by_id("result").is_displayed(), "the result opened from the history")
