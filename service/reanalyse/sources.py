@@ -96,23 +96,13 @@ def items_in_folder(folder: Path, out: Path | None = None) -> list[Item]:
 
 def _check_schema(database: Database) -> None:
     """SourceError unless the database's schema is the one this shockbench reads (read only here: an
-    older one is upgraded by `shockbench db upgrade`, not by a re-analysis)."""
-    from service.store.schema import current_revision, head_revision, known_revisions
+    older one is upgraded by `shockbench db upgrade`, not by a re-analysis; service.store.schema)."""
+    from service.store.schema import SchemaError
 
-    with database.engine.connect() as connection:
-        revision = current_revision(connection)
-    if revision is None:
-        raise SourceError(f"database {database.safe_url}: no shockbench tables")
-    if revision not in known_revisions():
-        raise SourceError(
-            f"database {database.safe_url}: schema revision {revision} is newer than this shockbench "
-            f"knows (newest {head_revision()}): upgrade shockbench"
-        )
-    if revision != head_revision():
-        raise SourceError(
-            f"database {database.safe_url}: schema revision {revision} is older than this shockbench "
-            f"reads ({head_revision()}): run `shockbench db upgrade --database URL` first"
-        )
+    try:
+        database.require_newest_schema()
+    except SchemaError as exc:
+        raise SourceError(f"database {database.safe_url}: {exc}") from None
 
 
 def items_in_database(url: str) -> list[Item]:
