@@ -154,16 +154,15 @@ class BenchController:
         each laser's samples, rate and last error, while a sweep runs; after one, what the last sweep got
         from each (a live check of an idle device is `shockbench probe`'s job)."""
         with self._lock:
-            busy, progress = self._thread is not None, self._progress or self._last_progress
+            busy, progress = self._thread is not None, self._last_progress
         sources = {s.name: s for s in progress.sources} if progress is not None else {}
         found = []
         for device in self._devices:
             state = dict(device)
             if device["kind"] == "exciter":
-                moving = busy and progress is not None
                 state["state"] = (
                     f"{progress.phase.value} at {progress.frequency_Hz:.2f} Hz"
-                    if moving and progress
+                    if busy and progress is not None
                     else "stopped"
                 )
             else:

@@ -77,22 +77,24 @@ async def bench_live(request: Request, principal: Viewer) -> StreamingResponse:
     async def stream() -> AsyncIterator[str]:
         sequence = 0
         cursor, run = 0, None
-        last_state, last_sent = "", -math.inf
+        last_phase: tuple[int | None, str | None] | None = None
+        last_sent = -math.inf
         while True:
             if bench.stopping:
                 sequence += 1
                 yield _sse("closing", json.dumps({"reason": "the service is stopping"}), sequence)
                 return
             state = bench_out(bench)
-            data = LiveStateEvent(
-                busy=state.busy, sweep_id=state.sweep_id, progress=state.progress, devices=bench.devices()
-            )
             phase = (state.sweep_id, state.progress.phase if state.progress else None)
             now = time.monotonic()
-            if repr(phase) != last_state or now - last_sent >= STATE_EVERY_S:
+            if phase != last_phase or now - last_sent >= STATE_EVERY_S:
+                # built only when sent: the devices' states cost a lock and a pass over their statistics
+                data = LiveStateEvent(
+                    busy=state.busy, sweep_id=state.sweep_id, progress=state.progress, devices=bench.devices()
+                )
                 sequence += 1
                 yield _sse("state", data.model_dump_json(), sequence)
-                last_state, last_sent = repr(phase), now
+                last_phase, last_sent = phase, now
             rows = bench.live.since(cursor, run)
             cursor, run = rows.cursor, rows.run
             if rows.time_s.size or rows.missed:
