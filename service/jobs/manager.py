@@ -42,7 +42,7 @@ from service.jobs.messages import (
 )
 from service.jobs.process import WorkerProcess, describe_exit
 from service.store.job_queue import DEFAULT_LEASE_S, JobQueue
-from service.store.jobs import JobRecord, JobStore
+from service.store.jobs import RESTART_REASON, JobRecord, JobStore
 from service.store.models import JobStatus
 
 log = logging.getLogger("shockbench.jobs")
@@ -108,15 +108,14 @@ class JobManager:
         store: JobStore,
         settings: WorkerSettings = WorkerSettings(),
         completing: Callable[[str, dict], dict] | None = None,
-        instance: str | None = None,
     ) -> None:
         """completing(kind, result): what to store as a succeeded job's result (the service adds the
-        verdict an identification's figures earn under its configured thresholds). instance: this
-        service's name in the shared queue (its lane; default the store's lane)."""
+        verdict an identification's figures earn under its configured thresholds). In the shared queue
+        this service is named by its store's lane (one instance per lane)."""
         self.store = store
         self.settings = settings
         self.completing = completing
-        self.queue = JobQueue(store.db, instance or store.lane or "default", settings.lease_s)
+        self.queue = JobQueue(store.db, store.lane or "default", settings.lease_s)
         self._queued = 0  # the queue's length as last counted (status answers from memory)
         self.broker = EventBroker()
         self.restarts = 0
@@ -142,7 +141,7 @@ class JobManager:
         for job_id in reclaimed.requeued:
             log.warning("job %d was running when this lane's service stopped; it runs again", job_id)
         for job_id in reclaimed.failed:
-            log.warning("job %d: %s; marked failed", job_id, "its service stopped each time it ran")
+            log.warning("job %d: %s; marked failed", job_id, RESTART_REASON)
         self._queued = await asyncio.to_thread(self.queue.queued_count)
         if self._queued:
             log.info("%d queued job(s) waiting", self._queued)

@@ -17,7 +17,7 @@ from __future__ import annotations
 import asyncio
 import json
 from collections.abc import AsyncIterator
-from typing import Annotated
+from typing import Annotated, Any
 
 from fastapi import APIRouter, Path, Request
 from fastapi.responses import StreamingResponse
@@ -29,6 +29,7 @@ from service.api.routes.jobs import job_out
 from service.api.schemas import ProgressOut
 from service.api.stream_limit import HeldStreamingResponse
 from service.jobs.broker import JobEvent
+from service.jobs.messages import Progress
 
 KEEPALIVE_S = 15.0
 POLL_S = 1.0
@@ -39,6 +40,12 @@ router = APIRouter(tags=["jobs"])
 
 def sse(event: str, data: dict, event_id: int) -> str:
     return f"id: {event_id}\nevent: {event}\ndata: {json.dumps(data, separators=(',', ':'))}\n\n"
+
+
+def progress_data(job_id: int, progress: Progress | dict[str, Any]) -> dict[str, Any]:
+    """The data of a `progress` event (ProgressEvent), from the live progress or the one persisted."""
+    out = ProgressOut.of(progress)
+    return {"job_id": job_id, **(out.model_dump(mode="json") if out else {})}
 
 
 @router.get(
@@ -83,12 +90,12 @@ async def job_events(
                     event: JobEvent = await asyncio.wait_for(queue.get(), POLL_S)
                 except TimeoutError:
                     quiet_s += POLL_S
-                    if services.manager.runs_here(job_id):  # its events come through the broker
-                        if quiet_s >= KEEPALIVE_S:
-                            yield ": keep-alive\n\n"
-                            quiet_s = 0.0
-                        continue
-                    now = await asyncio.to_thread(services.jobs.get, job_id)
+                    # a job this instance runs has its events come through the broker; another's is read
+                    now = (
+                        None
+                        if services.manager.runs_here(job_id)
+                        else await asyncio.to_thread(services.jobs.get, job_id)
+                    )
                     if now is not None and now.status.finished:
                         yield sse(now.status.value, job_out(request, now).model_dump(mode="json"), next_id())
                         return
@@ -96,9 +103,7 @@ async def job_events(
                         yield sse("state", job_out(request, now).model_dump(mode="json"), next_id())
                         seen, quiet_s = now, 0.0
                     elif now is not None and now.progress and now.progress != seen.progress:
-                        progress = ProgressOut.of(now.progress)
-                        data = {"job_id": job_id, **(progress.model_dump(mode="json") if progress else {})}
-                        yield sse("progress", data, next_id())
+                        yield sse("progress", progress_data(job_id, now.progress), next_id())
                         seen, quiet_s = now, 0.0
                     if quiet_s >= KEEPALIVE_S:
                         yield ": keep-alive\n\n"
@@ -108,9 +113,7 @@ async def job_events(
                     yield sse("closing", {"job_id": job_id, "reason": "the service is stopping"}, next_id())
                     return
                 if event.name == "progress" and event.progress is not None:
-                    progress = ProgressOut.of(event.progress)
-                    data = {"job_id": job_id, **(progress.model_dump(mode="json") if progress else {})}
-                    yield sse("progress", data, next_id())
+                    yield sse("progress", progress_data(job_id, event.progress), next_id())
                 elif event.record is not None:
                     out = job_out(request, event.record).model_dump(mode="json")
                     if event.name == "finished":
