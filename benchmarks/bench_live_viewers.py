@@ -28,7 +28,6 @@ import time
 from pathlib import Path
 from typing import Any
 
-import h5py
 import httpx
 
 from daq.formats.vehicle_file import format_vehicle
@@ -37,7 +36,7 @@ from simulators.vehicle_sim import default_quarter_car
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "service"))
 
 from live_server import wait_until  # the tests' deadline-bounded wait, shared
-from realtime_bench import realtime_service
+from realtime_bench import realtime_service, recording_rows, sweep_status
 
 KEY = "benchmark-operator-key-0123456789"
 AUTH = {"Authorization": f"Bearer {KEY}"}
@@ -99,14 +98,10 @@ def one_sweep(url: str, pid: int, vehicle_toml: str, duration_s: float, viewers:
         recording = client.get(f"/api/v1/sweeps/{sweep_id}/recording.h5")
     for screen in screens:
         screen.stop.set()
-    with tempfile.NamedTemporaryFile(suffix=".h5") as h5:
-        h5.write(recording.content)
-        h5.flush()
-        with h5py.File(h5.name, "r") as f:
-            rows, gap_samples = int(f["time"].shape[0]), int(f.attrs["gap_samples"])
+    rows, gap_samples = recording_rows(recording.content)
     return {
         "viewers": viewers,
-        "status": sweep["status"] + (f" ({sweep['reason']})" if sweep["reason"] else ""),
+        "status": sweep_status(sweep),
         "complete": sweep["complete"],
         "rows": rows,
         "gap_samples": gap_samples,

@@ -26,7 +26,6 @@ from contextlib import ExitStack
 from pathlib import Path
 from typing import Any
 
-import h5py
 import httpx
 
 from daq.formats.vehicle_file import format_vehicle
@@ -36,7 +35,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "service"
 
 from headless_chromium import chromium_driver, find_chromium  # the browser tests' Chromium
 from live_server import wait_until  # the tests' deadline-bounded wait, shared
-from realtime_bench import realtime_service
+from realtime_bench import realtime_service, recording_rows, sweep_status
 
 OPERATOR = "benchmark-operator-key-0123456789"
 VIEWER = "benchmark-viewer-key-0123456789"
@@ -93,14 +92,10 @@ def one_sweep(url: str, drivers: list[Any], vehicle_toml: str, duration_s: float
             for d in drivers
         ]
         h5 = client.get(f"/api/v1/sweeps/{sweep_id}/recording.h5")
-    with tempfile.NamedTemporaryFile(suffix=".h5") as file:
-        file.write(h5.content)
-        file.flush()
-        with h5py.File(file.name, "r") as f:
-            rows, gap_samples = int(f["time"].shape[0]), int(f.attrs["gap_samples"])
+    rows, gap_samples = recording_rows(h5.content)
     return {
         "browsers": len(drivers),
-        "status": sweep["status"] + (f" ({sweep['reason']})" if sweep["reason"] else ""),
+        "status": sweep_status(sweep),
         "rows": rows,
         "gap_samples": gap_samples,
         "wall_s": wall,

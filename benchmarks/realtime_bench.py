@@ -8,9 +8,11 @@ import re
 import signal
 import subprocess
 import sys
+import tempfile
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
+from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "service"))
 
@@ -67,3 +69,20 @@ def realtime_service(folder: Path, keys_toml: str, *serve_args: str) -> Iterator
         raise
     finally:
         stop(service, devices)
+
+
+def recording_rows(h5_bytes: bytes) -> tuple[int, int]:
+    """(rows, gap samples) of a sweep's HDF5 recording as GET /sweeps/{id}/recording.h5 sends it: a lost
+    sample is a gap there."""
+    import h5py
+
+    with tempfile.NamedTemporaryFile(suffix=".h5") as h5:
+        h5.write(h5_bytes)
+        h5.flush()
+        with h5py.File(h5.name, "r") as f:
+            return int(f["time"].shape[0]), int(f.attrs["gap_samples"])
+
+
+def sweep_status(sweep: dict[str, Any]) -> str:
+    """A sweep's status, and its reason when it has one, for a benchmark's table."""
+    return sweep["status"] + (f" ({sweep['reason']})" if sweep["reason"] else "")
