@@ -228,6 +228,7 @@ class FittedModel:
             },
             standard_error=self._standard_errors(),
             peak_damper_force_N=max(float(np.max(np.abs(c.force_N))) for c in self.curves),
+            sample_time_s=dt,
         )
 
     def effect_values(self, effect: EffectInstance) -> dict[str, float]:

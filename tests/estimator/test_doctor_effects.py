@@ -198,6 +198,31 @@ def test_the_stiffness_and_friction_checks_of_plausibility() -> None:
     assert "oppose" in str(friction.implausible({"coulomb_friction_N": -30.0}, context))
 
 
+def test_a_delay_of_less_than_a_quarter_sample_is_not_a_lag() -> None:
+    """A fitted sub-sample delay stands in for curve misfit (catalog.MIN_DELAY_SAMPLES): not named at 1 ms
+    sampling below 0.25 ms, at 2 ms below 0.5 ms; a whole sample is a lag."""
+    from estimator.doctor.catalog import FitContext
+
+    context = FitContext(
+        spring_stiffness=20_000.0,
+        static_wheel_load_N=3000.0,
+        maxwell_time_constant_s=0.03,
+        peak_deflection_m=0.01,
+        airborne_fraction=0.0,
+        stated_stiffness_N_per_m={VehicleConstant.SPRING: 20_000.0, VehicleConstant.TYRE: 200_000.0},
+        standard_error={},
+        peak_damper_force_N=2000.0,
+        sample_time_s=0.001,
+    )
+    delay = CATALOG[EffectName.CHANNEL_DELAY]
+    assert "not a lag" in str(delay.implausible({"delay_s": 0.0002}, context))
+    assert delay.implausible({"delay_s": 0.0003}, context) is None
+    assert delay.implausible({"delay_s": 0.001}, context) is None
+    slower = replace(context, sample_time_s=0.002)
+    assert "not a lag" in str(delay.implausible({"delay_s": 0.0004}, slower))
+    assert delay.implausible({"delay_s": 0.002}, slower) is None
+
+
 def test_with_friction_the_curve_is_one_line_across_zero_velocity() -> None:
     quarter = [np.linspace(-0.3, 0.5, 30)]
     (grid,) = friction_grids(quarter)
