@@ -68,7 +68,7 @@ def plausible_truth(model: FittedModel, recording: Recording, settings: FitSetti
     """A plausible truth for `model` (module docstring): its structure identified on the recording with
     TRUTH_POINTS_FACTOR times the points, the damper curves made smooth."""
     points = settings.points
-    fine = FitSettings(None if points is None else TRUTH_POINTS_FACTOR * points, settings.nsample)
+    fine = replace(settings, points=None if points is None else TRUTH_POINTS_FACTOR * points)
     return smooth_truth(fit(Reference.of(recording, model.vehicle, fine), model.structure, warm=model))
 
 

@@ -126,6 +126,8 @@ class FitSettings:
     points: int | None = None
     """Damper curve points (default 20 for a quarter car, 10 per side for an axle)."""
     nsample: int | None = 5000
+    low_speed_knots: bool = False
+    """The uniform grid gets knots at 0 and ±LOW_SPEED_KNOTS_M_S too (low_speed_grids)."""
 
 
 @dataclass
@@ -293,7 +295,45 @@ class Reference:
                 f"the vehicle file is for a {kind} model but the recording's channels are not"
             )
         base = build(recording, vehicle, TyreModel.SPRING, settings.points, settings.nsample)
-        return Reference(recording, vehicle, settings, base.grids_m_s, base.filters)
+        grids = low_speed_grids(base.grids_m_s) if settings.low_speed_knots else base.grids_m_s
+        return Reference(recording, vehicle, settings, grids, base.filters)
+
+
+LOW_SPEED_KNOTS_M_S = (0.0, 0.005, 0.01)
+"""Suspension velocities (m/s) at which a grid with low-speed knots gets a knot (at ± each)."""
+LOW_SPEED_CLEARANCE = 0.5
+"""A uniform knot closer to a low-speed knot than this share of the low-speed knots' spacing gives way."""
+
+
+def low_speed_grids(grids: list[np.ndarray]) -> list[np.ndarray]:
+    """The grids with knots at ±LOW_SPEED_KNOTS_M_S added (those inside the grid), the uniform knots too close
+    to them dropped (not the end knots). An axle's two grids keep the same number of knots (the widest
+    intervals of the shorter one are halved)."""
+    extra = np.unique(np.concatenate([-np.asarray(LOW_SPEED_KNOTS_M_S), LOW_SPEED_KNOTS_M_S]))
+    clearance = LOW_SPEED_CLEARANCE * float(np.min(np.diff(extra)))
+    changed = []
+    for grid in grids:
+        inside = extra[(extra > grid[0]) & (extra < grid[-1])]
+        distance = np.min(np.abs(grid[:, None] - inside[None, :]), axis=1, initial=np.inf)
+        ends = (grid == grid[0]) | (grid == grid[-1])
+        changed.append(np.unique(np.concatenate([grid[(distance >= clearance) | ends], inside])))
+    return _same_size(changed)
+
+
+def _same_size(grids: list[np.ndarray], keep_m_s: float | None = None) -> list[np.ndarray]:
+    """The grids with the widest intervals of the shorter ones halved until all have as many knots (an axle's
+    two curves must); the interval starting at −keep_m_s is not halved."""
+    size = max(g.size for g in grids)
+    changed = []
+    for grid in grids:
+        while grid.size < size:
+            widths = np.diff(grid)
+            if keep_m_s is not None:
+                widths = np.where(np.isclose(grid[:-1], -keep_m_s), 0.0, widths)
+            widest = int(np.argmax(widths))
+            grid = np.insert(grid, widest + 1, 0.5 * (grid[widest] + grid[widest + 1]))
+        changed.append(grid)
+    return changed
 
 
 def friction_grids(grids: list[np.ndarray], band_m_s: float = FRICTION_BAND_M_S) -> list[np.ndarray]:
@@ -305,14 +345,7 @@ def friction_grids(grids: list[np.ndarray], band_m_s: float = FRICTION_BAND_M_S)
         outside = grid[np.abs(grid) >= band_m_s]
         edges = [v for v in (-band_m_s, band_m_s) if grid[0] < v < grid[-1]]
         changed.append(np.unique(np.concatenate([outside, edges])))
-    size = max(g.size for g in changed)
-    for number, grid in enumerate(changed):
-        while grid.size < size:
-            widths = np.where(np.isclose(grid[:-1], -band_m_s), 0.0, np.diff(grid))  # not the band's
-            widest = int(np.argmax(widths))
-            grid = np.insert(grid, widest + 1, 0.5 * (grid[widest] + grid[widest + 1]))
-        changed[number] = grid
-    return changed
+    return _same_size(changed, band_m_s)
 
 
 def friction_constraints(system: LinearResiduals, band_m_s: float = FRICTION_BAND_M_S) -> np.ndarray:

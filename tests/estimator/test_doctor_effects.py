@@ -35,7 +35,7 @@ from estimator.doctor.catalog import (
     EffectName,
 )
 from estimator.doctor.diagnose import _Doctor
-from estimator.doctor.model import ModelStructure, friction_grids
+from estimator.doctor.model import ModelStructure, friction_grids, low_speed_grids
 from estimator.recording import Recording
 from estimator.vehicle import PAPER_BENCH, REFERENCE_SAMPLE_TIME_S, VehicleConstant
 from simulators.independent.cases import Case, draw_case, simulate_case
@@ -233,6 +233,24 @@ def test_with_friction_the_curve_is_one_line_across_zero_velocity() -> None:
     axle = friction_grids([np.linspace(-0.3, 0.5, 15), np.linspace(-0.021, 0.6, 15)])
     assert axle[0].size == axle[1].size
     assert all(np.all(np.diff(g) > 0) for g in axle)
+
+
+def test_low_speed_knots_join_the_uniform_ones() -> None:
+    """model.low_speed_grids: knots at 0, ±5 and ±10 mm/s; a uniform knot within 2.5 mm/s of one gives way;
+    the ends stay; an axle's two grids keep one size; the friction grid drops them all (they lie in its
+    band)."""
+    quarter = np.linspace(-0.3, 0.5, 30)
+    (grid,) = low_speed_grids([quarter])
+    low = {round(v, 9) for v in (-0.01, -0.005, 0.0, 0.005, 0.01)}
+    assert low <= {round(v, 9) for v in grid}
+    assert grid[0] == quarter[0] and grid[-1] == quarter[-1]
+    assert np.all(np.diff(grid) >= 0.0025 - 1e-12)
+    kept = quarter[np.min(np.abs(quarter[:, None] - np.array(sorted(low))[None, :]), axis=1) >= 0.0025]
+    assert set(kept) <= set(grid)
+    axle = low_speed_grids([np.linspace(-0.3, 0.5, 15), np.linspace(-0.0012, 0.6, 15)])
+    assert axle[0].size == axle[1].size
+    assert all(np.all(np.diff(g) > 0) for g in axle)
+    assert np.array_equal(friction_grids([grid])[0], friction_grids([quarter])[0])
 
 
 @pytest.mark.parametrize(("label", "seed"), sorted(TWO_AT_ONCE))
