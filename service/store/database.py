@@ -43,7 +43,10 @@ class Database:
     """Engine plus session factory. Sessions are short (one unit of work each) and may be used from any
     thread; the API calls them from worker threads, never holding one across an await."""
 
-    def __init__(self, url: str) -> None:
+    def __init__(self, url: str, *, outbox: bool = False) -> None:
+        """outbox: this is a lane's local store; its stores queue every finished sweep and job for the
+        central database (service.store.outbox, service.store.sync)."""
+        self.outbox = outbox
         try:
             parsed: URL = make_url(url)
         except ArgumentError:
