@@ -1,0 +1,150 @@
+"""A lane's local store synced to the central database: the lane keeps testing when the central database
+is away, and the central database gets every finished sweep and job exactly once, in order.
+
+Design (README "A lane keeps testing when the central database is away"):
+
+- With `serve --database URL` the lane runs on its local store, SQLite in its data directory: its sweeps,
+  jobs, scheduled tests, results and result chain are written there first, with local ids, and its API
+  answers from there. Its jobs run on its own worker from its local queue: a job is never both in a local
+  queue and claimable on the central database, because the central database only ever receives it
+  finished (`serve --shared-queue` instead runs the lane on the central database alone, with item 4's
+  shared queue, and then needs the central database up).
+- Every sweep and job that reaches its final state joins the local outbox (service.store.outbox) in the
+  transaction that finishes it: `seq` orders the entries as they finished, which is also the order of the
+  lane's result chain.
+- `CentralSync.push_pending` pushes the entries oldest first, one central transaction each, and removes an
+  entry from the outbox only after the central transaction committed. A row is matched on the central
+  database by its global identity `uid` (a UUID, unique there), never by its id: a push repeated because the
+  connection died between the central commit and the outbox removal updates the same row to the same
+  values, so each row arrives exactly once. A job's sweep is pushed with it when it is not there yet (the
+  job's `sweep_id` is the central id of that sweep).
+- The result chain stays verifiable on the central database (`shockbench verify --database URL`): a synced
+  job keeps its local id as `origin_id`, which its link hashes, and its link is appended there with the
+  lane's hashes unchanged, after checking that it follows the central chain's newest link of its lane (one
+  lane, one store: a lane whose links also reach the central database another way would fork its chain;
+  the push stops with that error in the sync status instead).
+- Files stay on the lane: the central rows carry the paths of recordings, vehicle files and job artefacts
+  as they are on the lane's machine, under its data root (readable from elsewhere when the data root is a
+  shared mount, as item 4 asks); nothing is copied.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+from sqlalchemy import BigInteger, delete, func, insert, literal, select, update
+from sqlalchemy.orm import Session
+
+from service.store.database import Database
+from service.store.models import JobRow, ResultChainRow, SweepRow, SyncOutboxRow
+from service.store.outbox import JOB, SWEEP
+from service.store.result_chain import GENESIS, lane_lock_key
+
+
+class SyncError(RuntimeError):
+    """A finished row the central database cannot take as it is (one line); the push stops there."""
+
+
+def _values(row: SweepRow | JobRow, leave_out: set[str]) -> dict[str, Any]:
+    return {c.name: getattr(row, c.key) for c in row.__table__.columns if c.name not in leave_out}
+
+
+def _upsert(session: Session, model: type[SweepRow] | type[JobRow], values: dict[str, Any]) -> int:
+    """The central row of `values["uid"]`, inserted or brought to `values`; its central id."""
+    central_id = session.scalar(select(model.id).where(model.uid == values["uid"]))
+    if central_id is None:
+        return int(session.execute(insert(model).values(**values).returning(model.id)).scalar_one())
+    session.execute(update(model).where(model.id == central_id).values(**values))
+    return int(central_id)
+
+
+@dataclass(frozen=True)
+class Pushed:
+    kind: str
+    local_id: int
+    central_id: int
+
+
+class CentralSync:
+    """Pushes a lane's local outbox to the central database (module docstring)."""
+
+    def __init__(self, local: Database, central: Database) -> None:
+        self.local = local
+        self.central = central
+
+    def push_pending(self, limit: int | None = None) -> list[Pushed]:
+        """Push the outbox oldest first (at most `limit` entries); what was pushed. Raises what the
+        central database raises (unreachable, dropped) or SyncError; what was pushed before stays pushed."""
+        pushed: list[Pushed] = []
+        while limit is None or len(pushed) < limit:
+            with self.local.sessions() as session:
+                entry = session.scalars(select(SyncOutboxRow).order_by(SyncOutboxRow.seq).limit(1)).first()
+            if entry is None:
+                break
+            pushed.append(self.push_entry(entry))
+            with self.local.transaction() as session:  # acknowledged only after the central commit
+                session.execute(delete(SyncOutboxRow).where(SyncOutboxRow.seq == entry.seq))
+        return pushed
+
+    def push_entry(self, entry: SyncOutboxRow) -> Pushed:
+        """One entry, in one central transaction (idempotent: see the module docstring)."""
+        with self.local.sessions() as local, self.central.transaction() as central:
+            if entry.kind == SWEEP:
+                sweep = local.get(SweepRow, entry.row_id)
+                if sweep is None:
+                    raise SyncError(f"sweep {entry.row_id} of the outbox is not in the local store")
+                return Pushed(SWEEP, sweep.id, self._push_sweep(central, sweep))
+            if entry.kind == JOB:
+                job = local.get(JobRow, entry.row_id)
+                if job is None:
+                    raise SyncError(f"job {entry.row_id} of the outbox is not in the local store")
+                return Pushed(JOB, job.id, self._push_job(local, central, job))
+            raise SyncError(f"outbox entry {entry.seq} has an unknown kind {entry.kind!r}")
+
+    def _push_sweep(self, central: Session, sweep: SweepRow) -> int:
+        if sweep.uid is None:
+            raise SyncError(f"sweep {sweep.id} has no uid (schema older than revision 0005?)")
+        return _upsert(central, SweepRow, _values(sweep, {"id"}))
+
+    def _push_job(self, local: Session, central: Session, job: JobRow) -> int:
+        if job.uid is None:
+            raise SyncError(f"job {job.id} has no uid (schema older than revision 0005?)")
+        values = _values(job, {"id", "sweep_id", "origin_id", "lease_until"})
+        values["origin_id"] = job.origin_id if job.origin_id is not None else job.id
+        values["sweep_id"] = None
+        if job.sweep_id is not None:
+            sweep = local.get(SweepRow, job.sweep_id)
+            if sweep is None:
+                raise SyncError(f"job {job.id}'s sweep {job.sweep_id} is not in the local store")
+            values["sweep_id"] = self._push_sweep(central, sweep)
+        central_id = _upsert(central, JobRow, values)
+        link = local.scalar(select(ResultChainRow).where(ResultChainRow.job_id == job.id))
+        if link is not None:
+            self._push_link(central, link, central_id)
+        return central_id
+
+    def _push_link(self, central: Session, link: ResultChainRow, central_job_id: int) -> None:
+        """Append the lane's link to the central chain, unless it is there (a repeated push)."""
+        if central.scalar(select(ResultChainRow.id).where(ResultChainRow.job_id == central_job_id)):
+            return
+        if central.get_bind().dialect.name == "postgresql":  # as result_chain.append_link
+            central.execute(select(func.pg_advisory_xact_lock(literal(lane_lock_key(link.lane), BigInteger))))
+        newest = select(ResultChainRow.hash).where(ResultChainRow.lane == link.lane)
+        head = central.scalar(newest.order_by(ResultChainRow.id.desc()).limit(1)) or GENESIS
+        if head != link.previous_hash:
+            raise SyncError(
+                f"lane {link.lane!r}: the central chain ends at {head[:12]}, but this lane's next link "
+                f"(job {link.job_id}) follows {link.previous_hash[:12]}: another store wrote this lane's "
+                "results there; sync stopped"
+            )
+        central.add(
+            ResultChainRow(
+                lane=link.lane,
+                job_id=central_job_id,
+                previous_hash=link.previous_hash,
+                hash=link.hash,
+                created_at=link.created_at,
+            )
+        )
+        central.flush()
