@@ -21,6 +21,8 @@ from sqlalchemy.orm import Session, sessionmaker
 from estimator.errors import UserError
 
 DATABASE_FILE = "shockbench.sqlite3"
+CONNECT_TIMEOUT_S = 10
+"""A PostgreSQL server that does not answer a connection within this long counts as unreachable."""
 
 
 class DatabaseError(UserError, ValueError):
@@ -57,6 +59,11 @@ class Database:
             if parsed.database and parsed.database != ":memory:":
                 Path(parsed.database).parent.mkdir(parents=True, exist_ok=True)
             kwargs["connect_args"] = {"check_same_thread": False, "timeout": 30}
+        else:
+            # a server that went away and came back: stale pooled connections are replaced, not used
+            kwargs["pool_pre_ping"] = True
+            if parsed.get_backend_name() == "postgresql" and "connect_timeout" not in parsed.query:
+                kwargs["connect_args"] = {"connect_timeout": CONNECT_TIMEOUT_S}
         try:
             self.engine: Engine = create_engine(parsed, **kwargs)
         except (NoSuchModuleError, ModuleNotFoundError, ArgumentError) as exc:
