@@ -8,7 +8,9 @@ Design (README "A lane keeps testing when the central database is away"):
   answers from there. Its jobs run on its own worker from its local queue: a job is never both in a local
   queue and claimable on the central database, because the central database only ever receives it
   finished (`serve --shared-queue` instead runs the lane on the central database alone, with item 4's
-  shared queue, and then needs the central database up).
+  shared queue, and then needs the central database up). Not handing the lane's jobs to the shared queue
+  while the central database answers is deliberate: the lane's result chain has one writer, its local
+  store, and another instance chaining one of the lane's results on the central database would fork it.
 - Every sweep and job that reaches its final state joins the local outbox (service.store.outbox) in the
   transaction that finishes it: `seq` orders the entries as they finished, which is also the order of the
   lane's result chain.

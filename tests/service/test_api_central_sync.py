@@ -194,3 +194,14 @@ def test_a_lane_started_without_its_central_database(
         stop_lane(lane)
     jobs, _ = central_jobs(url)
     assert [(j.origin_id, j.status, j.attempts) for j in jobs] == [(job_id, "succeeded", 1)]
+
+
+@pytest.mark.parametrize("flag", ["--shared-queue", "--require-database"])
+def test_the_central_database_flags_need_a_database(tmp_path: Path, flag: str) -> None:
+    command = [sys.executable, "-m", "service.cli.serve", "--data", str(tmp_path), "--port", "0", flag]
+    refused = subprocess.run(command, cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert refused.returncode == 2
+    assert (
+        refused.stderr.strip()
+        == f"shockbench serve: error: {flag} needs --database URL (the central database)"
+    )

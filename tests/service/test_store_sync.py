@@ -13,6 +13,7 @@ import sqlalchemy as sa
 from sqlalchemy.exc import OperationalError
 
 from service.store.database import Database
+from service.store.job_queue import JobQueue
 from service.store.jobs import JobFiles, JobStore
 from service.store.models import JobRow, JobStatus, SweepRow, SweepStatus, SyncOutboxRow
 from service.store.outbox import backlog
@@ -86,6 +87,7 @@ def test_finished_rows_arrive_in_order_exactly_once(
     assert [j.status for j in jobs] == ["succeeded", "succeeded", "failed"]
     assert jobs[1].sweep_id == sweeps[0].id and jobs[1].result == {"gap_m": 2e-5}
     assert all(j.lane == LANE and j.attempts == 1 for j in jobs)
+    assert JobQueue(database, "south").claim_next() is None  # the queued job stayed local: nothing to claim
     assert verify_chain(database).problem is None and verify_chain(database).results == 2
 
     # the connection died after the central commit, before the outbox entries were removed: pushed again
