@@ -18,11 +18,11 @@ from datetime import datetime
 
 from sqlalchemy.exc import InterfaceError, OperationalError, SQLAlchemyError
 
-from service.store.database import Database, DatabaseError
+from service.store.database import CONNECT_TIMEOUT_S, Database, DatabaseError
 from service.store.models import utcnow
-from service.store.outbox import backlog
+from service.store.outbox import Backlog, backlog
 from service.store.schema import SchemaError
-from service.store.sync import CentralSync, SyncError
+from service.store.sync import CentralSync, LocalStoreError, SyncError
 
 log = logging.getLogger("shockbench.sync")
 
@@ -68,8 +68,9 @@ class SyncAgent:
         self._last_error: str | None = None
         self._last_contact: datetime | None = None
         self._pushed = 0
-        self._backlog = backlog(local)
+        self._backlog = Backlog(0, None)
         self._wakeup = asyncio.Event()
+        self._stopping = False
         self._task: asyncio.Task[None] | None = None
 
     def status(self) -> SyncStatus:
@@ -85,21 +86,28 @@ class SyncAgent:
         )
 
     async def start(self) -> None:
+        self._backlog = await asyncio.to_thread(backlog, self.local)
         self._task = asyncio.create_task(self._run(), name="central-sync")
 
     async def stop(self) -> None:
-        if self._task is not None:
-            self._task.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await self._task
-            self._task = None
+        """Let the round under way end (an entry whose central transaction committed is removed from the
+        outbox, not pushed again at the next start), then stop; cut it off if the central database hangs."""
+        if self._task is None:
+            return
+        self._stopping = True
+        self._wakeup.set()
+        try:
+            await asyncio.wait_for(self._task, 2 * CONNECT_TIMEOUT_S)
+        except TimeoutError:
+            log.warning("central sync did not end its round; stopped (it resumes at the next start)")
+        self._task = None
 
     def wake(self) -> None:
         """Something finished: push now rather than at the next interval (on the loop's thread)."""
         self._wakeup.set()
 
     async def _run(self) -> None:
-        while True:
+        while not self._stopping:
             self._wakeup.clear()
             await asyncio.to_thread(self.round)
             pause = self.interval_s if self._reachable and self._last_error is None else self.retry_s
@@ -120,7 +128,9 @@ class SyncAgent:
             self._reachable, self._last_error = False, one_line(exc)
         except (SchemaError, SyncError, SQLAlchemyError) as exc:  # it answers, but refuses
             self._reachable, self._last_error = True, one_line(exc)
-        except Exception as exc:  # e.g. the local store: reported, tried again
+        except LocalStoreError as exc:  # the central database is not to blame: tried again
+            self._last_error = one_line(exc)
+        except Exception as exc:
             log.exception("central sync round failed")
             self._last_error = one_line(exc)
         try:

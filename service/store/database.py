@@ -23,6 +23,16 @@ from estimator.errors import UserError
 DATABASE_FILE = "shockbench.sqlite3"
 CONNECT_TIMEOUT_S = 10
 """A PostgreSQL server that does not answer a connection within this long counts as unreachable."""
+POSTGRES_LIVENESS = {
+    "keepalives": 1,
+    "keepalives_idle": 10,
+    "keepalives_interval": 5,
+    "keepalives_count": 3,
+    "tcp_user_timeout": 30_000,
+}
+"""libpq's TCP keepalives (s) and unacknowledged-data limit (ms): a server cut off without closing the
+connection (network down, not stopped) is noticed in about half a minute instead of the system's hours,
+so that a lane's sync (service.api.central_sync) reports it away rather than waiting on it."""
 
 
 class DatabaseError(UserError, ValueError):
@@ -62,8 +72,11 @@ class Database:
         else:
             # a server that went away and came back: stale pooled connections are replaced, not used
             kwargs["pool_pre_ping"] = True
-            if parsed.get_backend_name() == "postgresql" and "connect_timeout" not in parsed.query:
-                kwargs["connect_args"] = {"connect_timeout": CONNECT_TIMEOUT_S}
+            if parsed.get_backend_name() == "postgresql":
+                defaults = {**POSTGRES_LIVENESS, "connect_timeout": CONNECT_TIMEOUT_S}
+                kwargs["connect_args"] = {
+                    k: v for k, v in defaults.items() if k not in parsed.query
+                }  # URL wins
         try:
             self.engine: Engine = create_engine(parsed, **kwargs)
         except (NoSuchModuleError, ModuleNotFoundError, ArgumentError) as exc:

@@ -32,10 +32,13 @@ Design (README "A lane keeps testing when the central database is away"):
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Any
 
 from sqlalchemy import BigInteger, delete, func, insert, literal, select, update
+from sqlalchemy.exc import SQLAlchemyError
 from sqlalchemy.orm import Session
 
 from service.store.database import Database
@@ -46,6 +49,19 @@ from service.store.result_chain import GENESIS, lane_lock_key
 
 class SyncError(RuntimeError):
     """A finished row the central database cannot take as it is (one line); the push stops there."""
+
+
+class LocalStoreError(RuntimeError):
+    """The local store failed while the outbox was read or an entry removed (one line); nothing is lost:
+    the entry is pushed again (idempotent) at the next try."""
+
+
+@contextmanager
+def _local_store() -> Iterator[None]:
+    try:
+        yield
+    except SQLAlchemyError as exc:
+        raise LocalStoreError(f"local store: {str(exc).splitlines()[0]}") from exc
 
 
 def _values(row: SweepRow | JobRow, leave_out: set[str]) -> dict[str, Any]:
@@ -80,73 +96,97 @@ class CentralSync:
         central database raises (unreachable, dropped) or SyncError; what was pushed before stays pushed."""
         pushed: list[Pushed] = []
         while limit is None or len(pushed) < limit:
-            with self.local.sessions() as session:
+            with _local_store(), self.local.sessions() as session:
                 entry = session.scalars(select(SyncOutboxRow).order_by(SyncOutboxRow.seq).limit(1)).first()
             if entry is None:
                 break
             pushed.append(self.push_entry(entry))
-            with self.local.transaction() as session:  # acknowledged only after the central commit
+            with _local_store(), self.local.transaction() as session:  # only after the central commit
                 session.execute(delete(SyncOutboxRow).where(SyncOutboxRow.seq == entry.seq))
         return pushed
 
     def push_entry(self, entry: SyncOutboxRow) -> Pushed:
-        """One entry, in one central transaction (idempotent: see the module docstring)."""
-        with self.local.sessions() as local, self.central.transaction() as central:
-            if entry.kind == SWEEP:
-                sweep = local.get(SweepRow, entry.row_id)
-                if sweep is None:
-                    raise SyncError(f"sweep {entry.row_id} of the outbox is not in the local store")
-                return Pushed(SWEEP, sweep.id, self._push_sweep(central, sweep))
-            if entry.kind == JOB:
-                job = local.get(JobRow, entry.row_id)
-                if job is None:
-                    raise SyncError(f"job {entry.row_id} of the outbox is not in the local store")
-                return Pushed(JOB, job.id, self._push_job(local, central, job))
+        """One entry: its rows read from the local store, then written in one central transaction
+        (idempotent: see the module docstring)."""
+        with _local_store(), self.local.sessions() as local:
+            found = _Rows.read(local, entry)
+        with self.central.transaction() as central:
+            if found.job is None:
+                assert found.sweep is not None
+                return Pushed(SWEEP, found.sweep.id, _push_sweep(central, found.sweep))
+            central_id = _push_job(central, found.job, found.sweep)
+            if found.link is not None:
+                _push_link(central, found.link, central_id)
+            return Pushed(JOB, found.job.id, central_id)
+
+
+@dataclass(frozen=True)
+class _Rows:
+    """What one outbox entry pushes, read from the local store: a sweep, or a job with its sweep (if it
+    ran on one) and its chain link (if it succeeded)."""
+
+    sweep: SweepRow | None
+    job: JobRow | None = None
+    link: ResultChainRow | None = None
+
+    @classmethod
+    def read(cls, local: Session, entry: SyncOutboxRow) -> _Rows:
+        if entry.kind == SWEEP:
+            sweep = local.get(SweepRow, entry.row_id)
+            if sweep is None:
+                raise SyncError(f"sweep {entry.row_id} of the outbox is not in the local store")
+            return cls(sweep)
+        if entry.kind != JOB:
             raise SyncError(f"outbox entry {entry.seq} has an unknown kind {entry.kind!r}")
-
-    def _push_sweep(self, central: Session, sweep: SweepRow) -> int:
-        if sweep.uid is None:
-            raise SyncError(f"sweep {sweep.id} has no uid (schema older than revision 0005?)")
-        return _upsert(central, SweepRow, _values(sweep, {"id"}))
-
-    def _push_job(self, local: Session, central: Session, job: JobRow) -> int:
-        if job.uid is None:
-            raise SyncError(f"job {job.id} has no uid (schema older than revision 0005?)")
-        values = _values(job, {"id", "sweep_id", "origin_id", "lease_until"})
-        values["origin_id"] = job.origin_id if job.origin_id is not None else job.id
-        values["sweep_id"] = None
+        job = local.get(JobRow, entry.row_id)
+        if job is None:
+            raise SyncError(f"job {entry.row_id} of the outbox is not in the local store")
+        sweep = None
         if job.sweep_id is not None:
             sweep = local.get(SweepRow, job.sweep_id)
             if sweep is None:
                 raise SyncError(f"job {job.id}'s sweep {job.sweep_id} is not in the local store")
-            values["sweep_id"] = self._push_sweep(central, sweep)
-        central_id = _upsert(central, JobRow, values)
         link = local.scalar(select(ResultChainRow).where(ResultChainRow.job_id == job.id))
-        if link is not None:
-            self._push_link(central, link, central_id)
-        return central_id
+        return cls(sweep, job, link)
 
-    def _push_link(self, central: Session, link: ResultChainRow, central_job_id: int) -> None:
-        """Append the lane's link to the central chain, unless it is there (a repeated push)."""
-        if central.scalar(select(ResultChainRow.id).where(ResultChainRow.job_id == central_job_id)):
-            return
-        if central.get_bind().dialect.name == "postgresql":  # as result_chain.append_link
-            central.execute(select(func.pg_advisory_xact_lock(literal(lane_lock_key(link.lane), BigInteger))))
-        newest = select(ResultChainRow.hash).where(ResultChainRow.lane == link.lane)
-        head = central.scalar(newest.order_by(ResultChainRow.id.desc()).limit(1)) or GENESIS
-        if head != link.previous_hash:
-            raise SyncError(
-                f"lane {link.lane!r}: the central chain ends at {head[:12]}, but this lane's next link "
-                f"(job {link.job_id}) follows {link.previous_hash[:12]}: another store wrote this lane's "
-                "results there; sync stopped"
-            )
-        central.add(
-            ResultChainRow(
-                lane=link.lane,
-                job_id=central_job_id,
-                previous_hash=link.previous_hash,
-                hash=link.hash,
-                created_at=link.created_at,
-            )
+
+def _push_sweep(central: Session, sweep: SweepRow) -> int:
+    if sweep.uid is None:
+        raise SyncError(f"sweep {sweep.id} has no uid (schema older than revision 0005?)")
+    return _upsert(central, SweepRow, _values(sweep, {"id"}))
+
+
+def _push_job(central: Session, job: JobRow, sweep: SweepRow | None) -> int:
+    """The job's central row (its sweep's first, when it ran on one); its central id."""
+    if job.uid is None:
+        raise SyncError(f"job {job.id} has no uid (schema older than revision 0005?)")
+    values = _values(job, {"id", "sweep_id", "origin_id", "lease_until"})
+    values["origin_id"] = job.origin_id if job.origin_id is not None else job.id
+    values["sweep_id"] = _push_sweep(central, sweep) if sweep is not None else None
+    return _upsert(central, JobRow, values)
+
+
+def _push_link(central: Session, link: ResultChainRow, central_job_id: int) -> None:
+    """Append the lane's link to the central chain, unless it is there (a repeated push)."""
+    if central.scalar(select(ResultChainRow.id).where(ResultChainRow.job_id == central_job_id)):
+        return
+    if central.get_bind().dialect.name == "postgresql":  # as result_chain.append_link
+        central.execute(select(func.pg_advisory_xact_lock(literal(lane_lock_key(link.lane), BigInteger))))
+    newest = select(ResultChainRow.hash).where(ResultChainRow.lane == link.lane)
+    head = central.scalar(newest.order_by(ResultChainRow.id.desc()).limit(1)) or GENESIS
+    if head != link.previous_hash:
+        raise SyncError(
+            f"lane {link.lane!r}: the central chain ends at {head[:12]}, but this lane's next link "
+            f"(job {link.job_id}) follows {link.previous_hash[:12]}: another store wrote this lane's "
+            "results there; sync stopped"
         )
-        central.flush()
+    central.add(
+        ResultChainRow(
+            lane=link.lane,
+            job_id=central_job_id,
+            previous_hash=link.previous_hash,
+            hash=link.hash,
+            created_at=link.created_at,
+        )
+    )
+    central.flush()
