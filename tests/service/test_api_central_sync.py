@@ -10,7 +10,6 @@ from __future__ import annotations
 import signal
 import subprocess
 import sys
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -18,7 +17,7 @@ import httpx
 import pytest
 import sqlalchemy as sa
 from live_server import ROOT, ServeProcess, SimulatedInputs, serve_process, wait_for_status, wait_until
-from pg_server import PostgresServer, find_bindir
+from pg_server import PostgresServer
 
 from daq.formats.vehicle_file import format_vehicle
 from service.store.database import Database
@@ -28,16 +27,6 @@ from simulators.vehicle_sim import default_quarter_car
 KEY = "operator-key-central-sync-01"
 LANE = "north"
 SWEEP = {"duration_s": 2, "settle_s": 0.5, "vehicle_toml": format_vehicle(default_quarter_car().known)}
-
-
-@pytest.fixture
-def server() -> Iterator[PostgresServer]:
-    """A PostgreSQL server of this test's own: stopping it disturbs no other test."""
-    bindir = find_bindir()
-    if bindir is None:
-        pytest.skip("PostgreSQL binaries not found (apt-get install postgresql)")
-    with PostgresServer(bindir) as pg:
-        yield pg
 
 
 def start_lane(tmp_path: Path, url: str, *more: str) -> ServeProcess:
@@ -54,6 +43,11 @@ def stop_lane(lane: ServeProcess) -> None:
 
 def upload(inputs: SimulatedInputs) -> dict[str, bytes]:
     return {"recording": inputs.recording.read_bytes(), "vehicle": inputs.vehicle.read_bytes()}
+
+
+def succeeded(client: httpx.Client, job_id: int) -> None:
+    end = wait_for_status(client, f"/api/v1/jobs/{job_id}", "succeeded", "failed", timeout_s=300)
+    assert end["status"] == "succeeded", end["error"]
 
 
 def sync_status(client: httpx.Client) -> dict[str, Any]:
@@ -85,8 +79,9 @@ def verify(url: str) -> subprocess.CompletedProcess[str]:
 
 
 def test_the_lane_keeps_testing_while_the_central_database_is_stopped(
-    tmp_path: Path, server: PostgresServer, inputs: SimulatedInputs
+    tmp_path: Path, own_postgres: PostgresServer, inputs: SimulatedInputs
 ) -> None:
+    server = own_postgres
     url = server.new_database()
     lane = start_lane(tmp_path, url, "--simulated")
     try:
@@ -94,10 +89,7 @@ def test_the_lane_keeps_testing_while_the_central_database_is_stopped(
         with lane.client(KEY) as client:
             fast = {"output_error": "false"}
             first = client.post("/api/v1/jobs", files=upload(inputs), data=fast).json()["id"]
-            assert (
-                wait_for_status(client, f"/api/v1/jobs/{first}", "succeeded", "failed")["status"]
-                == "succeeded"
-            )
+            succeeded(client, first)
             wait_until(lambda: synced(client, 1), 60, "the first job on the central database")
 
             slow = {"solver": "de", "generations": "150", "output_error": "false"}
@@ -120,8 +112,7 @@ def test_the_lane_keeps_testing_while_the_central_database_is_stopped(
             after = client.post("/api/v1/jobs", files=upload(inputs), data=fast).json()["id"]
             local_ids = [first, during, on_sweep.json()["id"], after]
             for job_id in local_ids[1:]:
-                end = wait_for_status(client, f"/api/v1/jobs/{job_id}", "succeeded", "failed", timeout_s=300)
-                assert end["status"] == "succeeded", end["error"]
+                succeeded(client, job_id)
 
             def backlog_waits() -> dict[str, Any] | None:
                 sync = sync_status(client)
@@ -129,9 +120,8 @@ def test_the_lane_keeps_testing_while_the_central_database_is_stopped(
 
             try:
                 away = wait_until(backlog_waits, 60, "the backlog of the sweep and three jobs")
-            except TimeoutError:
-                print(sync_status(client), lane.log.read_text()[-5000:])
-                raise
+            except TimeoutError as exc:
+                raise AssertionError(f"{exc}; sync status {sync_status(client)}") from None
             assert away["oldest_pending"] is not None and away["last_error"], away
             print(f"while the central database was away: {away}")
 
@@ -155,8 +145,9 @@ def test_the_lane_keeps_testing_while_the_central_database_is_stopped(
 
 
 def test_a_lane_started_without_its_central_database(
-    tmp_path: Path, server: PostgresServer, inputs: SimulatedInputs
+    tmp_path: Path, own_postgres: PostgresServer, inputs: SimulatedInputs
 ) -> None:
+    server = own_postgres
     url = server.new_database()
     server.stop()
     refused = subprocess.run(
@@ -179,14 +170,10 @@ def test_a_lane_started_without_its_central_database(
         assert len(line) == 1 and line[0].startswith("shockbench serve: central database postgresql"), line
         wait_until(lambda: lane.answers(KEY), 180, "the lane ready")
         with lane.client(KEY) as client:
-            assert sync_status(client)["reachable"] is False
-            job_id = client.post("/api/v1/jobs", files=upload(inputs), data={"output_error": "false"}).json()[
-                "id"
-            ]
-            assert (
-                wait_for_status(client, f"/api/v1/jobs/{job_id}", "succeeded", "failed")["status"]
-                == "succeeded"
-            )
+            wait_until(lambda: sync_status(client)["reachable"] is False, 60, "the central database away")
+            fast = {"output_error": "false"}
+            job_id = client.post("/api/v1/jobs", files=upload(inputs), data=fast).json()["id"]
+            succeeded(client, job_id)
             wait_until(lambda: sync_status(client)["backlog"] == 1, 30, "the job waiting to be synced")
             server.start()
             wait_until(lambda: synced(client, 1), 120, "the job pushed once the server is up")
