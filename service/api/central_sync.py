@@ -102,10 +102,6 @@ class SyncAgent:
             log.warning("central sync did not end its round; stopped (it resumes at the next start)")
         self._task = None
 
-    def wake(self) -> None:
-        """Something finished: push now rather than at the next interval (on the loop's thread)."""
-        self._wakeup.set()
-
     async def _run(self) -> None:
         while not self._stopping:
             self._wakeup.clear()
