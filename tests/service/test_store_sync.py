@@ -15,9 +15,10 @@ from sqlalchemy.exc import OperationalError
 from service.store.database import Database
 from service.store.job_queue import JobQueue
 from service.store.jobs import JobFiles, JobStore
-from service.store.models import JobRow, JobStatus, SweepRow, SweepStatus, SyncOutboxRow
+from service.store.models import JobRow, JobStatus, SweepRow, SweepStatus, SyncOutboxRow, utcnow
 from service.store.outbox import backlog
 from service.store.result_chain import verify_chain
+from service.store.schema import upgrade
 from service.store.sweeps import SweepStore
 from service.store.sync import CentralSync, SyncError
 
@@ -140,3 +141,24 @@ def test_an_unreachable_central_database_keeps_the_backlog(local: Database, tmp_
     assert backlog(local).count == 1
     with local.sessions() as session:
         assert session.scalar(sa.select(JobRow.status)) == JobStatus.SUCCEEDED.value
+
+
+def test_rows_stored_before_the_sync_revision_get_their_own_uid(database_url: str) -> None:
+    database = Database(database_url)
+    try:
+        upgrade(database.engine, to="0004")
+        with database.engine.begin() as c:
+            for _ in range(3):
+                c.execute(
+                    sa.text(
+                        "INSERT INTO sweeps (bench, lane, status, settings, complete, created_at) "
+                        "VALUES ('b', 'north', 'complete', '{}', true, :t)"
+                    ),
+                    {"t": utcnow()},
+                )
+        upgrade(database.engine)
+        with database.sessions() as session:
+            uids = session.scalars(sa.select(SweepRow.uid)).all()
+        assert len(uids) == 3 and len(set(uids)) == 3 and all(uids)
+    finally:
+        database.dispose()

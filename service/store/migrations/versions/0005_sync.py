@@ -25,8 +25,10 @@ def upgrade() -> None:
         # plain ADD COLUMN (no batch copy on SQLite: other tables' foreign keys point at both)
         op.add_column(table, sa.Column("uid", sa.String(36)))
         rows = sa.table(table, sa.column("id", sa.Integer), sa.column("uid", sa.String))
-        for (row_id,) in connection.execute(sa.select(rows.c.id)).all():
-            connection.execute(rows.update().where(rows.c.id == row_id).values(uid=new_uid()))
+        ids = connection.execute(sa.select(rows.c.id)).scalars().all()
+        if ids:  # one statement, executed for every row (executemany)
+            fill = rows.update().where(rows.c.id == sa.bindparam("row_id")).values(uid=sa.bindparam("new"))
+            connection.execute(fill, [{"row_id": row_id, "new": new_uid()} for row_id in ids])
         op.create_index(f"uq_{table}_uid", table, ["uid"], unique=True)
     op.add_column("jobs", sa.Column("origin_id", sa.Integer))
     op.create_table(
