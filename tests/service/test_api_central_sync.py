@@ -1,7 +1,8 @@
 """A lane (`shockbench serve --database URL`, a real process) keeps testing while its central PostgreSQL
 server is stopped and started again: its sweeps and jobs go on in its local store, GET /status shows the
-sync backlog and the central database unreachable, and once the server is back every finished sweep and
-job is on the central database exactly once, with the lane's result chain verifiable there. A lane started
+sync backlog and the central database unreachable, the backlog survives the lane's own SIGKILL, and once
+the server is back every finished sweep and job is on the central database exactly once, in order, with the
+lane's result chain verifiable there. A lane started
 while the central database is away starts on its local store and says so in one line, or with
 --require-database refuses in one line (exit 2). Each test has a PostgreSQL server of its own to stop."""
 
@@ -29,10 +30,11 @@ LANE = "north"
 SWEEP = {"duration_s": 2, "settle_s": 0.5, "vehicle_toml": format_vehicle(default_quarter_car().known)}
 
 
-def start_lane(tmp_path: Path, url: str, *more: str) -> ServeProcess:
+def start_lane(tmp_path: Path, url: str, *more: str, name: str = LANE) -> ServeProcess:
+    """`serve --database URL` as lane north on tmp_path/data, its output in tmp_path/NAME.log."""
     (tmp_path / "keys.toml").write_text(f'operator = ["{KEY}"]\n')
     args = ("--database", url, "--data", str(tmp_path / "data"), "--keys", str(tmp_path / "keys.toml"))
-    return serve_process(tmp_path, LANE, *args, "--lane", LANE, *more)
+    return serve_process(tmp_path, name, *args, "--lane", LANE, *more)
 
 
 def stop_lane(lane: ServeProcess) -> None:
@@ -125,9 +127,15 @@ def test_the_lane_keeps_testing_while_the_central_database_is_stopped(
             assert away["oldest_pending"] is not None and away["last_error"], away
             print(f"while the central database was away: {away}")
 
+        lane.process.send_signal(signal.SIGKILL)  # the lane dies too before the server is back
+        lane.process.wait(30)
+        lane = start_lane(tmp_path, url, "--simulated", name="north-again")
+        wait_until(lambda: lane.answers(KEY), 180, "the lane ready again")
+        with lane.client(KEY) as client:
+            wait_until(backlog_waits, 60, "the same backlog after the restart")
             server.start()
-            back = wait_until(lambda: synced(client, 5), 120, "the backlog pushed once the server is back")
-            assert back["oldest_pending"] is None, back  # pushed: 4 jobs and the sweep
+            back = wait_until(lambda: synced(client, 4), 120, "the backlog pushed once the server is back")
+            assert back["oldest_pending"] is None, back  # pushed: 3 jobs and the sweep
             local = {i: client.get(f"/api/v1/jobs/{i}").json() for i in local_ids}
     finally:
         stop_lane(lane)
