@@ -67,7 +67,6 @@ class SyncAgent:
         self._reachable: bool | None = None
         self._last_error: str | None = None
         self._last_contact: datetime | None = None
-        self._pushed = 0
         self._backlog = Backlog(0, None)
         self._wakeup = asyncio.Event()
         self._stopping = False
@@ -82,7 +81,7 @@ class SyncAgent:
             oldest_pending=self._backlog.oldest,
             last_error=self._last_error,
             last_contact=self._last_contact,
-            pushed=self._pushed,
+            pushed=self.sync.pushed,
         )
 
     async def start(self) -> None:
@@ -105,20 +104,23 @@ class SyncAgent:
     async def _run(self) -> None:
         while not self._stopping:
             self._wakeup.clear()
-            await asyncio.to_thread(self.round)
+            more = await asyncio.to_thread(self.round)
+            if more:  # a long backlog: straight on with the next batch
+                continue
             pause = self.interval_s if self._reachable and self._last_error is None else self.retry_s
             with contextlib.suppress(TimeoutError):
                 await asyncio.wait_for(self._wakeup.wait(), pause)
 
-    def round(self) -> None:
-        """Check the central schema (once), push what is pending, count the backlog. Never raises."""
+    def round(self) -> bool:
+        """Check the central schema (once), push what is pending (up to BATCH), count the backlog; whether
+        a full batch went (more may wait). Never raises."""
         was, error_before = self._reachable, self._last_error
+        pushed = 0
         try:
             if not self._schema_checked:
                 self.central.upgrade_schema()  # as `serve` does at start; refuses a newer schema
                 self._schema_checked = True
-            pushed = self.sync.push_pending(limit=BATCH)
-            self._pushed += len(pushed)
+            pushed = len(self.sync.push_pending(limit=BATCH))
             self._reachable, self._last_error, self._last_contact = True, None, utcnow()
         except (DatabaseError, OperationalError, InterfaceError) as exc:  # away, or dropped in mid-push
             self._reachable, self._last_error = False, one_line(exc)
@@ -144,3 +146,4 @@ class SyncAgent:
             log.info("central database %s reachable again; syncing", self.central.safe_url)
         elif self._reachable and self._last_error is not None and self._last_error != error_before:
             log.warning("central sync stopped: %s", self._last_error)
+        return pushed == BATCH

@@ -90,6 +90,8 @@ class CentralSync:
     def __init__(self, local: Database, central: Database) -> None:
         self.local = local
         self.central = central
+        self.pushed = 0
+        """Entries pushed and removed from the outbox by this object (also those of a call that raised)."""
 
     def push_pending(self, limit: int | None = None) -> list[Pushed]:
         """Push the outbox oldest first (at most `limit` entries); what was pushed. Raises what the
@@ -103,6 +105,7 @@ class CentralSync:
             pushed.append(self.push_entry(entry))
             with _local_store(), self.local.transaction() as session:  # only after the central commit
                 session.execute(delete(SyncOutboxRow).where(SyncOutboxRow.seq == entry.seq))
+            self.pushed += 1
         return pushed
 
     def push_entry(self, entry: SyncOutboxRow) -> Pushed:
