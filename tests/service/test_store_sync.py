@@ -6,11 +6,13 @@ chain the lane's links do not follow stops the push; an unreachable central data
 from __future__ import annotations
 
 from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
 import sqlalchemy as sa
 from sqlalchemy.exc import OperationalError
+from sqlalchemy.orm import Session
 
 from service.store.database import Database
 from service.store.job_queue import JobQueue
@@ -20,7 +22,7 @@ from service.store.outbox import backlog
 from service.store.result_chain import verify_chain
 from service.store.schema import upgrade
 from service.store.sweeps import SweepStore
-from service.store.sync import CentralSync, SyncError
+from service.store.sync import CentralSync, LocalStoreError, SyncError
 
 LANE = "north"
 
@@ -162,3 +164,32 @@ def test_rows_stored_before_the_sync_revision_get_their_own_uid(database_url: st
         assert len(uids) == 3 and len(set(uids)) == 3 and all(uids)
     finally:
         database.dispose()
+
+
+def test_a_push_whose_acknowledgement_is_lost_is_repeated_without_a_duplicate(
+    local: Database, database: Database, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The second entry's central transaction commits, then the local store fails to remove it (as when
+    the lane dies between the two): it is pushed again at the next try, and stays one row."""
+    ids = [finished_job(local, tmp_path, 1e-5 * (i + 1)) for i in range(3)]
+    sync = CentralSync(local, database)
+    real, acks = local.transaction, []
+
+    @contextmanager
+    def second_ack_fails() -> Iterator[Session]:
+        acks.append(1)
+        if len(acks) == 2:
+            raise OperationalError("DELETE FROM sync_outbox", {}, Exception("disk I/O error"))
+        with real() as session:
+            yield session
+
+    monkeypatch.setattr(local, "transaction", second_ack_fails)
+    with pytest.raises(LocalStoreError, match=r"local store: .*disk I/O error"):
+        sync.push_pending()
+    monkeypatch.undo()
+    assert sync.pushed == 1 and backlog(local).count == 2
+    assert [j.origin_id for j in central_rows(database)[1]] == ids[:2]  # the second is there already
+
+    assert [p.local_id for p in sync.push_pending()] == ids[1:]
+    assert [j.origin_id for j in central_rows(database)[1]] == ids  # once each
+    assert verify_chain(database).problem is None and verify_chain(database).results == 3
