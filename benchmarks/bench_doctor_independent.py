@@ -5,8 +5,9 @@ no code with the estimator or the project's own simulator.
     .venv/bin/python benchmarks/bench_doctor_independent.py --classes clean,pair --per-class 1
 
 For every class (clean; each single effect; two at once; outside the catalog) it draws `--per-class` cases
-with fixed seeds (simulators.independent.cases.draw_case), writes each as a recording CSV and vehicle TOML to
-a temporary folder, reads them back with the project's readers (daq.formats) and runs the doctor in-process
+with fixed seeds (simulators.independent.cases.draw_case, from `--first-seed`), writes each as a recording
+CSV and vehicle TOML to a temporary folder (or to `--cache DIR`, kept for re-runs of the doctor on the same
+draws), reads them back with the project's readers (daq.formats) and runs the doctor in-process
 (estimator.doctor.diagnose, the call `shockbench diagnose` makes, starting tyre Maxwell). It prints one line
 per case, a confusion matrix (hidden class × what the doctor said), the hit rates, the gaps before and after
 against the doctor's own expected gap, and the wall time per doctor run.
@@ -86,14 +87,17 @@ class Outcome:
         return not self.unexplained and sorted(self.named) == sorted(self.present)
 
 
-def run_case(label: str, seed: int, folder: str, sweep_s: float) -> Outcome:
-    """Simulate, write, read back, diagnose one case (runs in a worker process)."""
-    from daq.formats.recording_csv import read_recording_csv
-    from daq.formats.vehicle_file import read_vehicle
+def recording_files(label: str, seed: int, folder: str, sweep_s: float) -> tuple[Path, Path, float, float]:
+    """The recording CSV and vehicle TOML of one case in `folder`, with the share of samples the tyre is off
+    the plate and the simulation's wall time (s). A folder that already holds them (`--cache`) is read, not
+    simulated again: the doctor can then be re-run on the same draws."""
     from estimator import vehicle as vehicle_module
-    from estimator.doctor import DiagnoseOptions, diagnose
-    from estimator.vehicle import TyreModel
 
+    stem = Path(folder) / f"{label}_{seed}_{sweep_s:g}s"
+    csv_path, toml_path, facts_path = (stem.with_suffix(s) for s in (".csv", ".toml", ".json"))
+    if facts_path.exists():
+        facts = json.loads(facts_path.read_text())
+        return csv_path, toml_path, facts["airborne_fraction"], facts["simulate_s"]
     case = draw_case(label, seed, sweep_s=sweep_s)
     # the vehicle file's ϑ is referred to the recording's sample time (README today) unless the project
     # names a fixed reference sample time
@@ -102,8 +106,22 @@ def run_case(label: str, seed: int, folder: str, sweep_s: float) -> Outcome:
     start = time.perf_counter()
     world = simulate_case(case)
     simulate_s = time.perf_counter() - start
-    csv_path, toml_path = Path(folder) / f"{label}_{seed}.csv", Path(folder) / f"{label}_{seed}.toml"
     write_recording(world, csv_path, toml_path)
+    facts = {"airborne_fraction": world.airborne_fraction, "simulate_s": simulate_s}
+    facts_path.write_text(json.dumps(facts))
+    return csv_path, toml_path, world.airborne_fraction, simulate_s
+
+
+def run_case(label: str, seed: int, folder: str, sweep_s: float) -> Outcome:
+    """Simulate (or read from a cache folder), write, read back, diagnose one case (runs in a worker
+    process)."""
+    from daq.formats.recording_csv import read_recording_csv
+    from daq.formats.vehicle_file import read_vehicle
+    from estimator.doctor import DiagnoseOptions, diagnose
+    from estimator.vehicle import TyreModel
+
+    case = draw_case(label, seed, sweep_s=sweep_s)
+    csv_path, toml_path, airborne_fraction, simulate_s = recording_files(label, seed, folder, sweep_s)
     recording, vehicle = read_recording_csv(csv_path), read_vehicle(toml_path)
     start = time.perf_counter()
     result = diagnose(recording, vehicle, DiagnoseOptions(tyre=TyreModel.MAXWELL))
@@ -119,7 +137,7 @@ def run_case(label: str, seed: int, folder: str, sweep_s: float) -> Outcome:
         data["gap_before_m"],  # type: ignore[arg-type]
         data["gap_after_m"],  # type: ignore[arg-type]
         data["expected_gap_m"],  # type: ignore[arg-type]
-        world.airborne_fraction,
+        airborne_fraction,
         simulate_s,
         doctor_s,
         result.conclusion,
@@ -212,7 +230,13 @@ def print_report(outcomes: list[Outcome]) -> None:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--per-class", type=int, default=3, help="cases per class (seeds 0..N-1)")
+    parser.add_argument("--per-class", type=int, default=3, help="cases per class (seeds FIRST..FIRST+N-1)")
+    parser.add_argument("--first-seed", type=int, default=0, help="the first seed of every class")
+    parser.add_argument(
+        "--cache",
+        default=None,
+        help="folder that keeps the simulated recordings: cases found there are not simulated again",
+    )
     parser.add_argument("--jobs", type=int, default=1, help="worker processes")
     parser.add_argument("--classes", default=",".join(CLASSES), help="comma-separated subset of classes")
     parser.add_argument("--sweep-s", type=float, default=12.0, help="sweep length (s), 10-30")
@@ -238,15 +262,20 @@ def main() -> None:
         parser.error(f"unknown class {unknown[0]!r}; expected some of {', '.join(CLASSES)}")
     print(
         f"machine: {platform.machine()}, Python {platform.python_version()}, numpy {np.__version__}; "
-        f"{args.per_class} per class, {args.jobs} jobs, {args.sweep_s:.0f} s sweeps 0-20 Hz ±4 mm"
+        f"{args.per_class} per class from seed {args.first_seed}, {args.jobs} jobs, "
+        f"{args.sweep_s:.0f} s sweeps 0-20 Hz ±4 mm"
     )
     # seed by seed over all classes, so that a run cut short still covers every class
-    work = [(label, seed) for seed in range(args.per_class) for label in labels]
+    seeds = range(args.first_seed, args.first_seed + args.per_class)
+    work = [(label, seed) for seed in seeds for label in labels]
     start = time.perf_counter()
+    if args.cache:
+        Path(args.cache).mkdir(parents=True, exist_ok=True)
     with (
-        tempfile.TemporaryDirectory(prefix="doctor-independent-") as folder,
+        tempfile.TemporaryDirectory(prefix="doctor-independent-") as temporary,
         ProcessPoolExecutor(args.jobs) as pool,
     ):
+        folder = args.cache or temporary
         futures = [pool.submit(run_case, label, seed, folder, args.sweep_s) for label, seed in work]
         for done, future in enumerate(as_completed(futures), start=1):
             o = future.result()
