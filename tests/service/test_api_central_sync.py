@@ -94,7 +94,7 @@ def test_the_lane_keeps_testing_while_the_central_database_is_stopped(
             succeeded(client, first)
             wait_until(lambda: synced(client, 1), 60, "the first job on the central database")
 
-            slow = {"solver": "de", "generations": "150", "output_error": "false"}
+            slow = {"solver": "de", "generations": "800", "output_error": "false"}  # several seconds
             during = client.post("/api/v1/jobs", files=upload(inputs), data=slow).json()["id"]
 
             def running() -> bool:
@@ -103,7 +103,8 @@ def test_the_lane_keeps_testing_while_the_central_database_is_stopped(
                 return job["status"] == "running" and bool((job["progress"] or {}).get("generation"))
 
             wait_until(running, 120, "the DE job running")
-            server.stop()  # in mid-job: the central database is gone, connections cut
+            server.stop()  # the central database is gone, its connections cut
+            assert client.get(f"/api/v1/jobs/{during}").json()["status"] == "running"  # in mid-job
 
             sweep = client.post("/api/v1/sweeps", json=SWEEP)
             assert sweep.status_code == 201, sweep.text
