@@ -81,12 +81,12 @@ class PostgresServer:
         self._run("pg_ctl", "-D", str(self.data), "-m", "immediate", "-w", "stop")
 
     def running(self) -> bool:
-        """Whether the server accepts connections now."""
+        """Whether the server runs now (pg_ctl status: 0 running, 3 not)."""
         try:
-            with psycopg.connect(self._dsn()):
-                return True
-        except psycopg.OperationalError:
+            self._run("pg_ctl", "-D", str(self.data), "status")
+        except RuntimeError:
             return False
+        return True
 
     def _dsn(self, database: str = "postgres") -> str:
         return f"host=127.0.0.1 port={self.port} user=postgres dbname={database} connect_timeout=5"
