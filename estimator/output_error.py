@@ -18,7 +18,15 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from estimator.damper import CurveBatch, PiecewiseLinearCurve
-from estimator.dynamics import AxlePhysics, CornerPhysics, QuarterCarPhysics
+from estimator.dynamics import (
+    AxlePhysics,
+    CornerPhysics,
+    QuarterCarPhysics,
+    decay_rate_per_s,
+    runge_kutta_substeps,
+    sample_substeps,
+    steepest_slope_Ns_per_m,
+)
 from estimator.recording import Recording
 from estimator.signals import Kinematics
 from estimator.simulation_kernel import integrate_compiled
@@ -121,6 +129,19 @@ def _measured_drive(kin: Mapping[str, Kinematics], vehicle: VehicleParameters):
     return plate, rate, state0
 
 
+def _substeps(model: IdentifiedModel, curves: tuple[object, ...], sample_time_s: float) -> int:
+    """Runge-Kutta steps per sample for the model's fastest decay (estimator.dynamics.RK4_STABLE_STEP): its
+    steepest damper segment (over every column of a population), a Kelvin-Voigt tyre's damping."""
+    vehicle = model.vehicle
+    sprung_share_kg = model.sprung_mass_kg / (2 if vehicle.is_axle else 1)
+    kelvin_voigt = model.tyre_model is TyreModel.KELVIN_VOIGT
+    # a population (the output-error refinement) carries one tyre damping per column
+    dashpot = float(np.max(np.abs(model.tyre_damping_Ns_per_m))) if kelvin_voigt else 0.0
+    slope = max(steepest_slope_Ns_per_m(c.velocity_m_s, c.force_N) for c in curves)  # type: ignore[attr-defined]
+    rate = decay_rate_per_s(slope, 0.0, dashpot, sprung_share_kg, model.unsprung_mass_kg)
+    return runge_kutta_substeps(rate, sample_time_s)
+
+
 def simulate_identified(
     model: IdentifiedModel,
     recording: Recording,
@@ -134,8 +155,12 @@ def simulate_identified(
     physics = model.physics(curves)
     if batch is not None:
         state0 = np.repeat(state0[:, None], batch, axis=1)
+    dt = recording.sample_time_s
+    steps = _substeps(model, curves or model.curves, dt)
     with np.errstate(over="ignore", invalid="ignore"):  # an unstable model is reported as a diverged gap
-        states = integrate_compiled(physics, state0, recording.sample_time_s, plate, rate)
+        states = integrate_compiled(
+            physics, state0, dt / steps, sample_substeps(plate, steps), sample_substeps(rate, steps)
+        )[::steps]
     outputs = physics.outputs(np.moveaxis(states, 0, 1))
     measured = {name: recording.channels[name] for name in outputs}
     with np.errstate(over="ignore", invalid="ignore"):

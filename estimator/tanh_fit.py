@@ -26,7 +26,11 @@ from estimator.damper import TanhCurve
 from estimator.order_statistics import median
 
 OUTLIER_SIGMAS = 5.0
-OUTLIER_FLOOR_FRACTION = 0.15
+OUTLIER_FLOOR_FRACTION = 0.2
+"""A flagged point is off the robust fit by more than this share of the peak force. At 0.15 the last point
+of the paper's Table 2 Kelvin-Voigt column (1217.4 N, 234 N = 19% above the robust fit of the rest, a real
+upturn that the tanh form cannot follow) was flagged, and the fit of the other 19 then missed all 20 by
+59 N RMS against 33 N with it (tests/estimator/test_paper_table3.py)."""
 MAD_TO_SIGMA = 1.4826
 MU_SPAN_RANGE = (0.2, 40.0)
 """μ·max|v| searched: from a nearly linear damper to a sharp valve knee."""

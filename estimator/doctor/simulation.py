@@ -19,7 +19,15 @@ import numpy as np
 from estimator.damper import CurveBatch
 from estimator.doctor.catalog import EffectName
 from estimator.doctor.model import FittedModel
-from estimator.dynamics import COULOMB_SMOOTHING_M_S, AxlePhysics, CornerPhysics, QuarterCarPhysics
+from estimator.dynamics import (
+    AxlePhysics,
+    CornerPhysics,
+    QuarterCarPhysics,
+    decay_rate_per_s,
+    runge_kutta_substeps,
+    sample_substeps,
+    steepest_slope_Ns_per_m,
+)
 from estimator.output_error import DIVERGED_GAP_M
 from estimator.recording import Recording
 from estimator.simulation_kernel import integrate_compiled
@@ -113,34 +121,27 @@ def _drive(model: FittedModel) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return plate, rate, np.array([*heave_roll, *at0("x_t_l"), *at0("x_t_r"), 0.0, 0.0])
 
 
-RK4_STABLE_STEP = 2.0
-"""Largest |λ|·step the Runge-Kutta is run at for the stiffest decay a model has (RK4's real-axis limit is
-2.79; some margin for the damper curve's own slope)."""
-
-
 def substeps(model: FittedModel, sample_time_s: float) -> int:
-    """Runge-Kutta steps per sample. The smoothed friction step F·tanh(v / COULOMB_SMOOTHING_M_S) acts on the
-    wheel like a dashpot of F / COULOMB_SMOOTHING_M_S near zero velocity: 207 N on a motorcycle's wheel at
-    2 ms is |λ|·dt of about 5, beyond RK4's stability, and the simulated wheel chatters at every velocity
-    zero (on an independent recording with 207 N of friction the friction model's gap was 2.2x the model's
-    without it although its equations fitted 12% better). One step per sample otherwise."""
-    friction_N = abs(model.value("coulomb_friction_N"))
-    if friction_N == 0.0:
-        return 1
-    unsprung_kg = float(model.vehicle.unsprung_mass_kg(model.sprung_mass_kg))
-    rate_per_s = friction_N / COULOMB_SMOOTHING_M_S / unsprung_kg
-    return max(1, int(np.ceil(rate_per_s * sample_time_s / RK4_STABLE_STEP)))
-
-
-def _finer(samples: np.ndarray, steps: int) -> np.ndarray:
-    """samples (time along the last axis) linearly interpolated to `steps` points per sample interval."""
-    if steps == 1:
-        return samples
-    count = samples.shape[-1]
-    position = np.arange((count - 1) * steps + 1) / steps
-    index = np.minimum(position.astype(int), count - 2)
-    fraction = position - index
-    return samples[..., index] + fraction * (samples[..., index + 1] - samples[..., index])
+    """Runge-Kutta steps per sample for the model's fastest decay (estimator.dynamics.decay_rate_per_s):
+    its steepest damper segment, its friction and tyre dashpot. The smoothed friction step acts on the wheel
+    like a dashpot of F / COULOMB_SMOOTHING_M_S near zero velocity: 207 N on a motorcycle's wheel at 2 ms is
+    |λ|·dt of about 5, beyond RK4's stability, and the simulated wheel chattered at every velocity zero (on
+    an independent recording with 207 N of friction the friction model's gap was 2.2x the model's without
+    it although its equations fitted 12% better)."""
+    vehicle = model.vehicle
+    sprung_share_kg = model.sprung_mass_kg / (2 if vehicle.is_axle else 1)
+    unsprung_kg = float(vehicle.unsprung_mass_kg(model.sprung_mass_kg))
+    rate = max(
+        decay_rate_per_s(
+            steepest_slope_Ns_per_m(curve.velocity_m_s, curve.force_N),
+            model.value("coulomb_friction_N"),
+            model.value("tyre_dashpot_Ns_per_m"),
+            sprung_share_kg,
+            unsprung_kg,
+        )
+        for curve in model.curves
+    )
+    return runge_kutta_substeps(rate, sample_time_s)
 
 
 def simulate_models(
@@ -199,7 +200,9 @@ def _simulate(
             + np.array([m.value("anti_roll_bar_N_per_m") for m in models]),
         )
     with np.errstate(over="ignore", invalid="ignore"):  # an unstable model is reported as a diverged gap
-        states = integrate_compiled(physics, state0, dt / steps, _finer(plate, steps), _finer(rate, steps))
+        states = integrate_compiled(
+            physics, state0, dt / steps, sample_substeps(plate, steps), sample_substeps(rate, steps)
+        )
         states = states[::steps]
         outputs = physics.outputs(np.moveaxis(states, 0, 1))
     predicted: dict[str, np.ndarray] = {}

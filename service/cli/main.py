@@ -9,56 +9,58 @@ anything else is a bug, exit code 1 with its traceback in a log file the message
 from __future__ import annotations
 
 import argparse
+import importlib
 import sys
 from collections.abc import Sequence
+from types import ModuleType
 
-from service.cli import (
-    db,
-    devices,
-    diagnose,
-    export,
-    history,
-    identify,
-    reanalyse,
-    serve,
-    simulate,
-    sweep,
-    validate,
-    verify,
-)
 from service.cli.errors import run_command
 
-MODULES = (
-    simulate,
-    identify,
-    diagnose,
-    validate,
-    devices,
-    sweep,
-    export,
-    serve,
-    db,
-    history,
-    verify,
-    reanalyse,
-)
+COMMAND_MODULES: dict[str, str] = {
+    "simulate": "simulate",
+    "identify": "identify",
+    "fit-tanh": "identify",
+    "demo": "identify",
+    "diagnose": "diagnose",
+    "validate": "validate",
+    "sim-devices": "devices",
+    "probe": "devices",
+    "sweep": "sweep",
+    "export": "export",
+    "serve": "serve",
+    "db": "db",
+    "history": "history",
+    "verify": "verify",
+    "reanalyse": "reanalyse",
+}
+"""Each command and the module under service/cli that registers it, in `--help`'s order. A command line
+that names a command imports and registers only that module: all twelve parsers cost a whole `identify`
+about 30 ms of its ~190 ms (tests/service/test_cli_lazy_imports.py checks the table against the parsers)."""
 
 
-def build_parser() -> argparse.ArgumentParser:
+def _modules(names: Sequence[str]) -> list[ModuleType]:
+    unique = dict.fromkeys(names)
+    return [importlib.import_module(f"service.cli.{name}") for name in unique]
+
+
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The `shockbench` parser with every command, or with only `command`'s module when it is a known one."""
     parser = argparse.ArgumentParser(
         prog="shockbench",
         description="On-vehicle shock absorber test bench: identify the damper force-velocity curve "
         "from laser displacement measurements.",
     )
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    for module in MODULES:
+    names = [COMMAND_MODULES[command]] if command in COMMAND_MODULES else list(COMMAND_MODULES.values())
+    for module in _modules(names):
         module.register(sub)
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
+    arguments = list(sys.argv[1:] if argv is None else argv)
+    parser = build_parser(arguments[0] if arguments else None)
+    args = parser.parse_args(arguments)
     return run_command(args.command, lambda: args.handler(args))
 
 

@@ -96,7 +96,7 @@ class Vehicle:
 
     def stated(self, theta_reference_s: float) -> dict[str, float | str]:
         """The vehicle file, as [vehicle] keys: what the test is told, errors included. ϑ is referred to
-        the sample time theta_reference_s (the project's README at the time of writing: the recording's)."""
+        the sample time theta_reference_s (the README: 1 ms, whatever the recording's rate)."""
         corner = self.corners[0]
         relaxation = corner.maxwell_relaxation_s
         stated: dict[str, float | str] = {

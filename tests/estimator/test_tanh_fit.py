@@ -4,38 +4,16 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from paper_tables import TABLE_2_FORCE_N
 
 from estimator.damper import TanhCurve
 from estimator.tanh_fit import fit_tanh
-
-PAPER_TABLE_2_MAXWELL_N = [
-    -196.8,
-    -208.6,
-    -186.0,
-    -141.8,
-    -135.6,
-    -108.8,
-    -80.4,
-    -63.2,
-    -61.6,
-    0,
-    92.8,
-    129.6,
-    170.8,
-    228.2,
-    326.8,
-    401.0,
-    497.8,
-    618.4,
-    746.2,
-    920.4,
-]
 
 
 def test_paper_table_2_outlier_is_flagged() -> None:
     """Table 2's constant-stiffness column has 10 821.8 N where about 1 082 N fits; planted in the Maxwell
     column's last point it must be the only one flagged."""
-    force = np.array(PAPER_TABLE_2_MAXWELL_N)
+    force = np.array(TABLE_2_FORCE_N["maxwell"])
     force[-1] = 10821.8
     fit = fit_tanh(np.linspace(-1.0, 1.0, 20), force)
     assert fit.outliers == [19]

@@ -8,7 +8,6 @@ from pathlib import Path
 
 import pytest
 
-from service.cli import diagnose as diagnose_command
 from service.cli import main as main_module
 
 PNG = b"\x89PNG\r\n\x1a\n"
@@ -20,10 +19,8 @@ def files(plate_offset_files: Path) -> Path:
 
 
 @pytest.fixture
-def cli(monkeypatch: pytest.MonkeyPatch):
-    """shockbench's main() with the diagnose subcommand registered."""
-    if diagnose_command not in main_module.MODULES:
-        monkeypatch.setattr(main_module, "MODULES", (*main_module.MODULES, diagnose_command))
+def cli():
+    """shockbench's main()."""
     return main_module.main
 
 

@@ -6,6 +6,7 @@ benchmarks/bench_kernel.py, not here.
 
 from __future__ import annotations
 
+import argparse
 import json
 import subprocess
 import sys
@@ -52,9 +53,35 @@ def _modules_after(argv: list[str]) -> set[str]:
 )
 def test_help_imports_no_heavy_module(argv: list[str]) -> None:
     modules = _modules_after(argv)
-    assert {"service.cli.identify", "service.cli.diagnose", "service.cli.reanalyse"} <= modules  # registered
+    registered = {"service.cli.identify", "service.cli.diagnose", "service.cli.reanalyse"}
+    assert (registered <= modules) if argv == ["--help"] else (f"service.cli.{argv[0]}" in modules)
     heavy = sorted(m for m in modules if any(m == h or m.startswith(h + ".") for h in HEAVY))
     assert heavy == [], f"shockbench {' '.join(argv)} imports {heavy[:10]}"
+
+
+def test_the_command_table_names_every_parser() -> None:
+    """main.COMMAND_MODULES (which module to import for a command) is what the modules register, in order."""
+    from service.cli import main
+
+    parser = main.build_parser()
+    commands = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction)).choices
+    assert list(commands) == list(main.COMMAND_MODULES)
+    for command, module in main.COMMAND_MODULES.items():
+        alone = main.build_parser(command)
+        sub = next(a for a in alone._actions if isinstance(a, argparse._SubParsersAction))
+        assert set(sub.choices) == {c for c, m in main.COMMAND_MODULES.items() if m == module}
+
+
+def test_a_command_registers_only_its_own_module() -> None:
+    modules = _modules_after(["identify", "--help"])
+    assert "service.cli.identify" in modules
+    others = sorted(
+        m
+        for m in modules
+        if m.startswith("service.cli.")
+        and m.split(".")[2] in {"serve", "reanalyse", "diagnose", "db", "sweep"}
+    )
+    assert others == []
 
 
 def test_a_command_still_imports_what_it_needs() -> None:
