@@ -62,30 +62,31 @@ class Judging:
     ) -> tuple[EffectInstance, float] | None:
         """After the last round, a candidate the equations demand but the gap cannot confirm because the gap
         is mostly what a complete model leaves too (the curve's discretisation): strong in the equations
-        (strong_in_equations), with it the objective at most that of the complete models re-identified for
-        the expected gap (residual ratio times its objective ratio at most 1: it explains all the equations
-        lack), and its gap at or below the expected gap or below the current model's (the output does not
-        contradict it). Candidates measured against a base of their own (coulomb_friction, fits.bases) are
-        not: their objective ratio is not against the current model. Independent world (held-out draws,
-        valve dampers, 2 ms or no lift-off): tyre rate ×0.78, ×0.75 and spring rate ×0.78 found right
-        (+28.1%, +33.6%, +26.7%) with objective 0.49-0.59 on all samples and held out, but the gap moved by
-        -4% to +8%, at the expected 277-364 µm; the final model's residual ratio 1.43-1.95. Channel delays
-        of 1.1-3.4 ms found within 2% (objective 0.19-0.49, correlation 0.90-0.99, residual ratio 1.9-3.1
-        before, 0.6-1.0 with it) whose gap fell 11-19%, to 0.8-1.3 times the expected gap; a lift-off of
-        1.4% with a bump stop named (objective 0.85, gap -5%) and a bump stop with a lift-off named
-        (objective 0.73, gap -5%), both at 1.06-1.26 times the expected gap. On clean recordings no
-        physically possible candidate was strong in the last round; on recordings with an effect outside the
-        catalog the strong ones (delays, bump stops, rates standing in for it) left 1.6-9 times a complete
-        model's residual. The candidate and its share of a complete model's objective, or None."""
+        (strong_in_equations), with it the objective at most that of the complete models re-identified for the
+        expected gap (residual ratio times its objective ratio at most 1: it explains all the equations lack),
+        and its gap at or below the expected gap or not above the current model's beyond tie_tolerance (the
+        output does not contradict it). Candidates measured against a base of their own (coulomb_friction,
+        fits.bases) are not: their objective ratio is not against the current model. Independent world
+        (held-out draws, valve dampers, 2 ms or no lift-off): tyre rate ×0.78, ×0.75 and spring rate ×0.78
+        found right (+28.1%, +33.6%, +26.7%) with objective 0.49-0.59 on all samples and held out, but the gap
+        moved by -4% to +8%, at the expected 277-364 µm; the final model's residual ratio 1.43-1.95. Channel
+        delays of 1.1-3.4 ms found within 2% (objective 0.19-0.49, correlation 0.90-0.99, residual ratio
+        1.9-3.1 before, 0.6-1.0 with it) whose gap fell 11-19%, to 0.8-1.3 times the expected gap, and one of
+        1.59 ms (objective 0.43) whose gap rose 0.9%, to 1.05 times it; a lift-off of 1.4% with a bump stop
+        named (objective 0.85, gap -5%) and a bump stop with a lift-off named (objective 0.73, gap -5%), both
+        at 1.06-1.26 times the expected gap. On clean recordings no physically possible candidate was strong
+        in the last round; on recordings with an effect outside the catalog the strong ones (delays, bump
+        stops, rates standing in for it) left 1.6-9 times a complete model's residual. The candidate and its
+        share of a complete model's objective, or None."""
         if not np.isfinite(expected) or not np.isfinite(residual_ratio) or state.simulated is None:
             return None
-        current_gap_m = state.simulated.gap_m
+        no_worse_m = state.simulated.gap_m * (1.0 + self.options.tie_tolerance)
         shares = {
             i: residual_ratio * played.fits.ratios[i]
             for i in played.fits.kept
             if i not in played.fits.bases
             and self.strong_in_equations(i, played)
-            and (played.gaps[i] <= expected or played.gaps[i] < current_gap_m)
+            and played.gaps[i] <= max(expected, no_worse_m)
             and residual_ratio * played.fits.ratios[i] <= 1.0
         }
         if not shares:
