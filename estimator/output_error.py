@@ -134,7 +134,9 @@ def _substeps(model: IdentifiedModel, curves: tuple[object, ...], sample_time_s:
     steepest damper segment (over every column of a population), a Kelvin-Voigt tyre's damping."""
     vehicle = model.vehicle
     sprung_share_kg = model.sprung_mass_kg / (2 if vehicle.is_axle else 1)
-    dashpot = model.tyre_damping_Ns_per_m if model.tyre_model is TyreModel.KELVIN_VOIGT else 0.0
+    kelvin_voigt = model.tyre_model is TyreModel.KELVIN_VOIGT
+    # a population (the output-error refinement) carries one tyre damping per column
+    dashpot = float(np.max(np.abs(model.tyre_damping_Ns_per_m))) if kelvin_voigt else 0.0
     slope = max(steepest_slope_Ns_per_m(c.velocity_m_s, c.force_N) for c in curves)  # type: ignore[attr-defined]
     rate = decay_rate_per_s(slope, 0.0, dashpot, sprung_share_kg, model.unsprung_mass_kg)
     return runge_kutta_substeps(rate, sample_time_s)

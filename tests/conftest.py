@@ -41,17 +41,29 @@ def hit_rate():
     return report_case
 
 
-@pytest.fixture(scope="session")
-def postgres() -> Iterator[PostgresServer]:
-    """A real PostgreSQL server for the session (tests/pg_server.py). Skipped when Debian's postgresql is
-    not installed, except in CI (the environment variable CI set), where .ci/run installs it and a missing
-    server fails."""
+def postgres_bindir() -> Path:
+    """Debian's PostgreSQL binaries; the test is skipped without them, except in CI (the environment
+    variable CI set), where .ci/run installs them and a missing one fails."""
     bindir = find_bindir()
     if bindir is None:
         if os.environ.get(CI_NEEDS_POSTGRES):
             pytest.fail("PostgreSQL binaries (Debian's postgresql) not found, and CI needs them")
         pytest.skip("PostgreSQL binaries not found (apt-get install postgresql)")
-    with PostgresServer(bindir) as server:
+    return bindir
+
+
+@pytest.fixture(scope="session")
+def postgres() -> Iterator[PostgresServer]:
+    """A real PostgreSQL server for the session (tests/pg_server.py; see postgres_bindir)."""
+    with PostgresServer(postgres_bindir()) as server:
+        yield server
+
+
+@pytest.fixture
+def own_postgres() -> Iterator[PostgresServer]:
+    """A real PostgreSQL server of this test's own, which it may stop and start (PostgresServer.stop,
+    .start) without disturbing the session's."""
+    with PostgresServer(postgres_bindir()) as server:
         yield server
 
 

@@ -65,15 +65,36 @@ class PostgresServer:
         if self._as_root:
             shutil.chown(self.folder, "postgres", "postgres")
         self._run("initdb", "-D", str(self.data), "-U", "postgres", "-A", "trust", "-E", "UTF8", "--no-sync")
+        self.start()
+        return self
+
+    def start(self) -> None:
+        """Start the server (again, after `stop`) on its port; returns once it accepts connections."""
         options = f"-p {self.port} -k {self.folder} -c listen_addresses=127.0.0.1 -c fsync=off"
         self._run(
             "pg_ctl", "-D", str(self.data), "-o", options, "-l", str(self.folder / "log"), "-w", "start"
         )
-        return self
+
+    def stop(self) -> None:
+        """Stop the server at once (immediate mode: open connections are cut, as by a crash or a network
+        failure); returns once it is down. Its databases come back with `start`."""
+        self._run("pg_ctl", "-D", str(self.data), "-m", "immediate", "-w", "stop")
+
+    def running(self) -> bool:
+        """Whether the server runs now (pg_ctl status: 0 running, 3 not)."""
+        try:
+            self._run("pg_ctl", "-D", str(self.data), "status")
+        except RuntimeError:
+            return False
+        return True
+
+    def _dsn(self, database: str = "postgres") -> str:
+        return f"host=127.0.0.1 port={self.port} user=postgres dbname={database} connect_timeout=5"
 
     def __exit__(self, *_exc: object) -> None:
         try:
-            self._run("pg_ctl", "-D", str(self.data), "-m", "immediate", "-w", "stop")
+            if self.running():
+                self.stop()
         finally:
             shutil.rmtree(self.folder, ignore_errors=True)
 
@@ -83,8 +104,6 @@ class PostgresServer:
     def new_database(self) -> str:
         """A new, empty database on this server; its SQLAlchemy URL (psycopg 3)."""
         name = f"test_{next(self._names)}"
-        with psycopg.connect(
-            f"host=127.0.0.1 port={self.port} user=postgres dbname=postgres", autocommit=True
-        ) as c:
+        with psycopg.connect(self._dsn(), autocommit=True) as c:
             c.execute(f'CREATE DATABASE "{name}"')
         return self.url(name)

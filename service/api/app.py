@@ -21,6 +21,7 @@ from pathlib import Path
 from fastapi import APIRouter, FastAPI
 
 from service.access import KeyRing
+from service.api.central_sync import SyncAgent
 from service.api.contract import install_contract
 from service.api.errors import install_error_handlers
 from service.api.input_check import CHECKER
@@ -72,6 +73,8 @@ class Services:
     """Scheduled inspection-line tests."""
     scheduler: InspectionScheduler | None = None
     """Runs the scheduled tests on the bench (None without a bench)."""
+    sync: SyncAgent | None = None
+    """Pushes the local store to the central database (None without a local store: settings.central_url)."""
 
     def wake_scheduler(self) -> None:
         """Something changed (a test submitted, a sweep ended): let the scheduler look now. Any thread."""
@@ -130,7 +133,7 @@ def lifespan_factory(settings: ServiceSettings) -> Lifespan:
             for folder in (settings.data_dir, settings.jobs_dir, settings.uploads_dir):
                 folder.mkdir(parents=True, exist_ok=True)
             settings.keys.fingerprint_secret = fingerprint_secret(settings.data_dir)
-            database = Database(settings.resolved_database_url)
+            database = Database(settings.resolved_database_url, outbox=settings.central_url is not None)
             database.upgrade_schema()
             return database
 
@@ -148,6 +151,7 @@ def lifespan_factory(settings: ServiceSettings) -> Lifespan:
             log.warning("sweeps %s were cut off by a restart; marked failed", failed_sweeps)
         manager = JobManager(store, settings.worker, completing=verdict_of(settings.verdict))
         tests = ScheduleStore(database, lane=settings.lane)
+        sync = SyncAgent(database, Database(settings.central_url)) if settings.central_url else None
         scheduler = None
         if bench is not None:
             scheduler = InspectionScheduler(settings, bench, tests, sweep_store, store, manager)
@@ -164,10 +168,13 @@ def lifespan_factory(settings: ServiceSettings) -> Lifespan:
             bench=bench,
             tests=tests,
             scheduler=scheduler,
+            sync=sync,
         )
         try:
             await asyncio.to_thread(CHECKER.start)
             await manager.start()
+            if sync is not None:
+                await sync.start()
             if scheduler is not None:
                 await scheduler.start()
             log.info("shockbench service up; database %s, data in %s", database.safe_url, settings.data_dir)
@@ -178,6 +185,9 @@ def lifespan_factory(settings: ServiceSettings) -> Lifespan:
             if bench is not None:
                 await asyncio.to_thread(bench.close)  # a running sweep ends (and is stored) first
             await manager.stop()
+            if sync is not None:
+                await sync.stop()  # after the manager: a job it ended is in the outbox, pushed next start
+                sync.central.dispose()
             await asyncio.to_thread(CHECKER.close)
             database.dispose()
 

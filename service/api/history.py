@@ -12,6 +12,7 @@ from datetime import datetime
 from typing import Any
 
 from pydantic import BaseModel, Field
+from sqlalchemy.exc import SQLAlchemyError
 
 from estimator.trend import REFERENCE_VELOCITIES_M_S, Curve, damping_trend
 from service.api.results import AxleInspectionOut, InspectionOut, ModelCurveOut, VerdictOut
@@ -78,6 +79,11 @@ class VehicleHistoryOut(BaseModel):
     vehicle_id: str = Field(description="as asked (tests match it without regard to case)")
     tests: list[VehicleTestOut] = Field(description="every test of the vehicle, all lanes, newest first")
     trend: TrendOut
+    other_lanes_missing: bool = Field(
+        False,
+        description="true: this lane keeps a local store and its central database did not answer, so "
+        "only this lane's tests are listed",
+    )
 
 
 def _curves(result: dict[str, Any]) -> list[ModelCurveOut]:
@@ -131,8 +137,28 @@ def trend_out(tests: list[VehicleTestOut]) -> TrendOut:
     return TrendOut(reference_velocities_m_s=list(REFERENCE_VELOCITIES_M_S), corners=corners)
 
 
-def vehicle_history(database: Database, vehicle_id: str) -> VehicleHistoryOut:
+def vehicle_history(
+    database: Database, vehicle_id: str, central: Database | None = None, lane: str = ""
+) -> VehicleHistoryOut:
     """Every test of `vehicle_id` in the database, and the trend. Blocking (database): call it in a
-    thread from async code."""
-    tests = [vehicle_test_out(t) for t in vehicle_tests(database, vehicle_id)]
-    return VehicleHistoryOut(vehicle_id=vehicle_id, tests=tests, trend=trend_out(tests))
+    thread from async code.
+
+    With `central` (a lane that keeps a local store, service.store.sync): `lane`'s tests from the local
+    store (their ids are the lane's, current even before they are synced) and every other lane's from the
+    central database (its ids), merged newest first; when the central database does not answer, the
+    lane's own, saying so (`other_lanes_missing`)."""
+    if central is None:
+        found = vehicle_tests(database, vehicle_id)
+        missing = False
+    else:
+        found = vehicle_tests(database, vehicle_id, lane=lane)
+        try:
+            found += vehicle_tests(central, vehicle_id, other_than=lane)
+            missing = False
+        except SQLAlchemyError:
+            missing = True
+        found.sort(key=lambda test: test.sweep.created_at, reverse=True)  # stable: the lane's first on a tie
+    tests = [vehicle_test_out(t) for t in found]
+    return VehicleHistoryOut(
+        vehicle_id=vehicle_id, tests=tests, trend=trend_out(tests), other_lanes_missing=missing
+    )

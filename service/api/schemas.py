@@ -324,6 +324,21 @@ class CurrentJobOut(BaseModel):
     progress: ProgressOut | None
 
 
+class SyncOut(BaseModel):
+    """The lane's local store and its sync to the central database (serve --database without
+    --shared-queue)."""
+
+    central: str = Field(description="the central database's URL, password hidden")
+    reachable: bool | None = Field(
+        description="the central database answered the last sync round (null: none yet)"
+    )
+    backlog: int = Field(description="finished sweeps and jobs not yet on the central database")
+    oldest_pending: datetime | None = Field(description="when the oldest of them finished (UTC)")
+    last_error: str | None = Field(description="why the last round did not finish its work, in one line")
+    last_contact: datetime | None = Field(description="when a round last reached the central database")
+    pushed: int = Field(description="sweeps and jobs pushed since the service started")
+
+
 class StatusOut(BaseModel):
     service: str = "shockbench"
     version: str
@@ -333,3 +348,6 @@ class StatusOut(BaseModel):
     queue_length: int = Field(description="jobs waiting for the worker")
     current_job: CurrentJobOut | None
     bench: BenchOut | None = Field(None, description="the bench at a glance (null: the service has none)")
+    sync: SyncOut | None = Field(
+        None, description="the sync of the lane's local store to the central database (null: no local store)"
+    )

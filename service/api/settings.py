@@ -27,7 +27,11 @@ class ServiceSettings:
     otherwise."""
     keys: KeyRing
     database_url: str | None = None
-    """Any SQLAlchemy URL; None: SQLite in data_dir."""
+    """Any SQLAlchemy URL; None: SQLite in data_dir. With `local_store`, the central database."""
+    local_store: bool = False
+    """Run on a local store (SQLite in data_dir) and sync finished sweeps and jobs to `database_url`, the
+    central database, when it is reachable (service.store.sync; `serve --database` without
+    `--shared-queue`)."""
     bench_config: Path | None = None
     """Bench configuration (TOML), for the acquisition layer."""
     simulated: bool = False
@@ -47,7 +51,15 @@ class ServiceSettings:
 
     @property
     def resolved_database_url(self) -> str:
-        return self.database_url or default_database_url(self.data_dir)
+        """The database the service runs on: the local store, else `database_url`."""
+        if self.local_store or not self.database_url:
+            return default_database_url(self.data_dir)
+        return self.database_url
+
+    @property
+    def central_url(self) -> str | None:
+        """The central database the local store is synced to; None without a local store."""
+        return self.database_url if self.local_store else None
 
     @property
     def jobs_dir(self) -> Path:

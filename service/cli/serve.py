@@ -1,8 +1,8 @@
 """`shockbench serve`: run the bench service (FastAPI under uvicorn, with its worker process).
 
     shockbench serve [--config BENCH.toml] [--simulated] [--host H] [--port P] [--keys KEYS.toml]
-                     [--data DIR] [--database URL] [--max-upload-mb N] [--max-streams-per-key N]
-                     [--body-timeout-s S]
+                     [--data DIR] [--database URL [--shared-queue] [--require-database]]
+                     [--max-upload-mb N] [--max-streams-per-key N] [--body-timeout-s S]
 
 Listens on loopback by default; any other address needs a keys file. Without a keys file an operator key
 is generated and printed at start-up (as Jupyter prints its token). Port 0 takes a free port; the line
@@ -54,6 +54,9 @@ def run_serve(args: argparse.Namespace) -> int:
         raise CliError("--max-streams-per-key must be at least 1")
     if args.body_timeout_s is not None and not 0 < args.body_timeout_s <= 3600:
         raise CliError("--body-timeout-s must lie in (0, 3600]")
+    for flag, given in (("--shared-queue", args.shared_queue), ("--require-database", args.require_database)):
+        if given and args.database is None:
+            raise CliError(f"{flag} needs --database URL (the central database)")
     import logging
 
     from service.access import KeyRing, load_keys  # here, not at the top: every command imports this module
@@ -82,6 +85,7 @@ def run_serve(args: argparse.Namespace) -> int:
         data_dir=Path(args.data).resolve(),
         keys=keys,
         database_url=args.database,
+        local_store=args.database is not None and not args.shared_queue,
         bench_config=Path(args.config).resolve() if args.config else None,
         simulated=args.simulated,
         max_upload_bytes=int(args.max_upload_mb * 2**20),
@@ -90,6 +94,7 @@ def run_serve(args: argparse.Namespace) -> int:
         **({"verdict": verdict} if verdict is not None else {}),  # type: ignore[arg-type]
         **({"lane": args.lane} if args.lane else {}),  # type: ignore[arg-type]
     )
+    central_note = reach_central(settings.central_url, args.require_database)
     database = Database(settings.resolved_database_url)  # a bad URL or an unreachable server: one line now
     try:
         database.upgrade_schema()
@@ -107,6 +112,8 @@ def run_serve(args: argparse.Namespace) -> int:
         f"database {database.safe_url}",
         flush=True,
     )
+    if central_note is not None:
+        print(f"shockbench serve: {central_note}", flush=True)
     if generated_key is not None:
         print(
             "shockbench serve: no keys file, so this operator key was generated for this run; send it as "
@@ -117,6 +124,30 @@ def run_serve(args: argparse.Namespace) -> int:
     with contextlib.suppress(KeyboardInterrupt):  # uvicorn stops gracefully on Ctrl-C, then re-raises it
         server.run(sockets=[sock])
     return 0 if server.started else EXIT_FAILED
+
+
+def reach_central(url: str | None, required: bool) -> str | None:
+    """With a local store: bring the central database's schema up to date now if it answers, and say in
+    one line what the lane does (None without a local store). Unreachable: a CliError when `required`
+    (--require-database), else the lane starts on its local store. A bad URL, or a central schema newer
+    than this shockbench knows, is refused (one line) either way."""
+    if url is None:
+        return None
+    from service.store.database import Database, DatabaseError
+
+    central = Database(url)
+    try:
+        central.upgrade_schema()
+    except DatabaseError as exc:
+        if required:
+            raise CliError(f"{exc} (--require-database: not starting without it)") from None
+        return (
+            f"central {exc}; the lane starts on its local store and syncs to the central database when "
+            "it is reachable"
+        )
+    finally:
+        central.dispose()
+    return f"local store in the data directory, synced to the central database {central.safe_url}"
 
 
 def load_verdict_thresholds(path: Path) -> VerdictThresholds:
@@ -174,7 +205,24 @@ def register(sub: argparse._SubParsersAction) -> None:
         "own (default: the host name)",
     )
     p.add_argument("--data", default="shockbench-data", help="data directory (default ./shockbench-data)")
-    p.add_argument("--database", default=None, help="SQLAlchemy URL (default: SQLite in the data directory)")
+    p.add_argument(
+        "--database",
+        default=None,
+        help="the central database, an SQLAlchemy URL: the lane runs on a local store (SQLite in the data "
+        "directory) and syncs its finished sweeps and jobs there when it is reachable (default: no central "
+        "database, SQLite in the data directory)",
+    )
+    p.add_argument(
+        "--shared-queue",
+        action="store_true",
+        help="run on the --database itself, no local store: jobs go to the queue all instances share, and "
+        "the central database must stay up",
+    )
+    p.add_argument(
+        "--require-database",
+        action="store_true",
+        help="refuse to start (exit 2) when the --database cannot be reached",
+    )
     p.add_argument("--max-upload-mb", type=float, default=64.0, help="upload size limit in MiB (default 64)")
     p.add_argument(
         "--max-streams-per-key",

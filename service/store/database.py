@@ -21,6 +21,18 @@ from sqlalchemy.orm import Session, sessionmaker
 from estimator.errors import UserError
 
 DATABASE_FILE = "shockbench.sqlite3"
+CONNECT_TIMEOUT_S = 10
+"""A PostgreSQL server that does not answer a connection within this long counts as unreachable."""
+POSTGRES_LIVENESS = {
+    "keepalives": 1,
+    "keepalives_idle": 10,
+    "keepalives_interval": 5,
+    "keepalives_count": 3,
+    "tcp_user_timeout": 30_000,
+}
+"""libpq's TCP keepalives (s) and unacknowledged-data limit (ms): a server cut off without closing the
+connection (network down, not stopped) is noticed in about half a minute instead of the system's hours,
+so that a lane's sync (service.api.central_sync) reports it away rather than waiting on it."""
 
 
 class DatabaseError(UserError, ValueError):
@@ -43,7 +55,10 @@ class Database:
     """Engine plus session factory. Sessions are short (one unit of work each) and may be used from any
     thread; the API calls them from worker threads, never holding one across an await."""
 
-    def __init__(self, url: str) -> None:
+    def __init__(self, url: str, *, outbox: bool = False) -> None:
+        """outbox: this is a lane's local store; its stores queue every finished sweep and job for the
+        central database (service.store.outbox, service.store.sync)."""
+        self.outbox = outbox
         try:
             parsed: URL = make_url(url)
         except ArgumentError:
@@ -54,6 +69,14 @@ class Database:
             if parsed.database and parsed.database != ":memory:":
                 Path(parsed.database).parent.mkdir(parents=True, exist_ok=True)
             kwargs["connect_args"] = {"check_same_thread": False, "timeout": 30}
+        else:
+            # a server that went away and came back: stale pooled connections are replaced, not used
+            kwargs["pool_pre_ping"] = True
+            if parsed.get_backend_name() == "postgresql":
+                defaults = {**POSTGRES_LIVENESS, "connect_timeout": CONNECT_TIMEOUT_S}
+                kwargs["connect_args"] = {
+                    k: v for k, v in defaults.items() if k not in parsed.query
+                }  # URL wins
         try:
             self.engine: Engine = create_engine(parsed, **kwargs)
         except (NoSuchModuleError, ModuleNotFoundError, ArgumentError) as exc:

@@ -25,9 +25,12 @@ class VehicleTest:
     """The identification's result hash in its lane's chain (service.store.result_chain)."""
 
 
-def vehicle_tests(database: Database, vehicle_id: str) -> list[VehicleTest]:
-    """Every sweep whose settings name `vehicle_id` (without regard to case), of every lane, newest first
-    (by the time it was requested, then id), joined with its newest succeeded identify job."""
+def vehicle_tests(
+    database: Database, vehicle_id: str, *, lane: str | None = None, other_than: str | None = None
+) -> list[VehicleTest]:
+    """Every sweep whose settings name `vehicle_id` (without regard to case), of every lane (or only of
+    `lane`, or of every lane but `other_than`), newest first (by the time it was requested, then id), joined
+    with its newest succeeded identify job."""
     newest = (
         select(JobRow.sweep_id.label("sweep_id"), func.max(JobRow.id).label("job_id"))
         .where(
@@ -46,6 +49,10 @@ def vehicle_tests(database: Database, vehicle_id: str) -> list[VehicleTest]:
         .outerjoin(ResultChainRow, ResultChainRow.job_id == JobRow.id)
         .order_by(SweepRow.created_at.desc(), SweepRow.id.desc())
     )
+    if lane is not None:
+        query = query.where(SweepRow.lane == lane)
+    if other_than is not None:
+        query = query.where(SweepRow.lane != other_than)
     with database.sessions() as session:
         return [
             VehicleTest(SweepRecord.of(sweep), JobRecord.of(job) if job is not None else None, digest)

@@ -27,6 +27,7 @@ from sqlalchemy import func, or_, select, update
 from service.store.database import Database
 from service.store.jobs import RESTART_REASON, JobRecord
 from service.store.models import JobRow, JobStatus, utcnow
+from service.store.outbox import JOB, queue_finished
 
 DEFAULT_LEASE_S = 30.0
 """A claim not renewed for this long is taken to be dead (the renewal comes every third of it)."""
@@ -158,6 +159,7 @@ class JobQueue:
                     .where(JobRow.id.in_(spent), running)
                     .values(status=JobStatus.FAILED.value, error=RESTART_REASON, finished_at=utcnow())
                 )
+                queue_finished(self.db, session, JOB, spent)
             if again:
                 session.execute(
                     update(JobRow)

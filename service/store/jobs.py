@@ -18,6 +18,7 @@ from sqlalchemy.orm import Session
 
 from service.store.database import Database
 from service.store.models import JobRow, JobStatus, utcnow
+from service.store.outbox import JOB, queue_finished
 from service.store.result_chain import append_link
 
 RESTART_REASON = "its service stopped each time it ran"
@@ -193,6 +194,8 @@ class JobStore:
             done = session.execute(update(JobRow).where(*where).values(**values))
             if done.rowcount == 1 and then is not None:
                 then(session, job_id)
+            if done.rowcount == 1 and JobStatus(values.get("status", JobStatus.RUNNING)).finished:
+                queue_finished(self.db, session, JOB, [job_id])
             return done.rowcount == 1
 
     def mark_running(self, job_id: int, owner: str | None = None) -> bool:

@@ -7,6 +7,7 @@ values. Timestamps are UTC; SQLite forgets the zone, so `UTCDateTime` puts it ba
 
 from __future__ import annotations
 
+import uuid
 from datetime import UTC, datetime
 from enum import StrEnum
 from typing import Any
@@ -30,6 +31,12 @@ from sqlalchemy.types import TypeDecorator
 
 def utcnow() -> datetime:
     return datetime.now(UTC)
+
+
+def new_uid() -> str:
+    """A row's global identity (service.store.sync): a random UUID, the same in a lane's local store and
+    in the central database, where the row's integer id differs."""
+    return str(uuid.uuid4())
 
 
 class UTCDateTime(TypeDecorator[datetime]):
@@ -91,9 +98,15 @@ class SweepRow(Base):
     """A sweep on the bench (filled in by the acquisition layer). The recording stays in its file."""
 
     __tablename__ = "sweeps"
-    __table_args__ = (Index("ix_sweeps_lane", "lane"), {"sqlite_autoincrement": True})  # ids never reused
+    __table_args__ = (
+        Index("ix_sweeps_lane", "lane"),
+        Index("uq_sweeps_uid", "uid", unique=True),
+        {"sqlite_autoincrement": True},  # ids never reused
+    )
 
     id: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=True)
+    uid: Mapped[str | None] = mapped_column(String(36), default=new_uid)
+    """Global identity: the same in the lane's local store and the central database (service.store.sync)."""
     bench: Mapped[str] = mapped_column(String(100), default="default")
     lane: Mapped[str] = mapped_column(String(100), default="", server_default="")
     """The lane (`serve --lane`) whose bench ran it; "" for rows from before lanes."""
@@ -121,11 +134,17 @@ class JobRow(Base):
     __table_args__ = (
         Index("ix_jobs_status", "status"),
         Index("ix_jobs_lane", "lane"),
+        Index("uq_jobs_uid", "uid", unique=True),
         {"sqlite_autoincrement": True},
     )
 
     id: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=True)
     """Increasing: the submission order, which is the order jobs run in (FIFO)."""
+    uid: Mapped[str | None] = mapped_column(String(36), default=new_uid)
+    """Global identity: the same in the lane's local store and the central database (service.store.sync)."""
+    origin_id: Mapped[int | None] = mapped_column(Integer, default=None)
+    """On the central database, a job synced from a lane's local store: its id there, which its result
+    chain link hashes (service.store.result_chain); None for a job stored where it was submitted."""
     lane: Mapped[str] = mapped_column(String(100), default="", server_default="")
     """The lane it was submitted on; "" for rows from before lanes."""
     kind: Mapped[str] = mapped_column(String(16), default=JobKind.IDENTIFY.value)
@@ -208,4 +227,19 @@ class ResultChainRow(Base):
     """The lane's previous link's hash; 64 zeros for its first."""
     hash: Mapped[str] = mapped_column(String(64))
     """sha256 (hex) of the canonical record (service.store.result_chain.link_hash)."""
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+
+
+class SyncOutboxRow(Base):
+    """A lane's local store: a finished sweep or job waiting to be pushed to the central database, in the
+    order of `seq` (service.store.sync). Empty and unused elsewhere."""
+
+    __tablename__ = "sync_outbox"
+    __table_args__ = ({"sqlite_autoincrement": True},)
+
+    seq: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=True)
+    kind: Mapped[str] = mapped_column(String(16))
+    """"sweep" or "job"."""
+    row_id: Mapped[int] = mapped_column(Integer)
+    """The row's id in the local store."""
     created_at: Mapped[datetime] = mapped_column(default=utcnow)

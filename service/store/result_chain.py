@@ -9,9 +9,11 @@ The hash of a link (`link_hash`) is the sha256, in lowercase hex, of the UTF-8 b
      "options": the job's options, "result": its stored result,
      "finished_at": when it succeeded, ISO 8601 in UTC (datetime.isoformat: 2026-11-25T18:04:55.123456+00:00)}
 
-with the values as the database gives them back. Changing a stored result, its options or kind, moving it to
-another lane, or removing a link changes a hash or breaks the chain; rewriting every later link to hide a
-change needs write access to the whole chain, and the newest hash, exported daily, pins it.
+with the values as the database gives them back; "job_id" is the id the job had in the store where it ran
+(a job synced from a lane's local store to the central database keeps it there as `origin_id`, so its link
+verifies there too). Changing a stored result, its options or kind, moving it to another lane, or removing a
+link changes a hash or breaks the chain; rewriting every later link to hide a change needs write access to
+the whole chain, and the newest hash, exported daily, pins it.
 
 Appending (`append_link`) happens in the transaction that marks the job succeeded (JobStore.succeed), so no
 result is stored without its link. Appends are serialized per lane: on PostgreSQL by a transaction-scoped
@@ -68,7 +70,10 @@ def link_hash(
 
 
 def job_hash(previous_hash: str, job: JobRow) -> str:
-    return link_hash(previous_hash, job.id, job.lane, job.kind, job.options, job.result, job.finished_at)
+    """The link hash of a stored job: `job_id` is the id it has where it ran, its `origin_id` when it was
+    synced from a lane's local store to the central database (service.store.sync), else its own id."""
+    job_id = job.origin_id if job.origin_id is not None else job.id
+    return link_hash(previous_hash, job_id, job.lane, job.kind, job.options, job.result, job.finished_at)
 
 
 def lane_lock_key(lane: str) -> int:

@@ -17,6 +17,7 @@ from sqlalchemy import ColumnElement, func, select, update
 
 from service.store.database import Database
 from service.store.models import SweepRow, SweepStatus, utcnow
+from service.store.outbox import SWEEP, queue_finished
 
 RESTART_REASON = "service restarted while the sweep ran"
 UNFINISHED = (SweepStatus.REQUESTED, SweepStatus.RUNNING)
@@ -141,6 +142,8 @@ class SweepStore:
                 .where(SweepRow.id == sweep_id, SweepRow.status.in_([s.value for s in from_status]))
                 .values(**values)
             )
+            if done.rowcount == 1 and finished(SweepStatus(values.get("status", SweepStatus.RUNNING))):
+                queue_finished(self.db, session, SWEEP, [sweep_id])
             return done.rowcount == 1
 
     def mark_running(self, sweep_id: int) -> bool:
@@ -176,4 +179,5 @@ class SweepStore:
                     .where(SweepRow.id.in_(ids))
                     .values(status=SweepStatus.FAILED.value, reason=reason, finished_at=utcnow())
                 )
+                queue_finished(self.db, session, SWEEP, ids)
             return ids

@@ -20,7 +20,9 @@ LEASE_S = 2.0
 def lanes(tmp_path: Path, postgres: PostgresServer) -> Iterator[tuple[ServeProcess, ServeProcess]]:
     url = postgres.new_database()
     (tmp_path / "keys.toml").write_text(f'operator = ["{KEY}"]\n')
-    common = ("--database", url, "--data", str(tmp_path / "data"), "--keys", str(tmp_path / "keys.toml"))
+    # --shared-queue: both lanes run on the central database itself (no local store), sharing its queue
+    common = ("--database", url, "--shared-queue", "--data", str(tmp_path / "data"))
+    common += ("--keys", str(tmp_path / "keys.toml"))
     north = serve_process(tmp_path, "north", *common, "--lane", "north", "--job-lease-s", str(LEASE_S))
     south = serve_process(tmp_path, "south", *common, "--lane", "south", "--job-lease-s", str(LEASE_S))
     yield north, south

@@ -17,7 +17,7 @@ from service.api.history import vehicle_history
 from service.store.database import Database
 from service.store.history import vehicle_tests
 from service.store.jobs import JobFiles, JobStore
-from service.store.models import JobKind, SweepStatus
+from service.store.models import JobKind, SweepRow, SweepStatus
 from service.store.schema import BASELINE, upgrade
 from service.store.sweeps import SweepStore
 
@@ -145,3 +145,43 @@ def test_the_history_command_names_a_missing_or_old_database(tmp_path: Path) -> 
     refused = shockbench("history", "AB-1", "--database", url)
     assert refused.returncode == 2 and "shockbench db upgrade" in refused.stderr
     assert refused.stderr.strip().count("\n") == 0
+
+
+def test_a_lane_with_a_local_store_lists_its_own_tests_and_the_other_lanes_from_the_central_database(
+    database: Database, tmp_path: Path
+) -> None:
+    central_ids = fill(database, tmp_path)  # north's "first" is there too: synced earlier
+    local = Database(f"sqlite:///{tmp_path / 'local.sqlite3'}", outbox=True)
+    local.upgrade_schema()
+    try:
+        place = lambda i: (tmp_path / f"l{i}.h5", tmp_path / f"l{i}.toml")  # noqa: E731
+        sweeps = SweepStore(local, lane="north")
+        first = sweeps.create("bench", {"vehicle_id": "AB-123"}, place)  # the lane's own copy of "first"
+        newest = sweeps.create("bench", {"vehicle_id": "ab-123"}, place)  # not synced yet
+        for sweep in (first, newest):
+            sweeps.finish(sweep.id, SweepStatus.COMPLETE, complete=True, reason=None)
+        job = run_job(
+            JobStore(local, lane="north"), newest.id, JobKind.IDENTIFY, linear_result(1200.0), tmp_path
+        )
+        with database.sessions() as session:  # the copy was tested when the central "first" was
+            tested = session.scalar(sa.select(SweepRow.created_at).where(SweepRow.id == central_ids["first"]))
+        with local.transaction() as session:
+            session.execute(sa.update(SweepRow).where(SweepRow.id == first.id).values(created_at=tested))
+
+        history = vehicle_history(local, "AB-123", central=database, lane="north")
+        assert [(t.lane, t.sweep_id) for t in history.tests] == [
+            ("north", newest.id),
+            ("south", central_ids["last"]),
+            ("south", central_ids["failed"]),
+            ("north", first.id),
+        ]
+        assert history.tests[0].identification_job_id == job and not history.other_lanes_missing
+        (corner,) = history.trend.corners  # the lane's copy of "first" has no identification here
+        assert [t.sweep_id for t in corner.tests] == [central_ids["last"], newest.id]
+        assert corner.tests[-1].change_percent == pytest.approx([-20.0] * 6)  # 1200 vs 1500 N·s/m
+
+        away = Database("postgresql+psycopg://postgres@127.0.0.1:9/none?connect_timeout=2")
+        alone = vehicle_history(local, "AB-123", central=away, lane="north")
+        assert [t.sweep_id for t in alone.tests] == [newest.id, first.id] and alone.other_lanes_missing
+    finally:
+        local.dispose()

@@ -5,6 +5,7 @@ only the controls the key may use (the API still enforces every role itself)."""
 from __future__ import annotations
 
 import time
+from dataclasses import asdict
 from typing import Literal
 
 from fastapi import APIRouter, Request
@@ -13,7 +14,7 @@ from pydantic import BaseModel, Field
 from service.api.auth import Viewer
 from service.api.errors import responses
 from service.api.routes.bench import bench_summary
-from service.api.schemas import CurrentJobOut, ProgressOut, StatusOut, WorkerOut
+from service.api.schemas import CurrentJobOut, ProgressOut, StatusOut, SyncOut, WorkerOut
 
 router = APIRouter(tags=["status"])
 
@@ -31,7 +32,8 @@ async def whoami(principal: Viewer) -> WhoAmIOut:
 
 @router.get("/status", response_model=StatusOut, operation_id="get_status", responses=responses(401, 403))
 async def get_status(request: Request, _principal: Viewer) -> StatusOut:
-    """Version, worker process, queue, the job that runs now, and the bench (null without one)."""
+    """Version, worker process, queue, the job that runs now, the bench (null without one), and the sync
+    backlog of the lane's local store (null without one)."""
     services = request.app.state.services
     s = services.manager.status()
     current = (
@@ -51,4 +53,5 @@ async def get_status(request: Request, _principal: Viewer) -> StatusOut:
         queue_length=s.queue_length,
         current_job=current,
         bench=bench_summary(request),
+        sync=SyncOut(**asdict(services.sync.status())) if services.sync is not None else None,
     )

@@ -36,8 +36,17 @@ VehicleId = Annotated[
 async def vehicle_results(request: Request, vehicle_id: VehicleId, _principal: Viewer) -> VehicleHistoryOut:
     """Every test of the vehicle on every lane, newest first: lane, date, tyre pressure, operator, status,
     and its newest succeeded identification's curves, lane figures and verdict; plus the trend of the
-    damping force at reference velocities since the first test. 404 when no test names the vehicle."""
-    history = await asyncio.to_thread(vehicle_history, request.app.state.services.database, vehicle_id)
+    damping force at reference velocities since the first test. 404 when no test names the vehicle.
+    A lane with a central database lists its own tests from its local store and the other lanes' from the
+    central database (`other_lanes_missing` when that does not answer)."""
+    services = request.app.state.services
+    sync = services.sync
+    central = sync.central if sync is not None and sync.status().reachable is not False else None
+    history = await asyncio.to_thread(
+        vehicle_history, services.database, vehicle_id, central, services.settings.lane
+    )
+    if sync is not None and central is None:  # known away: not waited for
+        history.other_lanes_missing = True
     if not history.tests:
         raise ApiError(404, f"no test of vehicle {vehicle_id!r}")
     return history
