@@ -23,8 +23,9 @@ Every round:
    strong (objective down by `strong_objective_reduction` and gap by `strong_gap_reduction`; a second
    missing effect can pull a half's estimate). A candidate that strong on held-out data too needs no
    significance against its standard error in (d) either.
-   A spring_stiffness or tyre_stiffness whose objective falls by `strong_objective_reduction` on all
-   samples and on the held-out blocks needs only `stiffness_min_gap_reduction` in (a).
+   A spring_stiffness, tyre_stiffness or anti_roll_bar whose objective falls by
+   `strong_objective_reduction` on all samples and on the held-out blocks needs only
+   `stiffness_min_gap_reduction` in (a).
    coulomb_friction is measured in (a)-(c) and in the screen against the current structure refitted on its
    own damper grid (one line across the band around zero velocity, _Doctor.like_bases), like with like,
    and its gap must not exceed the current model's.

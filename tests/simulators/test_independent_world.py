@@ -269,3 +269,14 @@ def test_cases_of_every_class_are_drawn_reproducibly() -> None:
         assert first.description == again.description
         assert first.vehicle.is_axle == (label == "anti_roll_bar")
         assert (first.hidden == ()) == (label == "clean")
+
+
+def test_an_axle_carries_the_same_wheel_and_tyre_on_both_sides() -> None:
+    """Left and right of one axle are mirror images (the estimator's axle, as the paper's, has one unsprung
+    mass and one tyre damping): only the dampers differ."""
+    for seed in range(5):
+        left, right = draw_case("anti_roll_bar", seed).vehicle.corners
+        assert left.unsprung_mass_kg == right.unsprung_mass_kg
+        assert left.maxwell_damping_Ns_per_m == right.maxwell_damping_Ns_per_m
+        assert left.maxwell_relaxation_s == right.maxwell_relaxation_s
+        assert (left.spring_N_per_m, left.tyre_N_per_m) == (right.spring_N_per_m, right.tyre_N_per_m)

@@ -1,0 +1,79 @@
+"""Effects whose gap is mostly the curve's floor (issue 13, item 4): on the independent world a channel delay,
+an anti-roll bar the vehicle file omits or a bump stop beside a lift-off can leave most of the gap to what a
+complete model leaves too (the damper curve's discretisation), while the equations demand them. The doctor
+must name them all the same (_Doctor.at_the_floor, Judging.min_gap_reduction), and not take the bar for a
+stiffer spring.
+
+Draws of benchmarks/bench_doctor_independent.py (10 s sweeps, ϑ referred to 1 ms), simulated, written and
+read back as `shockbench diagnose` reads them. Hit rates are printed in the test summary; the benchmark runs
+the classes over more draws (BENCHMARKS.md).
+"""
+
+from __future__ import annotations
+
+import tempfile
+from dataclasses import replace
+from pathlib import Path
+
+from daq.formats.recording_csv import read_recording_csv
+from daq.formats.vehicle_file import read_vehicle
+from estimator.doctor import DiagnoseOptions, DiagnosisResult, diagnose
+from estimator.vehicle import REFERENCE_SAMPLE_TIME_S
+from simulators.independent.cases import Case, draw_case, simulate_case
+from simulators.independent.files import write_recording
+
+SWEEP_S = 10.0
+DELAY_ACCURACY = 0.05
+"""The fitted delay must be within this fraction of the hidden one."""
+BAR_ACCURACY = 0.1
+"""The fitted bar must be within this fraction of the true one (the doctor's curve and the world's valve
+damper differ; a complete model identifies stiffnesses a few per cent off)."""
+
+
+def _diagnosed(label: str, seed: int, max_steps: int) -> tuple[Case, DiagnosisResult]:
+    case = draw_case(label, seed, sweep_s=SWEEP_S)
+    case = replace(case, settings=replace(case.settings, theta_reference_s=REFERENCE_SAMPLE_TIME_S))
+    world = simulate_case(case)
+    with tempfile.TemporaryDirectory(prefix="doctor-floor-") as name:
+        csv_path, toml_path = Path(name) / "r.csv", Path(name) / "v.toml"
+        write_recording(world, csv_path, toml_path)
+        recording, vehicle = read_recording_csv(csv_path), read_vehicle(toml_path)
+    return case, diagnose(recording, vehicle, DiagnoseOptions(max_steps=max_steps))
+
+
+def _line(case: Case, result: DiagnosisResult) -> str:
+    said = ", ".join(result.effects_named) or "nothing"
+    return f"{case.description}: named {said}; {result.conclusion}"
+
+
+def test_a_channel_delay_at_the_floor_is_named(hit_rate) -> None:
+    """Draw channel_delay 1 (car, valve model, 1 ms, x_s lags 3.42 ms): the delay lowers the objective to a
+    fifth but the gap by 19% only (220 -> 178 µm, a complete model leaves about 200 µm); it was "unexplained"
+    before."""
+    case, result = _diagnosed("channel_delay", 1, max_steps=2)
+    hidden = case.vehicle.effects.channel_delay_s
+    step = result.steps[0] if result.steps else None
+    hit = (
+        result.effects_named == ["channel_delay"]
+        and not result.unexplained
+        and step is not None
+        and step.parameters["channel"] in hidden
+        and abs(float(step.parameters["delay_s"]) / hidden[str(step.parameters["channel"])] - 1.0)
+        <= DELAY_ACCURACY
+    )
+    hit_rate("independent world: a channel delay at the floor", _line(case, result), hit)
+    assert hit, _line(case, result)
+    assert result.residual_ratio <= 1.0
+
+
+def test_an_omitted_bar_is_named_not_a_stiffer_spring(hit_rate) -> None:
+    """Draw anti_roll_bar 6 (car axle, valve dampers, 1 ms, a 12.4 kN/m bar omitted): the bar lowers the
+    objective to half and the gap by 22%, to below what a complete model leaves; a spring rate 37% stiffer
+    stands in for it less well (objective 0.63, gap -11%) but was the one named."""
+    case, result = _diagnosed("anti_roll_bar", 6, max_steps=2)
+    step = result.steps[0] if result.steps else None
+    truth = case.vehicle.anti_roll_bar_N_per_m
+    error = float(step.parameters["anti_roll_bar_stiffness_N_per_m"]) / truth - 1.0 if step else 1.0
+    hit = result.effects_named == ["anti_roll_bar"] and not result.unexplained and abs(error) <= BAR_ACCURACY
+    hit_rate("independent world: an omitted bar, not a stiffer spring", _line(case, result), hit)
+    assert hit, _line(case, result)
