@@ -71,7 +71,7 @@ class Judging:
         found right (+28.1%, +33.6%, +26.7%) with objective 0.49-0.59 on all samples and held out, but the gap
         moved by -4% to +8%, at the expected 277-364 µm; the final model's residual ratio 1.43-1.95. Channel
         delays of 1.1-3.4 ms found within 2% (objective 0.19-0.49, correlation 0.90-0.99, residual ratio
-        1.9-3.1 before, 0.6-1.0 with it) whose gap fell 11-19%, to 0.8-1.3 times the expected gap, and one of
+        1.9-3.1 before, 0.6-1.0 with it) whose gap fell 11-19%, to 0.8-1.35 times the expected gap, and one of
         1.59 ms (objective 0.43) whose gap rose 0.9%, to 1.05 times it; a lift-off of 1.4% with a bump stop
         named (objective 0.85, gap -5%) and a bump stop with a lift-off named (objective 0.73, gap -5%), both
         at 1.06-1.26 times the expected gap. On clean recordings no physically possible candidate was strong
