@@ -33,6 +33,7 @@ from estimator.doctor.catalog import (
     MIN_STIFFNESS_CHANGE,
     EffectInstance,
     EffectName,
+    FitContext,
 )
 from estimator.doctor.diagnose import _Doctor
 from estimator.doctor.model import ModelStructure, friction_grids, low_speed_grids
@@ -164,9 +165,9 @@ def test_a_stiffness_the_file_does_not_state_is_not_a_candidate() -> None:
     assert "tyre_stiffness" in candidates(frozenset({VehicleConstant.SPRING}))
 
 
-def test_the_stiffness_and_friction_checks_of_plausibility() -> None:
-    from estimator.doctor.catalog import FitContext
-
+def _car_context(**changes: object) -> FitContext:
+    """What the catalog's plausibility checks are told of a car corner (20 kN/m spring, 200 kN/m tyre, 2 kN
+    peak damper force), with `changes` to its fields."""
     context = FitContext(
         spring_stiffness=20_000.0,
         static_wheel_load_N=3000.0,
@@ -174,8 +175,15 @@ def test_the_stiffness_and_friction_checks_of_plausibility() -> None:
         peak_deflection_m=0.01,
         airborne_fraction=0.0,
         stated_stiffness_N_per_m={VehicleConstant.SPRING: 20_000.0, VehicleConstant.TYRE: 200_000.0},
-        standard_error={"spring_stiffness_change_N_per_m": 200.0, "coulomb_friction_N": 5.0},
+        standard_error={},
         peak_damper_force_N=2000.0,
+    )
+    return replace(context, **changes)
+
+
+def test_the_stiffness_and_friction_checks_of_plausibility() -> None:
+    context = _car_context(
+        standard_error={"spring_stiffness_change_N_per_m": 200.0, "coulomb_friction_N": 5.0}
     )
     spring = CATALOG[EffectName.SPRING_STIFFNESS]
     small = 0.5 * MIN_STIFFNESS_CHANGE * 20_000.0
@@ -201,19 +209,7 @@ def test_the_stiffness_and_friction_checks_of_plausibility() -> None:
 def test_a_delay_of_less_than_a_quarter_sample_is_not_a_lag() -> None:
     """A fitted sub-sample delay stands in for curve misfit (catalog.MIN_DELAY_SAMPLES): not named at 1 ms
     sampling below 0.25 ms, at 2 ms below 0.5 ms; a whole sample is a lag."""
-    from estimator.doctor.catalog import FitContext
-
-    context = FitContext(
-        spring_stiffness=20_000.0,
-        static_wheel_load_N=3000.0,
-        maxwell_time_constant_s=0.03,
-        peak_deflection_m=0.01,
-        airborne_fraction=0.0,
-        stated_stiffness_N_per_m={VehicleConstant.SPRING: 20_000.0, VehicleConstant.TYRE: 200_000.0},
-        standard_error={},
-        peak_damper_force_N=2000.0,
-        sample_time_s=0.001,
-    )
+    context = _car_context(sample_time_s=0.001)
     delay = CATALOG[EffectName.CHANNEL_DELAY]
     assert "not a lag" in str(delay.implausible({"delay_s": 0.0002}, context))
     assert delay.implausible({"delay_s": 0.0003}, context) is None
