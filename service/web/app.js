@@ -16,7 +16,10 @@ const page = {
   following: null, // the sweep id the live view shows
   startedHere: new Set(), // sweeps this tab started: it submits their identification
   opening: 0, // the latest result request; an older one that answers late is dropped
+  statusTimer: null, // refreshes the lane's sync state
 };
+
+const STATUS_REFRESH_MS = 5000;
 
 // ---- sign-in ---------------------------------------------------------------------------------------------
 
@@ -46,6 +49,8 @@ function enter(me) {
   page.chart = new LiveChart($("live-chart"), $("live-legend"));
   page.feed = new BenchFeed({ onState, onSamples: (s) => page.chart.add(s), onError: feedError });
   loadBench();
+  loadStatus();
+  page.statusTimer = setInterval(loadStatus, STATUS_REFRESH_MS);
   loadHistory(openSweep);
   loadSchedules();
 }
@@ -53,6 +58,8 @@ function enter(me) {
 function signOut(message = "signed out") {
   page.feed?.stop();
   page.feed = null;
+  clearInterval(page.statusTimer);
+  page.statusTimer = null;
   forgetKey();
   setRole(null);
   $("app").hidden = true;
@@ -74,13 +81,32 @@ async function loadBench() {
     const bench = await api("/bench");
     $("bench-name").textContent = `${bench.name}${bench.simulated ? " (simulated)" : ""}`;
     $("bench-model").textContent = bench.model;
-    $("bench-lane").textContent = (await api("/status")).lane;
     onState({ busy: bench.busy, sweep_id: bench.sweep_id, progress: bench.progress });
     const { devices } = await api("/bench/devices");
     renderDevices(devices);
   } catch (error) {
     $("bench-name").textContent = error.message;
   }
+}
+
+/** The service's lane, and where its results go: its own database, or a central one it syncs to (with the
+ * backlog waiting while that database is away). */
+async function loadStatus() {
+  try {
+    const status = await api("/status");
+    $("bench-lane").textContent = status.lane;
+    $("bench-sync").textContent = syncText(status.sync);
+  } catch (error) {
+    $("bench-sync").textContent = `unknown: ${error.message}`;
+  }
+}
+
+function syncText(sync) {
+  if (!sync) return "none: results stay in this lane's database";
+  const waiting = `${sync.backlog} result${sync.backlog === 1 ? "" : "s"} waiting to sync`;
+  if (sync.reachable === null) return `connecting; ${waiting}`;
+  if (sync.reachable) return `reachable; ${waiting}`;
+  return `away: results are kept here; ${waiting}${sync.last_error ? ` (${sync.last_error})` : ""}`;
 }
 
 /** The phases the followed sweep went through, in data-phases (a short phase may pass between looks). */

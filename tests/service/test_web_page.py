@@ -157,6 +157,7 @@ def test_an_operator_runs_a_test_and_reads_curve_figures_and_verdict(
     with service.client(VIEWER) as client:
         lane = client.get("/api/v1/status").json()["lane"]
     assert lane and page.testid("bench-lane").text == lane  # the lane this service runs
+    assert page.testid("bench-sync").text.startswith("none")  # no central database: results stay here
     states = [e.text for e in page.driver.find_elements("css selector", "[data-testid=device-state]")]
     assert any(state.startswith(("reading: ", "idle; last sweep: ")) for state in states), states
 
@@ -386,3 +387,27 @@ def test_without_chromium_the_tests_skip_except_in_ci(monkeypatch: pytest.Monkey
     monkeypatch.setenv("CI", "1")
     with pytest.raises(pytest.fail.Exception, match="CI is set, so the browser tests must run"):
         find_chromium()
+
+
+def test_a_lane_whose_central_database_is_away_says_so(chromium: Chromium, tmp_path: Path) -> None:
+    """serve --database naming a central database that does not answer: the lane runs on its local store
+    (issue 18, item 7), and the bench view says the central database is away and how many results wait."""
+    keys = tmp_path / "keys.toml"
+    keys.write_text(f'operator = ["{OPERATOR}"]\n')
+    central = "postgresql+psycopg://nobody@127.0.0.1:1/central"  # nothing listens on port 1
+    service = serve_process(
+        tmp_path, "serve", "--simulated", "--data", str(tmp_path / "data"), "--keys", str(keys),
+        "--database", central,
+    )  # fmt: skip
+    try:
+        wait_until(lambda: service.answers(OPERATOR), SERVE_STARTUP_TIMEOUT_S, "service ready", 0.2)
+        with chromium_driver(chromium, tmp_path / "downloads") as driver:
+            page = Page(driver, service.url + "/", tmp_path / "downloads")
+            page.sign_in(OPERATOR)
+            sync = page.testid("bench-sync")
+            page.wait(lambda: sync.text.startswith("away"), "the central database shown away")
+            assert "results are kept here; 0 results waiting to sync" in sync.text
+            assert "Connection refused" in sync.text or "connection" in sync.text.lower()
+            assert not console_errors(driver, page.expected_errors)
+    finally:
+        service.stop()
