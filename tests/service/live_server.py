@@ -58,6 +58,11 @@ def wait_for_status(
     return wait_until(reached, timeout_s, f"{path} {' or '.join(statuses)}")
 
 
+def bearer_client(url: str, key: str) -> httpx.Client:
+    """An httpx client of the service at `url` sending `key` as its Bearer key."""
+    return httpx.Client(base_url=url, headers={"Authorization": f"Bearer {key}"}, timeout=60)
+
+
 class LiveServer:
     """`with LiveServer(app) as server:` serves `app` (lifespan included) at `server.url`."""
 
@@ -82,6 +87,10 @@ class LiveServer:
             raise RuntimeError("the service did not start (see the log above)")
         return self
 
+    def client(self, key: str) -> httpx.Client:
+        """An httpx client of the service sending `key` as its Bearer key."""
+        return bearer_client(self.url, key)
+
     def __exit__(self, *exc_info: object) -> None:
         if self._server is not None and self._thread is not None:
             self._server.stop()
@@ -98,7 +107,7 @@ class ServeProcess:
 
     def client(self, key: str) -> httpx.Client:
         """An httpx client of the service sending `key` as its Bearer key."""
-        return httpx.Client(base_url=self.url, headers={"Authorization": f"Bearer {key}"}, timeout=60)
+        return bearer_client(self.url, key)
 
     def answers(self, key: str) -> dict[str, Any] | None:
         """GET /status once the service answers with its worker ready, else None (fails if it exited)."""

@@ -42,10 +42,6 @@ def server(settings: ServiceSettings) -> Iterator[LiveServer]:
         yield s
 
 
-def client(server: LiveServer, key: str) -> httpx.Client:
-    return httpx.Client(base_url=server.url, headers={"Authorization": f"Bearer {key}"}, timeout=60)
-
-
 def run_test(operator: httpx.Client, test: dict[str, Any]) -> tuple[int, int]:
     """A sweep of the vehicle and its identification; (sweep id, job id)."""
     started = operator.post("/api/v1/sweeps", json={**SHORT, **test})
@@ -63,9 +59,9 @@ def run_test(operator: httpx.Client, test: dict[str, Any]) -> tuple[int, int]:
 def test_a_vehicles_tests_newest_first_with_curves_figures_verdict_and_trend(
     server: LiveServer, settings: ServiceSettings
 ) -> None:
-    with client(server, OPERATOR) as operator:
+    with server.client(OPERATOR) as operator:
         first, second = (run_test(operator, test) for test in TESTS)
-    with client(server, VIEWER) as viewer:
+    with server.client(VIEWER) as viewer:
         answer = viewer.get("/api/v1/vehicles/Wvw-Zzz 1k/results")
         assert answer.status_code == 200, answer.text
         history = answer.json()
