@@ -14,6 +14,14 @@ if TYPE_CHECKING:
     from service.store.database import Database
 
 
+def add_database_arguments(parser: argparse.ArgumentParser) -> None:
+    """--database URL and --data DIR: where a command that reads the service's database finds it."""
+    parser.add_argument("--database", default=None, help="SQLAlchemy URL (default: SQLite in --data)")
+    parser.add_argument(
+        "--data", default="shockbench-data", help="data directory (default ./shockbench-data)"
+    )
+
+
 def open_database(url: str | None, data: str) -> Database:
     """The service's database for a command that reads it (`history`, `verify`): `url`, else the SQLite
     file in the data directory `data`. One line (exit 2) when there is no database there, or its schema is
@@ -57,8 +65,5 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     actions = p.add_subparsers(dest="action", required=True, metavar="ACTION")
     upgrade = actions.add_parser("upgrade", help="create or upgrade the schema to the newest revision")
-    upgrade.add_argument("--database", default=None, help="SQLAlchemy URL (default: SQLite in --data)")
-    upgrade.add_argument(
-        "--data", default="shockbench-data", help="data directory (default ./shockbench-data)"
-    )
+    add_database_arguments(upgrade)
     upgrade.set_defaults(handler=run_db_upgrade)

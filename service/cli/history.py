@@ -7,7 +7,7 @@ from __future__ import annotations
 import argparse
 from typing import TYPE_CHECKING
 
-from service.cli.db import open_database
+from service.cli.db import add_database_arguments, open_database
 from service.cli.errors import CliError
 
 if TYPE_CHECKING:
@@ -93,7 +93,6 @@ def register(sub: argparse._SubParsersAction) -> None:
         "since the first test.",
     )
     p.add_argument("vehicle_id", metavar="VEHICLE_ID", help="VIN or registration (case does not matter)")
-    p.add_argument("--database", default=None, help="SQLAlchemy URL (default: SQLite in --data)")
-    p.add_argument("--data", default="shockbench-data", help="data directory (default ./shockbench-data)")
+    add_database_arguments(p)
     p.add_argument("--json", action="store_true", help="print what GET /vehicles/{id}/results answers")
     p.set_defaults(handler=run_history)

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import argparse
 
-from service.cli.db import open_database
+from service.cli.db import add_database_arguments, open_database
 from service.cli.errors import EXIT_FAILED, CliError
 
 
@@ -36,7 +36,6 @@ def register(sub: argparse._SubParsersAction) -> None:
         description="Walk every lane's result chain, recompute each result's hash and name the first "
         "record altered or removed since it was stored (exit 1); else say how many were verified.",
     )
-    p.add_argument("--database", default=None, help="SQLAlchemy URL (default: SQLite in --data)")
-    p.add_argument("--data", default="shockbench-data", help="data directory (default ./shockbench-data)")
+    add_database_arguments(p)
     p.add_argument("--lane", default=None, help="only this lane's chain")
     p.set_defaults(handler=run_verify)
