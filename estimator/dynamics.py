@@ -16,7 +16,7 @@ acts with equal and opposite forces on the wheels and on the body: no net heave 
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Protocol
 
@@ -60,6 +60,31 @@ def steepest_slope_Ns_per_m(velocity_m_s: np.ndarray, force_N: np.ndarray) -> fl
     steps = np.diff(np.asarray(velocity_m_s, dtype=float))
     slopes = np.diff(force, axis=0) / (steps[:, None] if force.ndim == 2 else steps)
     return float(np.max(slopes)) if slopes.size else 0.0
+
+
+class KnotCurve(Protocol):
+    """A piecewise-linear damper curve, or a population of them: knots and the forces there."""
+
+    velocity_m_s: np.ndarray
+    force_N: np.ndarray
+
+
+def model_substeps(
+    curves: Sequence[KnotCurve],
+    sprung_mass_kg: float,
+    unsprung_mass_kg: float,
+    corners: int,
+    sample_time_s: float,
+    coulomb_friction_N: float = 0.0,
+    wheel_dashpot_Ns_per_m: float = 0.0,
+) -> int:
+    """Runge-Kutta steps per sample for a model's fastest decay: the steepest segment of its curves (of
+    every column of a population), its friction and its tyre dashpot, the body shared among `corners`."""
+    slope = max(steepest_slope_Ns_per_m(c.velocity_m_s, c.force_N) for c in curves)
+    rate = decay_rate_per_s(
+        slope, coulomb_friction_N, wheel_dashpot_Ns_per_m, sprung_mass_kg / corners, unsprung_mass_kg
+    )
+    return runge_kutta_substeps(rate, sample_time_s)
 
 
 def sample_substeps(samples: np.ndarray, steps: int) -> np.ndarray:

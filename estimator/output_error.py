@@ -22,10 +22,8 @@ from estimator.dynamics import (
     AxlePhysics,
     CornerPhysics,
     QuarterCarPhysics,
-    decay_rate_per_s,
-    runge_kutta_substeps,
+    model_substeps,
     sample_substeps,
-    steepest_slope_Ns_per_m,
 )
 from estimator.recording import Recording
 from estimator.signals import Kinematics
@@ -132,14 +130,17 @@ def _measured_drive(kin: Mapping[str, Kinematics], vehicle: VehicleParameters):
 def _substeps(model: IdentifiedModel, curves: tuple[object, ...], sample_time_s: float) -> int:
     """Runge-Kutta steps per sample for the model's fastest decay (estimator.dynamics.RK4_STABLE_STEP): its
     steepest damper segment (over every column of a population), a Kelvin-Voigt tyre's damping."""
-    vehicle = model.vehicle
-    sprung_share_kg = model.sprung_mass_kg / (2 if vehicle.is_axle else 1)
     kelvin_voigt = model.tyre_model is TyreModel.KELVIN_VOIGT
     # a population (the output-error refinement) carries one tyre damping per column
     dashpot = float(np.max(np.abs(model.tyre_damping_Ns_per_m))) if kelvin_voigt else 0.0
-    slope = max(steepest_slope_Ns_per_m(c.velocity_m_s, c.force_N) for c in curves)  # type: ignore[attr-defined]
-    rate = decay_rate_per_s(slope, 0.0, dashpot, sprung_share_kg, model.unsprung_mass_kg)
-    return runge_kutta_substeps(rate, sample_time_s)
+    return model_substeps(
+        curves,  # type: ignore[arg-type]
+        model.sprung_mass_kg,
+        model.unsprung_mass_kg,
+        2 if model.vehicle.is_axle else 1,
+        sample_time_s,
+        wheel_dashpot_Ns_per_m=dashpot,
+    )
 
 
 def simulate_identified(

@@ -23,10 +23,8 @@ from estimator.dynamics import (
     AxlePhysics,
     CornerPhysics,
     QuarterCarPhysics,
-    decay_rate_per_s,
-    runge_kutta_substeps,
+    model_substeps,
     sample_substeps,
-    steepest_slope_Ns_per_m,
 )
 from estimator.output_error import DIVERGED_GAP_M
 from estimator.recording import Recording
@@ -128,20 +126,15 @@ def substeps(model: FittedModel, sample_time_s: float) -> int:
     |λ|·dt of about 5, beyond RK4's stability, and the simulated wheel chattered at every velocity zero (on
     an independent recording with 207 N of friction the friction model's gap was 2.2x the model's without
     it although its equations fitted 12% better)."""
-    vehicle = model.vehicle
-    sprung_share_kg = model.sprung_mass_kg / (2 if vehicle.is_axle else 1)
-    unsprung_kg = float(vehicle.unsprung_mass_kg(model.sprung_mass_kg))
-    rate = max(
-        decay_rate_per_s(
-            steepest_slope_Ns_per_m(curve.velocity_m_s, curve.force_N),
-            model.value("coulomb_friction_N"),
-            model.value("tyre_dashpot_Ns_per_m"),
-            sprung_share_kg,
-            unsprung_kg,
-        )
-        for curve in model.curves
+    return model_substeps(
+        model.curves,
+        model.sprung_mass_kg,
+        float(model.vehicle.unsprung_mass_kg(model.sprung_mass_kg)),
+        2 if model.vehicle.is_axle else 1,
+        sample_time_s,
+        coulomb_friction_N=model.value("coulomb_friction_N"),
+        wheel_dashpot_Ns_per_m=model.value("tyre_dashpot_Ns_per_m"),
     )
-    return runge_kutta_substeps(rate, sample_time_s)
 
 
 def simulate_models(
