@@ -82,13 +82,19 @@ def lane_lock_key(lane: str) -> int:
     return int.from_bytes(digest[:8], "big", signed=True)
 
 
+def locked_head(session: Session, lane: str) -> str:
+    """The hash of the lane's newest link (GENESIS for none), the lane's chain locked for the rest of
+    `session`'s transaction on PostgreSQL (SQLite has a single writer): what the next link must follow."""
+    if session.get_bind().dialect.name == "postgresql":
+        session.execute(select(func.pg_advisory_xact_lock(literal(lane_lock_key(lane), BigInteger))))
+    newest = select(ResultChainRow.hash).where(ResultChainRow.lane == lane)
+    return session.scalar(newest.order_by(ResultChainRow.id.desc()).limit(1)) or GENESIS
+
+
 def append_link(session: Session, job_id: int) -> str:
     """Chain the job's stored result to its lane's newest link, in `session`'s transaction; its hash."""
     job = session.execute(select(JobRow).where(JobRow.id == job_id)).scalar_one()  # as verify reads it
-    if session.get_bind().dialect.name == "postgresql":
-        session.execute(select(func.pg_advisory_xact_lock(literal(lane_lock_key(job.lane), BigInteger))))
-    newest = select(ResultChainRow.hash).where(ResultChainRow.lane == job.lane)
-    previous = session.scalar(newest.order_by(ResultChainRow.id.desc()).limit(1)) or GENESIS
+    previous = locked_head(session, job.lane)
     digest = job_hash(previous, job)
     session.add(ResultChainRow(lane=job.lane, job_id=job.id, previous_hash=previous, hash=digest))
     session.flush()

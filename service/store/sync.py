@@ -37,14 +37,14 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Any
 
-from sqlalchemy import BigInteger, delete, func, insert, literal, select, update
+from sqlalchemy import delete, insert, select, update
 from sqlalchemy.exc import SQLAlchemyError
 from sqlalchemy.orm import Session
 
 from service.store.database import Database
 from service.store.models import JobRow, ResultChainRow, SweepRow, SyncOutboxRow
 from service.store.outbox import JOB, SWEEP
-from service.store.result_chain import GENESIS, lane_lock_key
+from service.store.result_chain import locked_head
 
 
 class SyncError(RuntimeError):
@@ -173,10 +173,7 @@ def _push_link(central: Session, link: ResultChainRow, central_job_id: int) -> N
     """Append the lane's link to the central chain, unless it is there (a repeated push)."""
     if central.scalar(select(ResultChainRow.id).where(ResultChainRow.job_id == central_job_id)):
         return
-    if central.get_bind().dialect.name == "postgresql":  # as result_chain.append_link
-        central.execute(select(func.pg_advisory_xact_lock(literal(lane_lock_key(link.lane), BigInteger))))
-    newest = select(ResultChainRow.hash).where(ResultChainRow.lane == link.lane)
-    head = central.scalar(newest.order_by(ResultChainRow.id.desc()).limit(1)) or GENESIS
+    head = locked_head(central, link.lane)
     if head != link.previous_hash:
         raise SyncError(
             f"lane {link.lane!r}: the central chain ends at {head[:12]}, but this lane's next link "
