@@ -18,6 +18,7 @@ from datetime import datetime
 
 from sqlalchemy.exc import InterfaceError, OperationalError, SQLAlchemyError
 
+from estimator.errors import one_line
 from service.store.database import CONNECT_TIMEOUT_S, Database, DatabaseError
 from service.store.models import utcnow
 from service.store.outbox import Backlog, backlog
@@ -31,8 +32,9 @@ BATCH = 200
 MAX_ERROR_CHARS = 300
 
 
-def one_line(exc: BaseException) -> str:
-    text = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
+def _reason(exc: BaseException) -> str:
+    """The exception in one line (estimator.errors.one_line), cut to MAX_ERROR_CHARS for /status."""
+    text = one_line(exc)
     return text if len(text) <= MAX_ERROR_CHARS else text[: MAX_ERROR_CHARS - 3] + "..."
 
 
@@ -123,14 +125,14 @@ class SyncAgent:
             pushed = len(self.sync.push_pending(limit=BATCH))
             self._reachable, self._last_error, self._last_contact = True, None, utcnow()
         except (DatabaseError, OperationalError, InterfaceError) as exc:  # away, or dropped in mid-push
-            self._reachable, self._last_error = False, one_line(exc)
+            self._reachable, self._last_error = False, _reason(exc)
         except (SchemaError, SyncError, SQLAlchemyError) as exc:  # it answers, but refuses
-            self._reachable, self._last_error = True, one_line(exc)
+            self._reachable, self._last_error = True, _reason(exc)
         except LocalStoreError as exc:  # the central database is not to blame: tried again
-            self._last_error = one_line(exc)
+            self._last_error = _reason(exc)
         except Exception as exc:
             log.exception("central sync round failed")
-            self._last_error = one_line(exc)
+            self._last_error = _reason(exc)
         try:
             self._backlog = backlog(self.local)
         except Exception:

@@ -41,6 +41,7 @@ from sqlalchemy import delete, insert, select, update
 from sqlalchemy.exc import SQLAlchemyError
 from sqlalchemy.orm import Session
 
+from estimator.errors import one_line
 from service.store.database import Database
 from service.store.models import JobRow, ResultChainRow, SweepRow, SyncOutboxRow
 from service.store.outbox import JOB, SWEEP
@@ -61,7 +62,7 @@ def _local_store() -> Iterator[None]:
     try:
         yield
     except SQLAlchemyError as exc:
-        raise LocalStoreError(f"local store: {str(exc).splitlines()[0]}") from exc
+        raise LocalStoreError(f"local store: {one_line(exc)}") from exc
 
 
 def _values(row: SweepRow | JobRow, leave_out: set[str]) -> dict[str, Any]:
