@@ -4,9 +4,12 @@ The paper does not print Table 2's velocities, only that the range between the l
 damper velocity was split into 20 points, C_a^10 = 0 N being the one at 0 m/s; so point i sits at
 (i − 10)·Δv. Δv is inferred from the paper alone, as the step at which Table 3's three curves pass closest to
 their Table 2 points (the misprint left out): each column on its own gives the same step within 2%, which
-is what says the grid is right. On that grid the test reports how far our fit lands from Table 3's curve,
-and checks what can be checked: the fit describes Table 2's points at least as well as Table 3's curve
-does, so where the two differ, Table 3 is not the least-squares curve of its own points."""
+is what says the grid is right. On that grid every row of our fit lands within 15 N RMS of Table 3's curve,
+and the fit describes Table 2's points at least as well as Table 3's curve does.
+
+What brings the rows there is in the fit (estimator/tanh_fit.py): c_s, κ ≥ 0 (the constant-stiffness row's
+unconstrained least squares has κ = −1250 N, 41 N from Table 3) and points weighted by the velocity interval
+they stand for (the Kelvin-Voigt row's last point, a real upturn, weighs half: 19.0 N with equal weights)."""
 
 from __future__ import annotations
 
@@ -72,6 +75,5 @@ def test_fit_tanh_against_table_3(hit_rate) -> None:
         )
         # the fit is the better description of the paper's own points (every point, the misprint aside)
         assert fit_miss <= table_3_miss + 1e-9, column
-    maxwell = fit_tanh(v, np.array(TABLE_2_FORCE_N["maxwell"]))
-    maxwell_table_3 = TanhCurve(*TABLE_3_TANH["maxwell"]).force(v)
-    assert np.sqrt(np.mean((maxwell.curve.force(v) - maxwell_table_3) ** 2)) <= TABLE_3_TOLERANCE_N
+        assert rms_to_table_3 <= TABLE_3_TOLERANCE_N, column
+        assert fit.curve.c_s >= 0 and fit.curve.kappa >= 0, column
