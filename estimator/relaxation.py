@@ -39,15 +39,13 @@ from estimator.equations import TYRE_DAMPING, LinearResiduals, maxwell_regressor
 from estimator.linear_algebra import cholesky_factor, cholesky_solve
 from estimator.newton_refit import newton_refit
 from estimator.order_statistics import median
-from estimator.solvers.exact import ExactSolution, solve_exact
+from estimator.solvers.exact import NEWTON_HANDOVER, ExactSolution, solve_exact
 from estimator.vehicle import coefficient_from_relaxation_time, relaxation_time_from_coefficient
 
 RELAXATION_TIME_BOUNDS_S = (0.002, 0.25)
 """Search range of τ = C_d/K_d: ϑ at 1 ms from 0.67 to 0.996 (the paper's tyre: ϑ = 0.97, τ = 32 ms)."""
 FIRST_TOLERANCE = 1e-3
 """Brent's tolerance on log τ in the first iteration, which searches the whole range (0.1% in τ)."""
-NEWTON_HANDOVER = 1e-3
-"""IRLS hands over to Newton steps when an iteration lowers GF by less than this (relative)."""
 LOCAL_WIDTH = 0.1
 MIN_WIDTH = 1e-3
 """Later iterations step τ by a parabola through log τ and log τ ± a width: the last step's size, clipped to

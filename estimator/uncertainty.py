@@ -27,8 +27,11 @@ second identification (a Richardson-style estimate, combined in quadrature with 
 the curve's representation bias (representation_bias, below), and the bias of the velocities' low-pass
 (filter_bias): the same identification with the kinematics cutoff lowered to KINEMATICS_CUTOFF_RATIO of it.
 The two extra solves cost more than the sandwich itself (BENCHMARKS.md); both start from the optimum
-already found and take Newton steps to theirs (estimator.newton_refit), 3-4 times faster than IRLS from
-scratch, with the same optimum (within 0.1% of the noise half-width on the tests' cases).
+already found. The filter's optimum lies close to it and is reached by Newton steps (estimator.newton_refit),
+3-4 times faster than IRLS from scratch, with the same optimum (within 0.1% of the noise half-width on the
+tests' cases). The refined grid's can lie far (GF 30% lower where the curve has a sharp knee), where Newton
+alone takes many halved steps: that one is solved by the exact solver (a few IRLS iterations handing over
+to Newton) from the same start.
 
 The curve's representation bias: The damper curve is piecewise linear between its grid points, and the
 true curve is not: the identified point at a grid velocity is (roughly) the best piecewise-linear fit of the
@@ -45,9 +48,9 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from estimator.equations import TYRE_DAMPING, LinearResiduals, maxwell_regressor
-from estimator.newton_refit import newton_refit
 from estimator.order_statistics import median
 from estimator.signals import FilterChoice
+from estimator.solvers.exact import solve_exact
 from estimator.vehicle import coefficient_from_relaxation_time, relaxation_time_from_coefficient
 
 CONFIDENCE = 0.95
@@ -177,7 +180,7 @@ def refined_grids(system: LinearResiduals) -> list[np.ndarray]:
 def refined_start(system: LinearResiduals, theta: np.ndarray, refined: LinearResiduals) -> np.ndarray:
     """θ of `system` carried onto `refined` (refined_grids): the same curve (old points kept, midpoints on
     the straight line between them, so the curve and GF are unchanged) and the other unknowns by name: the
-    refined optimum is found by Newton steps from there (estimator.newton_refit)."""
+    refined optimum is found from there by the exact solver (estimator.solvers.exact)."""
     start = np.zeros(refined.n_params)
     in_curves = np.zeros(refined.n_params, bool)
     for coarse_slice, fine_slice, grid, fine_grid in zip(
@@ -197,7 +200,7 @@ def representation_bias(system: LinearResiduals, theta: np.ndarray, refined: Lin
     samples), compared at the shared unknowns (masses, tyre damping, stiffnesses) and at the original grid
     points. Where the true curve bends between grid points (a knee at 0 m/s) the two differ by about the
     coarse grid's representation error; elsewhere by noise, so the allowance is conservative there."""
-    fine = newton_refit(refined, refined_start(system, theta, refined)).theta
+    fine = solve_exact(refined, initial=refined_start(system, theta, refined), certify=False).theta
     return richardson_bias(system, theta, refined, fine)
 
 

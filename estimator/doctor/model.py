@@ -42,16 +42,12 @@ from estimator.doctor.catalog import (
 from estimator.doctor.columns import EquationSignals, restrict, with_columns
 from estimator.equations import LinearResiduals, build
 from estimator.errors import InvalidValueError
-from estimator.newton_refit import newton_refit
 from estimator.recording import Recording
 from estimator.signals import FilterChoice
 from estimator.solvers.exact import solve_exact
 from estimator.uncertainty import confidence_intervals
 from estimator.vehicle import TyreModel, VehicleConstant, VehicleParameters
 
-NEWTON_HANDOVER = 1e-3
-"""A fit's IRLS hands over to Newton steps when an iteration lowers the objective by less than this
-(relative), as estimator.relaxation does."""
 GAUSS_NEWTON_ITERATIONS = 4
 GAUSS_NEWTON_STEP = {"delay": 5e-4, "offset": 1e-4}
 """Finite-difference step of each kind of channel parameter (s, m)."""
@@ -376,15 +372,11 @@ def friction_constraints(system: LinearResiduals, band_m_s: float = FRICTION_BAN
 def _minimise(
     system: LinearResiduals, initial: np.ndarray | None, tolerance: float
 ) -> tuple[np.ndarray, float]:
-    """θ minimising the paper's objective, and the objective: IRLS (estimator.solvers.exact) until an
-    iteration gains less than NEWTON_HANDOVER, then Newton steps (estimator.newton_refit) to `tolerance`,
-    as identify does. IRLS converges linearly (a median 27 weighted normal matrices per fit of the doctor to
-    1e-10), Newton quadratically from near the optimum (every step checked to lower the objective); the
-    result is IRLS's own when Newton does not improve on it."""
-    near = solve_exact(system, NEWTON_HANDOVER, initial=initial, certify=False)
-    polished = newton_refit(system, near.theta, tolerance=tolerance)
-    theta = polished.theta if polished.objective < near.objective else near.theta
-    return theta, float(system.objective(theta))
+    """θ minimising the paper's objective, and the objective: estimator.solvers.exact's IRLS handing over to
+    Newton steps, to `tolerance`, as identify does (a median 27 weighted normal matrices per fit of the
+    doctor to 1e-10 by IRLS alone)."""
+    solution = solve_exact(system, tolerance, initial=initial, certify=False)
+    return solution.theta, solution.objective
 
 
 def _solve(

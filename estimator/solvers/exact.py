@@ -3,7 +3,11 @@ convex; a second-order-cone problem).
 
 Method: iteratively reweighted least squares (Weiszfeld's scheme for sums of norms). Each step solves the
 weighted least-squares problem with weights 1/max(||r_i||, ε) and never increases GF; ε shrinks as the
-iterate settles.
+iterate settles. IRLS converges linearly (25 weighted normal matrices to 1e-10 on the benchmark recording of
+benchmarks/bench_identify_process.py), so once an iteration gains less than NEWTON_HANDOVER (relative) the
+rest is done by Newton steps (estimator.newton_refit: quadratic convergence, every step checked to lower
+GF): 3 IRLS iterations and 5 Newton steps there, 7 ms instead of 17, to a lower GF than IRLS's own
+stopping point. The result is IRLS's own when Newton does not improve on it.
 
 Certificate: by duality, GF(θ) ≥ Σ_i y_iᵀ c_i for any y with ||y_i|| ≤ 1 and Σ_i A_iᵀ y_i = 0. We take
 y_i = r_i/||r_i|| at the solution, project it onto {Σ A_iᵀ y_i = 0} and scale it into the unit balls; the
@@ -18,7 +22,11 @@ import numpy as np
 
 from estimator.equations import LinearResiduals
 from estimator.linear_algebra import cholesky_factor, cholesky_solve
+from estimator.newton_refit import newton_refit
 from estimator.order_statistics import median
+
+NEWTON_HANDOVER = 1e-3
+"""IRLS hands over to Newton steps when an iteration lowers GF by less than this (relative)."""
 
 
 @dataclass(frozen=True)
@@ -75,7 +83,8 @@ def solve_exact(
     initial: np.ndarray | None = None,
     certify: bool = True,
 ) -> ExactSolution:
-    """Minimise GF by IRLS; stops when GF improves by less than `tolerance` (relative) per iteration.
+    """Minimise GF: IRLS until an iteration gains less than NEWTON_HANDOVER, then Newton steps until one gains
+    less than `tolerance` (relative); a `tolerance` at or above NEWTON_HANDOVER is IRLS alone.
 
     initial: a starting θ (default: the least-squares solution), e.g. the solution of a similar system;
     certify=False skips the dual bound (lower_bound is then −inf), for callers that solve many systems."""
@@ -87,7 +96,7 @@ def solve_exact(
     if initial is not None:
         z = np.asarray(initial, dtype=float) * column_scale
     else:
-        z, *_ = np.linalg.lstsq(a_scaled, -c, rcond=None)
+        z = _weighted_least_squares(a_scaled, c, np.ones(c.size))  # plain least squares
     previous = np.inf
     objective = np.inf
     iterations = 0
@@ -95,12 +104,16 @@ def solve_exact(
         r = (a_scaled @ z + c).reshape(-1, e)
         norms = np.linalg.norm(r, axis=1)
         objective = float(norms.sum())
-        if previous - objective <= tolerance * objective:
+        if previous - objective <= max(tolerance, NEWTON_HANDOVER) * objective:
             break
         previous = objective
         floor = 1e-9 * max(float(median(norms)), 1e-300)
         z = _weighted_least_squares(a_scaled, c, np.repeat(1.0 / np.maximum(norms, floor), e))
     theta = z / column_scale
     objective = float(system.objective(theta))
+    if tolerance < NEWTON_HANDOVER:
+        polished = newton_refit(system, theta, tolerance=tolerance)
+        if polished.objective < objective:
+            theta, objective = polished.theta, float(system.objective(polished.theta))
     bound = dual_lower_bound(system, theta) if certify else -np.inf
     return ExactSolution(theta, objective, bound, iterations)
