@@ -30,9 +30,9 @@ This module imports numba only in the second case.
 
 from __future__ import annotations
 
-import hashlib
 import importlib
 import importlib.util
+import zlib
 from collections.abc import Callable
 from functools import cache
 from types import ModuleType
@@ -81,15 +81,16 @@ EXTENSION_PREFIX = "_simulation_kernel_aot_"
 def source_digest() -> str:
     """The kernel's version: a digest of the source of this module (the table layout) and of the kernels'
     (KERNEL_MODULES), as the import system reads them (the kernel modules are not imported: that would
-    import numba)."""
-    digest = hashlib.sha256()
+    import numba). CRC-32 is enough to tell versions apart (this is a cache key, not a seal) and zlib is
+    built in, where hashlib's OpenSSL would cost every process about 2.5 ms of its start."""
+    digest = 0
     for name in KERNEL_MODULES:
         spec = importlib.util.find_spec(name)
         source = spec.loader.get_source(name) if spec is not None and spec.loader is not None else None
         if source is None:
             raise ImportError(f"no source for {name}")
-        digest.update(source.encode())
-    return digest.hexdigest()[:16]
+        digest = zlib.crc32(source.encode(), digest)
+    return f"{digest:08x}"
 
 
 def extension_name() -> str:

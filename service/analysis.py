@@ -14,8 +14,7 @@ from typing import TYPE_CHECKING
 from estimator.identify import IdentificationResult, IdentifyOptions, identify
 from estimator.recording import Recording
 from estimator.vehicle import VehicleParameters
-from service.jobs.bounds import check_physical_bounds
-from service.jobs.context import check_recording_fits
+from service.jobs.bounds import check_physical_bounds, check_recording_fits
 
 if TYPE_CHECKING:
     from estimator.doctor.diagnose import DiagnoseOptions, DiagnoseProgress

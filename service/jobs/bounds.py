@@ -103,3 +103,14 @@ def check_physical_bounds(recording: Recording, vehicle: VehicleParameters) -> N
     """Both checks; every job kind runs it at submit and again in the worker."""
     check_vehicle_bounds(vehicle)
     check_recording_bounds(recording)
+
+
+def check_recording_fits(recording: Recording, vehicle: VehicleParameters) -> None:
+    """InputError (field recording) when the recording's channels are not those of the vehicle file's
+    model: an axle recording with a quarter-car file, or the other way round. Every job kind checks this."""
+    if vehicle.is_axle != recording.is_axle:
+        has = "axle" if recording.is_axle else "quarter-car"
+        raise InputError(
+            "recording",
+            f"the recording has {has} channels but the vehicle file is for a {vehicle.model.value}",
+        )

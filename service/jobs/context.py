@@ -14,19 +14,8 @@ from typing import Any
 from estimator.recording import Recording
 from estimator.solvers.differential_evolution import DEProgress
 from estimator.vehicle import VehicleParameters
-from service.jobs.input_error import InputError
+from service.jobs.input_error import InputError as InputError  # re-exported: the job kinds raise it from here
 from service.jobs.messages import Progress
-
-
-def check_recording_fits(recording: Recording, vehicle: VehicleParameters) -> None:
-    """InputError (field recording) when the recording's channels are not those of the vehicle file's
-    model: an axle recording with a quarter-car file, or the other way round. Every job kind checks this."""
-    if vehicle.is_axle != recording.is_axle:
-        has = "axle" if recording.is_axle else "quarter-car"
-        raise InputError(
-            "recording",
-            f"the recording has {has} channels but the vehicle file is for a {vehicle.model.value}",
-        )
 
 
 class ProgressReporter:

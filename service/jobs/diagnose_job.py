@@ -9,11 +9,10 @@ from pydantic import BaseModel, Field
 from estimator.identify import IdentifyOptions
 from estimator.recording import Recording
 from estimator.vehicle import TyreModel, VehicleParameters
-from service.jobs.bounds import check_physical_bounds
+from service.jobs.bounds import check_physical_bounds, check_recording_fits
 from service.jobs.context import (
     JobContext,
     JobOutcome,
-    check_recording_fits,
     finite_json,
 )
 

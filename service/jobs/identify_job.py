@@ -11,12 +11,11 @@ from estimator.identify import IdentifyOptions, Solver
 from estimator.recording import Recording
 from estimator.solvers.differential_evolution import DESettings
 from estimator.vehicle import ModelKind, TyreModel, VehicleParameters
-from service.jobs.bounds import check_physical_bounds
+from service.jobs.bounds import check_physical_bounds, check_recording_fits
 from service.jobs.context import (
     InputError,
     JobContext,
     JobOutcome,
-    check_recording_fits,
     finite_json,
 )
 
