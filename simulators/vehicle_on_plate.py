@@ -136,8 +136,12 @@ class VehicleOnPlate:
                 ) from None
             if times_s.size == 0:
                 return times_s.copy()
-            span = max(0, int((self._time_s - float(times_s[0])) / self.step_s) + 3)
-            keep = min(len(self._history_times_s), span)
+            # the history holds about one entry per step, but an idle bench's entries fall where it was read,
+            # closer than a step at times: count back by steps, then further until the first time is covered
+            entries = len(self._history_times_s)
+            keep = min(entries, max(0, int((self._time_s - float(times_s[0])) / self.step_s) + 3))
+            while keep < entries and self._history_times_s[entries - keep] > float(times_s[0]):
+                keep = min(entries, 2 * keep + 1)
             hist_t = list(itertools.islice(self._history_times_s, len(self._history_times_s) - keep, None))
             hist_v = [
                 v[column]
