@@ -11,7 +11,6 @@ from typing import TYPE_CHECKING
 
 from estimator.vehicle import TyreModel, VehicleConstant, VehicleParameters
 from service.cli.errors import CliError
-from service.cli.simulate import run_demo
 
 SOLVERS = ("exact", "de")
 """estimator.identify.Solver's values, named here so that `shockbench --help` does not import the estimator
@@ -235,6 +234,13 @@ def read_points_csv(path: Path) -> tuple[np.ndarray, np.ndarray]:
         raise CliError(f"{path}: {len(values)} points; the tanh fit needs at least 5")
     data = np.array(values)
     return data[:, 0], data[:, 1]
+
+
+def run_demo(args: argparse.Namespace) -> int:
+    """`demo` (service.cli.simulate), imported when it runs: `identify` does not pay for the simulator."""
+    from service.cli.simulate import run_demo as demo
+
+    return demo(args)
 
 
 def run_fit_tanh(args: argparse.Namespace) -> int:
