@@ -21,8 +21,8 @@ def hat_basis(velocity_m_s: np.ndarray, grid_m_s: np.ndarray) -> np.ndarray:
     g = np.asarray(grid_m_s, dtype=float)
     seg = np.clip(np.searchsorted(g, v, side="right") - 1, 0, len(g) - 2)
     w = (v - g[seg]) / (g[seg + 1] - g[seg])
-    basis = np.zeros((v.size, g.size))
-    rows = np.arange(v.size)
+    basis = np.zeros((v.size, g.size), order="F")  # column-major: each column's samples contiguous, as the
+    rows = np.arange(v.size)  # zero-phase filter (estimator.digital_filters) runs along them
     basis[rows, seg] = 1.0 - w.ravel()
     basis[rows, seg + 1] = w.ravel()
     return basis
