@@ -180,6 +180,8 @@ class _Doctor(Judging):
         self.reference = Reference.of(recording, vehicle, self.settings)
         plate = recording.channels["x_r_l" if vehicle.is_axle else "x_r"]
         self.frequency = sweep_frequency_Hz(plate, recording.sample_time_s)
+        self.floors: dict[int, tuple[FittedModel, tuple[float, float]]] = {}
+        """expected() per model (keyed by id, the model kept so that the id stays its own)."""
         self.pool: ThreadPoolExecutor | None = None
         """The threads of `workers` while run() runs."""
 
@@ -405,14 +407,32 @@ class _Doctor(Judging):
         gap_m, model = then.gaps[second], then.fits.full[second]
         heldout = heldout_objective(then.fits.held[second], rows) / played.heldout_base
         bic = bic_difference(state.simulated, gap_m, added_unknowns(state.current, model))
+        shrinks = gap_m <= (1.0 - options.min_gap_reduction) * state.simulated.gap_m
         passes = (
-            gap_m <= (1.0 - options.min_gap_reduction) * state.simulated.gap_m
-            and heldout <= 1.0 - options.min_heldout_reduction
+            heldout <= 1.0 - options.min_heldout_reduction
             and bic <= -options.bic_margin
+            and (
+                shrinks
+                or self.shrinks_above_floor(
+                    state.simulated.gap_m, gap_m, options.min_gap_reduction, state.current, state.simulated
+                )
+            )
         )
         return (first, second, then) if passes else None
 
+    def floor_m(self, current: FittedModel, simulated: Simulated) -> float:
+        """The expected gap of `current` (see expected), computed once per model."""
+        return self.expected(current, simulated)[0]
+
     def expected(self, current: FittedModel, final: Simulated) -> tuple[float, float]:
+        """The expected gap and residual ratio of `current` (computed once per model: a round's criterion (a)
+        asks for it too, Judging.shrinks_above_floor)."""
+        key = id(current)
+        if key not in self.floors:
+            self.floors[key] = (current, self.expect(current, final))
+        return self.floors[key][1]
+
+    def expect(self, current: FittedModel, final: Simulated) -> tuple[float, float]:
         """The gap a model without missing effects leaves on this sweep and the final model's objective over
         that model's (estimator.doctor.expected): the mean over `expected_draws` synthetic recordings of the
         plausible truth read with the noise measured on the final model's output residual."""
