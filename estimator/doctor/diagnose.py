@@ -182,6 +182,8 @@ class _Doctor(Judging):
         self.frequency = sweep_frequency_Hz(plate, recording.sample_time_s)
         self.floors: dict[int, tuple[FittedModel, tuple[float, float]]] = {}
         """expected() per model (keyed by id, the model kept so that the id stays its own)."""
+        self.removed: set[EffectInstance] = set()
+        """Effects named and then removed by rejudge: no candidates any more."""
         self.pool: ThreadPoolExecutor | None = None
         """The threads of `workers` while run() runs."""
 
@@ -203,7 +205,7 @@ class _Doctor(Judging):
             self.progress(DiagnoseProgress(step, stage))
 
     def candidates(self, structure: ModelStructure) -> list[EffectInstance]:
-        present = set(structure.effects)
+        present = set(structure.effects) | self.removed
         return [
             instance
             for effect in CATALOG.values()
@@ -251,6 +253,7 @@ class _Doctor(Judging):
                 rounds.append(mark_chosen(played.scores, chosen, "named"))
                 named, state = self.advance(state, played, chosen, rows)
                 steps.append(named)
+                state = self.rejudge(state, len(start_labels), steps, rounds, rows)
                 continue
             pair = self.look_ahead(state, played, step, rows) if step + 2 <= options.max_steps else None
             if pair is None:
@@ -267,6 +270,7 @@ class _Doctor(Judging):
             rounds.append(mark_chosen(then.scores, second, "named"))
             named, state = self.advance(state, then, second, rows)
             steps.append(named)
+            state = self.rejudge(state, len(start_labels), steps, rounds, rows)
         assert state.simulated is not None and initial is not None and located_before is not None
         self.report(len(steps), "simulating the expected gap")
         expected, residual_ratio = self.expected(state.current, state.simulated)
@@ -381,6 +385,44 @@ class _Doctor(Judging):
             predicted_after=after.predicted,
         )
         return named, RoundState(state.structure.with_effect(chosen), model, played.fits.held[chosen], after)
+
+    def rejudge(
+        self,
+        state: RoundState,
+        start: int,
+        steps: list[DiagnosisStep],
+        rounds: list[list[CandidateScore]],
+        rows: np.ndarray,
+    ) -> RoundState:
+        """Once an effect is named, every effect named before it is judged again as a candidate against the
+        current model without it (criteria (a)-(f), a round of one): an effect named while another was
+        missing can have stood in for that one, and once that one is named it no longer qualifies. The
+        first that does not is removed (from the model, `steps`, and the candidates of later rounds; its
+        round is added to `rounds`). Independent world, tyre ×1.29 and the plate lagging 1.72 ms: a tyre
+        dashpot of 375 N·s/m, which the lag mimics (the tyre rate times the lag is 347 N·s/m on the plate's
+        velocity), was named first, then the tyre rate and the lag. `start`: how many of the structure's
+        effects are the starting model's (never judged again). The state, without the effect removed."""
+        named = list(state.structure.effects[start:])
+        for effect in named[:-1]:
+            self.report(len(steps), f"judging {effect.label} again")
+            without = ModelStructure(tuple(e for e in state.structure.effects if e != effect))
+            model = fit(self.reference, without, warm=state.current)
+            reduced = RoundState(without, model, fit(self.reference, without, rows, warm=model), None)
+            played = self.play(reduced, len(steps), [effect], rows)
+            if effect in played.eligible:
+                continue
+            verdict = next(s.verdict for s in played.scores)
+            rounds.append(
+                mark_chosen(
+                    played.scores,
+                    effect,
+                    f"removed: named earlier; with {named[-1].label} added and it left out, {verdict}",
+                )
+            )
+            del steps[named.index(effect)]
+            self.removed.add(effect)
+            return replace(reduced, simulated=played.simulated)
+        return state
 
     def look_ahead(
         self, state: RoundState, played: Played, step: int, rows: np.ndarray
