@@ -105,10 +105,11 @@ class Judging:
         heldout_base: float,
         rows: np.ndarray,
         like: Simulated | None = None,
-    ) -> tuple[CandidateScore, bool]:
-        """A candidate's score and whether it qualifies to be named (criteria (a)-(f) of the module
-        docstring). like: the simulated base of a candidate with one (fits.bases): (a)-(c) then compare the
-        candidate with that base, and its gap must not exceed the current model's either."""
+    ) -> tuple[CandidateScore, bool, bool]:
+        """A candidate's score, whether it qualifies to be named (criteria (a)-(f) of the module
+        docstring), and whether only with (a) on the gap above the floor (shrinks_above_floor). like: the
+        simulated base of a candidate with one (fits.bases): (a)-(c) then compare the candidate with that
+        base, and its gap must not exceed the current model's either."""
         ratio, trial = fits.ratios[instance], fits.trials[instance]
         now, model_now = simulated, current
         if like is not None and instance in fits.bases:
@@ -119,9 +120,13 @@ class Judging:
         options = self.options
         if full is None or held is None or gap_m is None:
             verdict = f"screened out: the objective falls only {100 * (1 - ratio):.1f}%"
-            return CandidateScore(
-                instance.label, ratio, None, None, None, None, None, trial.parameters(instance), verdict
-            ), False
+            return (
+                CandidateScore(
+                    instance.label, ratio, None, None, None, None, None, trial.parameters(instance), verdict
+                ),
+                False,
+                False,
+            )
         heldout = heldout_objective(held, rows) / heldout_base
         gap_ratio = (
             gap_m / simulated.gap_m if np.isfinite(simulated.gap_m) else (0.0 if np.isfinite(gap_m) else 1.0)
@@ -161,18 +166,22 @@ class Judging:
             reasons.append(f"the residual does not follow its signal (correlation {correlation:.2f})")
         # (a) on the part of the gap a complete model would not leave, asked only of a candidate that meets
         # every other criterion (the floor costs a few fits)
-        if (
+        above_floor = (
             short_of_a
             and len(reasons) == 1
             and self.shrinks_above_floor(simulated.gap_m, gap_m, reduction, model_now, now)
-        ):
+        )
+        if above_floor:
             reasons = []
         spread = None
         if not reasons:
             spread, described = self.parameter_spread(instance, structure, full)
             if spread is not None and spread > options.max_parameter_spread and not strong:
                 reasons.append(f"its parameter is not the same over the sweep ({described})")
-        verdict = "qualifies" if not reasons else "rejected: " + "; ".join(reasons)
+        verdict = "rejected: " + "; ".join(reasons) if reasons else "qualifies"
+        if above_floor and not reasons:
+            verdict = "qualifies on the gap above a complete model's"
+
         score = CandidateScore(
             instance.label,
             ratio,
@@ -185,7 +194,7 @@ class Judging:
             verdict,
             spread,
         )
-        return score, not reasons
+        return score, not reasons, bool(above_floor)
 
     def floor_m(self, current: FittedModel, simulated: Simulated) -> float:
         """The gap a model without missing effects leaves on this sweep, for the structure of `current`
