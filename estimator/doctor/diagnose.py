@@ -30,7 +30,12 @@ Every round:
    own damper grid (one line across the band around zero velocity, _Doctor.like_bases), like with like,
    and its gap must not exceed the current model's.
    When no candidate qualifies alone, the one strongest in the equations is tried together with the best
-   of one more round (_Doctor.look_ahead).
+   of one more round (_Doctor.look_ahead). When that names nothing either, a candidate that meets (a) on
+   the part of the gap above what a complete model of the current structure leaves (the excess
+   √(gap² − floor²), Judging.shrinks_above_floor) and every other criterion is named.
+   Once an effect is named, the effects named before it are judged again against the model without them
+   (_Doctor.rejudge); one that no longer qualifies and is not strong in the equations stood in for the one
+   just named and is removed.
    Candidates that tie on the gap (within `tie_tolerance`) are told apart by the equations (the lowest
    objective); those that tie there too (an offset of the wheel sensor and the opposite offset of the plate
    sensor are indistinguishable in the equations) by the plate, which oscillates about its zero unless its
