@@ -244,9 +244,9 @@ def test_with_friction_the_curve_is_one_line_across_zero_velocity() -> None:
 
 
 def test_a_knot_just_beyond_the_friction_band_gives_way() -> None:
-    """A uniform knot 0.4 mm/s beyond the band edge (the independent world's car 30: knots 14.9 mm/s apart, one
-    at 20.4 mm/s) would leave a 0.4 mm/s interval whose slope, free to swing, sets the band's: it gives way,
-    and the interval beside the band spans the next knot; the end knots stay."""
+    """A uniform knot 0.4 mm/s beyond the band edge (the independent world's car 30: knots 14.9 mm/s
+    apart, one at 20.4 mm/s) would leave a 0.4 mm/s interval whose slope, free to swing, sets the band's:
+    it gives way, and the interval beside the band spans the next knot; the end knots stay."""
     uniform = np.linspace(-0.2181, 0.2142, 30)
     assert np.any(np.isclose(uniform, 0.0204, atol=5e-5))
     (grid,) = friction_grids([uniform])
