@@ -350,20 +350,22 @@ def friction_grids(grids: list[np.ndarray], band_m_s: float = FRICTION_BAND_M_S)
 
 FRICTION_EDGE_CLEARANCE = 0.5
 """The slopes the friction band's slope is tied to (friction_constraints) are taken from the band edge to
-the nearest knot at least this share of the grid's (median) knot spacing beyond it. A uniform knot can fall
-just beyond an edge, and the slope of so narrow an interval, which holds few samples, swings freely and
-takes the band's with it. Independent world (car, SUV table ×0.68, 90 N of friction, knots 14.9 mm/s apart,
-one at 20.4 mm/s): tied to the 0.4 mm/s interval beside the edge, the band's line came out at a sixth of the
-table's low-speed slope, the friction at 172 N for 90 N and the gap 5.3 times a complete model's
-(unexplained); tied to the slope up to the knot at 35.3 mm/s, 129 N, named and not unexplained. Half the
-band's width instead of half a spacing left that recording unexplained (its expected gap, from a curve with
-twice the knots, fell to 10.5 µm) and a held-out van with a lift-off missing its friction."""
+the nearest knot at least this share of the grid's (median) knot spacing, or of the band's half-width if
+that is less, beyond it. A uniform knot can fall just beyond an edge, and the slope of so narrow an
+interval, which holds few samples, swings freely and takes the band's with it. Independent world (car, SUV
+table ×0.68, 90 N of friction, knots 14.9 mm/s apart, one at 20.4 mm/s): tied to the 0.4 mm/s interval
+beside the edge, the band's line came out at a sixth of the table's low-speed slope, the friction at 172 N
+for 90 N and the gap 5.3 times a complete model's (unexplained); tied to the slope up to the knot at
+35.3 mm/s, 129 N. On a coarse grid (knots 87 mm/s apart) half a spacing would reach past intervals of
+20 mm/s beside the band, which are no slivers, and tie the band to slopes across the damper's knee: a car
+with a wrong tyre rate was then given 33 N of friction it does not have."""
 
 
 def friction_constraints(system: LinearResiduals, band_m_s: float = FRICTION_BAND_M_S) -> np.ndarray:
     """Rows a with a·θ = 0 (one per damper curve, as many columns as θ): the curve's slope across the band
     ±band_m_s is the mean of its slopes either side, each from the band edge to the nearest knot at least
-    FRICTION_EDGE_CLEARANCE of a knot spacing beyond it (the next knot unless that one is closer). With knots
+    FRICTION_EDGE_CLEARANCE of a knot spacing (or of band_m_s, if less) beyond it (the next knot unless that
+    one is closer). With knots
     at ±band only (see friction_grids) the curve could still step from −F to +F across the band; the
     constraint leaves it the slope a smooth curve has there, so only the friction term can step (on an
     independent recording with 98 N of friction: 104 N fitted with the constraint, 121 N without; either way
@@ -377,7 +379,7 @@ def friction_constraints(system: LinearResiduals, band_m_s: float = FRICTION_BAN
         i = int(low[0])
         if not np.isclose(grid[i + 1], band_m_s, rtol=0.0, atol=1e-12):
             continue
-        clearance = FRICTION_EDGE_CLEARANCE * float(np.median(np.diff(grid)))
+        clearance = FRICTION_EDGE_CLEARANCE * min(float(np.median(np.diff(grid))), band_m_s)
         below = np.nonzero(grid[:i] <= grid[i] - clearance)[0]
         above = np.nonzero(grid[i + 2 :] >= grid[i + 1] + clearance)[0]
         j = int(below[-1]) if below.size else i - 1
