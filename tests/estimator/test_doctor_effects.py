@@ -36,6 +36,7 @@ from estimator.doctor.catalog import (
     EffectName,
     FitContext,
 )
+from estimator.doctor.columns import interval_mean
 from estimator.doctor.diagnose import _Doctor
 from estimator.doctor.model import (
     ModelStructure,
@@ -267,6 +268,17 @@ def test_the_friction_band_is_tied_to_slopes_measured_beyond_a_sliver() -> None:
     band = int(np.searchsorted(wide, -FRICTION_BAND_M_S))
     assert np.count_nonzero(row) == 4
     assert row[band - 1] != 0.0 and row[band + 2] != 0.0
+
+
+def test_the_friction_column_is_the_step_s_share_of_each_sample_interval() -> None:
+    """columns.interval_mean: velocity -3, -1, 3, 5 (per sample) crosses zero a quarter sample after the
+    second sample, so over that sample's interval (half a sample either side) a sign is -1 for three
+    quarters and +1 for one: -0.5, where the sample instant says -1. Away from a crossing, and for a
+    function linear in the series, the mean is the value at the sample (the ends, held, aside)."""
+    velocity = np.array([-3.0, -1.0, 3.0, 5.0])
+    assert np.allclose(interval_mean(np.sign, velocity), [-1.0, -0.5, 1.0, 1.0])
+    ramp = np.linspace(-2.0, 2.0, 9)
+    assert np.allclose(interval_mean(lambda v: 3.0 * v + 1.0, ramp)[1:-1], 3.0 * ramp[1:-1] + 1.0)
 
 
 def test_low_speed_knots_join_the_uniform_ones() -> None:
