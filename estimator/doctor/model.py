@@ -336,43 +336,41 @@ def _same_size(grids: list[np.ndarray], keep_m_s: float | None = None) -> list[n
     return changed
 
 
-FRICTION_EDGE_CLEARANCE = 0.5
-"""A knot closer to a friction band edge (beyond it) than this share of the grid's (median) knot spacing,
-or of the band's half-width if that is less, gives way (not an end knot). The band's slope is tied to the
-slopes of the intervals either side (friction_constraints); a uniform knot can fall just beyond an edge, and
-the slope of so narrow an interval, which holds few samples, swings freely and takes the band's with it.
-Independent world (car, SUV table ×0.68, 90 N of friction, knots 14.9 mm/s apart, one at 20.4 mm/s): tied to
-the 0.4 mm/s interval beside the edge, the band's line came out at a sixth of the table's low-speed slope,
-the friction at 172 N for 90 N and the gap 5.3 times a complete model's (unexplained). Tying the band past
-such a knot instead and keeping it left the narrow interval free to step by itself: on a clean motorcycle
-(FSAE s5 table, a knot 1.1 mm/s beyond the edge) the friction fitted for the dead-band check came out
--78 ± 71 N instead of -159 ± 8 N, the dead band was missed and the final gap was 3.8 times a complete
-model's. The half-width bound keeps a coarse grid's knots (87 mm/s apart, 20 mm/s beyond the edges), whose
-intervals beside the band are no slivers."""
-
-
 def friction_grids(grids: list[np.ndarray], band_m_s: float = FRICTION_BAND_M_S) -> list[np.ndarray]:
     """The damper grids of a model with coulomb_friction: knots at ±band_m_s and none between (the curve is
-    one line there, so that it cannot make the friction step itself), none within FRICTION_EDGE_CLEARANCE
-    beyond them, the other knots as they were. An axle's two grids keep the same number of knots (the
-    longer intervals of the shorter one are halved)."""
+    one line there, so that it cannot make the friction step itself), the other knots as they were. An
+    axle's two grids keep the same number of knots (the longer intervals of the shorter one are halved)."""
     changed = []
     for grid in grids:
-        clearance = FRICTION_EDGE_CLEARANCE * min(float(np.median(np.diff(grid))), band_m_s)
-        ends = (grid == grid[0]) | (grid == grid[-1])
-        outside = grid[(np.abs(grid) >= band_m_s + clearance) | (ends & (np.abs(grid) >= band_m_s))]
+        outside = grid[np.abs(grid) >= band_m_s]
         edges = [v for v in (-band_m_s, band_m_s) if grid[0] < v < grid[-1]]
         changed.append(np.unique(np.concatenate([outside, edges])))
     return _same_size(changed, band_m_s)
 
 
+FRICTION_EDGE_CLEARANCE = 0.5
+"""The slopes the friction band's slope is tied to (friction_constraints) are taken from the band edge to
+the nearest knot at least this share of the grid's (median) knot spacing, or of the band's half-width if
+that is less, beyond it. A uniform knot can fall just beyond an edge, and the slope of so narrow an
+interval, which holds few samples, swings freely and takes the band's with it. Independent world (car, SUV
+table ×0.68, 90 N of friction, knots 14.9 mm/s apart, one at 20.4 mm/s): tied to the 0.4 mm/s interval
+beside the edge, the band's line came out at a sixth of the table's low-speed slope, the friction at 172 N
+for 90 N and the gap 5.3 times a complete model's (unexplained); tied to the slope up to the knot at
+35.3 mm/s, 129 N. On a coarse grid (knots 87 mm/s apart) half a spacing would reach past intervals of
+20 mm/s beside the band, which are no slivers, and tie the band to slopes across the damper's knee: a car
+with a wrong tyre rate was then given 33 N of friction it does not have."""
+
+
 def friction_constraints(system: LinearResiduals, band_m_s: float = FRICTION_BAND_M_S) -> np.ndarray:
     """Rows a with a·θ = 0 (one per damper curve, as many columns as θ): the curve's slope across the band
-    ±band_m_s is the mean of its slopes on the intervals either side. With knots at ±band only (see
-    friction_grids) the curve could still step from −F to +F across the band; the constraint leaves it the
-    slope a smooth curve has there, so only the friction term can step (on an independent recording with 98 N
-    of friction: 104 N fitted with the constraint, 121 N without; either way the fast half of the sweep, with
-    zero crossings of a few ms, sees less of the friction than the slow half)."""
+    ±band_m_s is the mean of its slopes either side, each from the band edge to the nearest knot at least
+    FRICTION_EDGE_CLEARANCE of a knot spacing (or of band_m_s, if less) beyond it (the next knot unless that
+    one is closer). With knots
+    at ±band only (see friction_grids) the curve could still step from −F to +F across the band; the
+    constraint leaves it the slope a smooth curve has there, so only the friction term can step (on an
+    independent recording with 98 N of friction: 104 N fitted with the constraint, 121 N without; either way
+    the fast half of the sweep, with zero crossings of a few ms, sees less of the friction than the slow
+    half)."""
     rows = []
     for grid, part in zip(system.grids_m_s, system.curve_slices, strict=True):
         low = np.nonzero(np.isclose(grid, -band_m_s, rtol=0.0, atol=1e-12))[0]
@@ -381,12 +379,17 @@ def friction_constraints(system: LinearResiduals, band_m_s: float = FRICTION_BAN
         i = int(low[0])
         if not np.isclose(grid[i + 1], band_m_s, rtol=0.0, atol=1e-12):
             continue
-        width, left, right = 2.0 * band_m_s, grid[i] - grid[i - 1], grid[i + 2] - grid[i + 1]
+        clearance = FRICTION_EDGE_CLEARANCE * min(float(np.median(np.diff(grid))), band_m_s)
+        below = np.nonzero(grid[:i] <= grid[i] - clearance)[0]
+        above = np.nonzero(grid[i + 2 :] >= grid[i + 1] + clearance)[0]
+        j = int(below[-1]) if below.size else i - 1
+        k = i + 2 + int(above[0]) if above.size else i + 2
+        width, left, right = 2.0 * band_m_s, grid[i] - grid[j], grid[k] - grid[i + 1]
         row = np.zeros(system.n_params)
-        row[part.start + i - 1] = 0.5 / left
-        row[part.start + i] = -1.0 / width - 0.5 / left
-        row[part.start + i + 1] = 1.0 / width + 0.5 / right
-        row[part.start + i + 2] = -0.5 / right
+        row[part.start + j] += 0.5 / left
+        row[part.start + i] += -1.0 / width - 0.5 / left
+        row[part.start + i + 1] += 1.0 / width + 0.5 / right
+        row[part.start + k] += -0.5 / right
         rows.append(row)
     return np.array(rows).reshape(len(rows), system.n_params)
 
