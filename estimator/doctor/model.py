@@ -348,29 +348,13 @@ def friction_grids(grids: list[np.ndarray], band_m_s: float = FRICTION_BAND_M_S)
     return _same_size(changed, band_m_s)
 
 
-FRICTION_EDGE_CLEARANCE = 0.5
-"""The slopes the friction band's slope is tied to (friction_constraints) are taken from the band edge to
-the nearest knot at least this share of the grid's (median) knot spacing, or of the band's half-width if
-that is less, beyond it. A uniform knot can fall just beyond an edge, and the slope of so narrow an
-interval, which holds few samples, swings freely and takes the band's with it. Independent world (car, SUV
-table ×0.68, 90 N of friction, knots 14.9 mm/s apart, one at 20.4 mm/s): tied to the 0.4 mm/s interval
-beside the edge, the band's line came out at a sixth of the table's low-speed slope, the friction at 172 N
-for 90 N and the gap 5.3 times a complete model's (unexplained); tied to the slope up to the knot at
-35.3 mm/s, 129 N. On a coarse grid (knots 87 mm/s apart) half a spacing would reach past intervals of
-20 mm/s beside the band, which are no slivers, and tie the band to slopes across the damper's knee: a car
-with a wrong tyre rate was then given 33 N of friction it does not have."""
-
-
 def friction_constraints(system: LinearResiduals, band_m_s: float = FRICTION_BAND_M_S) -> np.ndarray:
     """Rows a with a·θ = 0 (one per damper curve, as many columns as θ): the curve's slope across the band
-    ±band_m_s is the mean of its slopes either side, each from the band edge to the nearest knot at least
-    FRICTION_EDGE_CLEARANCE of a knot spacing (or of band_m_s, if less) beyond it (the next knot unless that
-    one is closer). With knots
-    at ±band only (see friction_grids) the curve could still step from −F to +F across the band; the
-    constraint leaves it the slope a smooth curve has there, so only the friction term can step (on an
-    independent recording with 98 N of friction: 104 N fitted with the constraint, 121 N without; either way
-    the fast half of the sweep, with zero crossings of a few ms, sees less of the friction than the slow
-    half)."""
+    ±band_m_s is the mean of its slopes on the intervals either side. With knots at ±band only (see
+    friction_grids) the curve could still step from −F to +F across the band; the constraint leaves it the
+    slope a smooth curve has there, so only the friction term can step (on an independent recording with 98 N
+    of friction: 104 N fitted with the constraint, 121 N without; either way the fast half of the sweep, with
+    zero crossings of a few ms, sees less of the friction than the slow half)."""
     rows = []
     for grid, part in zip(system.grids_m_s, system.curve_slices, strict=True):
         low = np.nonzero(np.isclose(grid, -band_m_s, rtol=0.0, atol=1e-12))[0]
@@ -379,17 +363,12 @@ def friction_constraints(system: LinearResiduals, band_m_s: float = FRICTION_BAN
         i = int(low[0])
         if not np.isclose(grid[i + 1], band_m_s, rtol=0.0, atol=1e-12):
             continue
-        clearance = FRICTION_EDGE_CLEARANCE * min(float(np.median(np.diff(grid))), band_m_s)
-        below = np.nonzero(grid[:i] <= grid[i] - clearance)[0]
-        above = np.nonzero(grid[i + 2 :] >= grid[i + 1] + clearance)[0]
-        j = int(below[-1]) if below.size else i - 1
-        k = i + 2 + int(above[0]) if above.size else i + 2
-        width, left, right = 2.0 * band_m_s, grid[i] - grid[j], grid[k] - grid[i + 1]
+        width, left, right = 2.0 * band_m_s, grid[i] - grid[i - 1], grid[i + 2] - grid[i + 1]
         row = np.zeros(system.n_params)
-        row[part.start + j] += 0.5 / left
-        row[part.start + i] += -1.0 / width - 0.5 / left
-        row[part.start + i + 1] += 1.0 / width + 0.5 / right
-        row[part.start + k] += -0.5 / right
+        row[part.start + i - 1] = 0.5 / left
+        row[part.start + i] = -1.0 / width - 0.5 / left
+        row[part.start + i + 1] = 1.0 / width + 0.5 / right
+        row[part.start + i + 2] = -0.5 / right
         rows.append(row)
     return np.array(rows).reshape(len(rows), system.n_params)
 

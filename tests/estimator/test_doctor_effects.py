@@ -20,7 +20,6 @@ import tempfile
 from dataclasses import replace
 from functools import cache
 from pathlib import Path
-from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -38,12 +37,7 @@ from estimator.doctor.catalog import (
 )
 from estimator.doctor.columns import interval_mean
 from estimator.doctor.diagnose import _Doctor
-from estimator.doctor.model import (
-    ModelStructure,
-    friction_constraints,
-    friction_grids,
-    low_speed_grids,
-)
+from estimator.doctor.model import ModelStructure, friction_grids, low_speed_grids
 from estimator.recording import Recording
 from estimator.vehicle import PAPER_BENCH, REFERENCE_SAMPLE_TIME_S, VehicleConstant
 from simulators.independent.cases import Case, draw_case, simulate_case
@@ -236,38 +230,6 @@ def test_with_friction_the_curve_is_one_line_across_zero_velocity() -> None:
     axle = friction_grids([np.linspace(-0.3, 0.5, 15), np.linspace(-0.021, 0.6, 15)])
     assert axle[0].size == axle[1].size
     assert all(np.all(np.diff(g) > 0) for g in axle)
-
-
-def _tie(grid: np.ndarray) -> np.ndarray:
-    """friction_constraints' row for one quarter-car curve on `grid` (θ = the curve's knot values)."""
-    system = SimpleNamespace(grids_m_s=[grid], curve_slices=[slice(0, grid.size)], n_params=grid.size)
-    (row,) = friction_constraints(system)  # type: ignore[arg-type]
-    return row
-
-
-def test_the_friction_band_is_tied_to_slopes_measured_beyond_a_sliver() -> None:
-    """The band's slope is the mean of the slopes either side, each from the band edge to the nearest knot at
-    least half a knot spacing beyond it. Independent world's car 30: knots 14.9 mm/s apart, one at 20.4 mm/s
-    beside the edge at 20 mm/s; the tie skips it and reaches to 35.3 mm/s. On the left the next knot
-    (24.3 mm/s beyond -20) is 4.3 mm/s away, also a sliver: the tie reaches to -39.2 mm/s. Where the next
-    knots are far enough (knots 50 mm/s apart), the tie is the slopes of the intervals beside the band."""
-    (grid,) = friction_grids([np.linspace(-0.2181, 0.2142, 30)])
-    row = _tie(grid)
-    band = int(np.searchsorted(grid, -FRICTION_BAND_M_S))
-    sliver, beyond = band + 2, band + 3
-    assert grid[sliver] - FRICTION_BAND_M_S < 0.001 and grid[beyond] > 0.035
-    assert row[sliver] == 0.0 and row[beyond] != 0.0
-    assert row[band - 1] == 0.0 and row[band - 2] != 0.0
-    # a curve straight across the band and its neighbours meets the tie, whatever the sliver does
-    curve = 3000.0 * grid
-    assert abs(row @ curve) < 1e-9 * 3000.0
-    curve[sliver] += 50.0
-    assert abs(row @ curve) < 1e-9 * 3000.0
-    (wide,) = friction_grids([np.linspace(-0.45, 0.45, 19)])
-    row = _tie(wide)
-    band = int(np.searchsorted(wide, -FRICTION_BAND_M_S))
-    assert np.count_nonzero(row) == 4
-    assert row[band - 1] != 0.0 and row[band + 2] != 0.0
 
 
 def test_the_friction_column_is_the_step_s_share_of_each_sample_interval() -> None:
