@@ -28,7 +28,7 @@ Every round:
    `stiffness_min_gap_reduction` in (a).
    coulomb_friction is measured in (a)-(c) and in the screen against the current structure refitted on its
    own damper grid (one line across the band around zero velocity, _Doctor.like_bases), like with like,
-   and its gap must not exceed the current model's by more than `tie_tolerance`.
+   and its gap must not exceed the current model's.
    When no candidate qualifies alone, the one strongest in the equations is tried together with the best
    of one more round (_Doctor.look_ahead).
    Candidates that tie on the gap (within `tie_tolerance`) are told apart by the equations (the lowest
