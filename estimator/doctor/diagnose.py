@@ -28,7 +28,7 @@ Every round:
    `stiffness_min_gap_reduction` in (a).
    coulomb_friction is measured in (a)-(c) and in the screen against the current structure refitted on its
    own damper grid (one line across the band around zero velocity, _Doctor.like_bases), like with like,
-   and its gap must not exceed the current model's.
+   and its gap must not exceed the current model's by more than `tie_tolerance`.
    When no candidate qualifies alone, the one strongest in the equations is tried together with the best
    of one more round (_Doctor.look_ahead). When that names nothing either, a candidate that meets (a) on
    the part of the gap above what a complete model of the current structure leaves (the excess

@@ -156,7 +156,9 @@ class Judging:
                 if gap_ratio < 1.0
                 else "the gap does not fall"
             )
-        if simulated is not now and np.isfinite(gap_m) and gap_m > now.gap_m:
+        # like with like, but the output must not contradict it either: a gap above the current model's
+        # beyond what counts as a tie elsewhere (choose, at_the_floor)
+        if simulated is not now and np.isfinite(gap_m) and gap_m > now.gap_m * (1.0 + options.tie_tolerance):
             reasons.append("the gap is larger than the current model's")
         if heldout > 1.0 - options.min_heldout_reduction:
             reasons.append("no better on held-out data")
