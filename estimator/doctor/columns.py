@@ -9,6 +9,7 @@ low-pass as the rest of the system (estimator.signals), so the equations keep ho
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -18,6 +19,9 @@ from estimator.equations import LinearResiduals
 from estimator.recording import Recording
 from estimator.signals import lowpass
 from estimator.vehicle import VehicleParameters
+
+INTERVAL_POINTS = 16
+"""Points per sample interval at which interval_mean evaluates its function."""
 
 QUARTER_CAR_EQUATIONS = ("body", "wheel")
 AXLE_EQUATIONS = ("left wheel", "right wheel", "heave", "roll")
@@ -147,3 +151,21 @@ def with_columns(
         velocity_m_s=system.velocity_m_s,
         kinematics=system.kinematics,
     )
+
+
+def interval_mean(function: Callable[[np.ndarray], np.ndarray], series: np.ndarray) -> np.ndarray:
+    """Per sample, the mean of function(series(t)) over the sample's own interval (half a sample time either
+    side), with the series linear between samples (INTERVAL_POINTS points per interval; the ends held). A
+    force that steps where the series crosses zero (Coulomb friction against the suspension velocity) acts
+    for the part of the interval on either side of the crossing; taken at the sample instants it switches a
+    whole sample early or late. At 2 ms sampling on the independent world the zero crossings of the fast
+    half of the sweep fall between samples, with the velocity tens of mm/s either side: a car with 109 N of
+    friction fitted 103 N at 2.9 standard errors with the pointwise column, 108 N at 3.4 with this one."""
+    before = np.concatenate([series[:1], series[:-1]])
+    after = np.concatenate([series[1:], series[-1:]])
+    total = np.zeros_like(series, dtype=float)
+    for k in range(INTERVAL_POINTS):
+        fraction = (k + 0.5) / INTERVAL_POINTS - 0.5
+        neighbour = before if fraction < 0.0 else after
+        total += function(series + (neighbour - series) * abs(fraction))
+    return total / INTERVAL_POINTS

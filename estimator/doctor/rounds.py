@@ -4,7 +4,7 @@ with (the fitting/held-out blocks, the held-out objective, the plate's centre, t
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -52,8 +52,9 @@ class RoundState:
 
 @dataclass
 class Played:
-    """A round's outcome: every candidate's score, those that qualify, the fits, the current model's
-    simulation, each kept candidate's simulation, and the current model's held-out objective."""
+    """A round's outcome: every candidate's score, those that qualify (criterion (a) on the whole gap),
+    the fits, the current model's simulation, each kept candidate's simulation, and the current model's
+    held-out objective."""
 
     scores: list[CandidateScore]
     eligible: list[EffectInstance]
@@ -61,6 +62,8 @@ class Played:
     simulated: Simulated
     outcomes: dict[EffectInstance, Simulated]
     heldout_base: float
+    above_floor: list[EffectInstance] = field(default_factory=list)
+    """Those that qualify only with criterion (a) on the gap above a complete model's (not in eligible)."""
 
     @property
     def gaps(self) -> dict[EffectInstance, float]:

@@ -35,6 +35,7 @@ from estimator.doctor.catalog import (
     EffectName,
     FitContext,
 )
+from estimator.doctor.columns import interval_mean
 from estimator.doctor.diagnose import _Doctor
 from estimator.doctor.model import ModelStructure, friction_grids, low_speed_grids
 from estimator.recording import Recording
@@ -229,6 +230,17 @@ def test_with_friction_the_curve_is_one_line_across_zero_velocity() -> None:
     axle = friction_grids([np.linspace(-0.3, 0.5, 15), np.linspace(-0.021, 0.6, 15)])
     assert axle[0].size == axle[1].size
     assert all(np.all(np.diff(g) > 0) for g in axle)
+
+
+def test_the_friction_column_is_the_step_s_share_of_each_sample_interval() -> None:
+    """columns.interval_mean: velocity -3, -1, 3, 5 (per sample) crosses zero a quarter sample after the
+    second sample, so over that sample's interval (half a sample either side) a sign is -1 for three
+    quarters and +1 for one: -0.5, where the sample instant says -1. Away from a crossing, and for a
+    function linear in the series, the mean is the value at the sample (the ends, held, aside)."""
+    velocity = np.array([-3.0, -1.0, 3.0, 5.0])
+    assert np.allclose(interval_mean(np.sign, velocity), [-1.0, -0.5, 1.0, 1.0])
+    ramp = np.linspace(-2.0, 2.0, 9)
+    assert np.allclose(interval_mean(lambda v: 3.0 * v + 1.0, ramp)[1:-1], 3.0 * ramp[1:-1] + 1.0)
 
 
 def test_low_speed_knots_join_the_uniform_ones() -> None:
