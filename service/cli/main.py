@@ -57,8 +57,16 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     return parser
 
 
+SHORT_LIVED_COMMANDS = frozenset({"identify", "diagnose", "validate", "simulate", "demo", "fit-tanh"})
+"""Commands that run one computation and exit: their allocator keeps freed memory (service.cli.allocator)."""
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     arguments = list(sys.argv[1:] if argv is None else argv)
+    if arguments and arguments[0] in SHORT_LIVED_COMMANDS:
+        from service.cli.allocator import keep_freed_memory
+
+        keep_freed_memory()
     parser = build_parser(arguments[0] if arguments else None)
     args = parser.parse_args(arguments)
     return run_command(args.command, lambda: args.handler(args))
