@@ -9,6 +9,7 @@ anything else is a bug, exit code 1 with its traceback in a log file the message
 from __future__ import annotations
 
 import argparse
+import gc
 import importlib
 import sys
 from collections.abc import Sequence
@@ -58,18 +59,26 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
 
 
 SHORT_LIVED_COMMANDS = frozenset({"identify", "diagnose", "validate", "simulate", "demo", "fit-tanh"})
-"""Commands that run one computation and exit: their allocator keeps freed memory (service.cli.allocator)."""
+"""Commands that run one computation and exit: their allocator keeps freed memory (service.cli.allocator),
+and their objects are frozen before the interpreter's shutdown."""
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     arguments = list(sys.argv[1:] if argv is None else argv)
-    if arguments and arguments[0] in SHORT_LIVED_COMMANDS:
+    # as the console script's process (argv None), not as a function called by a process that goes on (tests)
+    short_lived = argv is None and bool(arguments) and arguments[0] in SHORT_LIVED_COMMANDS
+    if short_lived:
         from service.cli.allocator import keep_freed_memory
 
         keep_freed_memory()
     parser = build_parser(arguments[0] if arguments else None)
     args = parser.parse_args(arguments)
-    return run_command(args.command, lambda: args.handler(args))
+    code = run_command(args.command, lambda: args.handler(args))
+    if short_lived:
+        # the process ends next: Python's shutdown collects cyclic garbage over every object it holds, about
+        # 12 ms of a 170 ms identify; frozen objects are skipped (files are closed already, atexit still runs)
+        gc.freeze()
+    return code
 
 
 if __name__ == "__main__":
