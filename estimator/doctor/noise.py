@@ -23,7 +23,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import nnls
 
 from estimator.digital_filters import first_order_filter, welch_density
 
@@ -85,6 +84,30 @@ def _ar1_shape(frequency_Hz: np.ndarray, sample_time_s: float, rho: float) -> np
     return 1.0 / (1.0 - 2.0 * rho * np.cos(omega) + rho * rho)
 
 
+def two_column_nnls(design: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, float]:
+    """scipy.optimize.nnls for a design of two columns: x ≥ 0 minimising ||design·x − target||, and that
+    norm. The problem is convex, so its optimum is the unconstrained least squares when that is ≥ 0, else
+    the best of the one-column fits (each clipped at 0) and zero. Why not scipy's: importing scipy.optimize
+    costs a diagnosis about 0.12 s, a tenth of it on a 12 s recording, for this one 2-unknown fit."""
+    candidates = []
+    for column in range(2):
+        values = design[:, column]
+        if float(values @ values) > 0.0:
+            one = np.zeros(2)
+            one[column] = max(float(values @ target) / float(values @ values), 0.0)
+            candidates.append(one)
+    both = np.linalg.lstsq(design, target, rcond=None)[0]
+    if np.all(both >= 0.0):
+        candidates.append(both)
+    candidates.append(np.zeros(2))
+    misfits = [float(np.linalg.norm(design @ x - target)) for x in candidates]
+    # on a tie (collinear columns: ρ = 0 makes the AR(1) shape white) the first column alone, as scipy's
+    # active set takes it, rather than lstsq's even split
+    tie = 1e-12 * (min(misfits) + float(np.linalg.norm(target)))
+    best = next(i for i, m in enumerate(misfits) if m <= min(misfits) + tie)
+    return candidates[best], misfits[best]
+
+
 def measure_channel_noise(
     residual_m: np.ndarray, sample_time_s: float, band_from_Hz: float, quantum_m: float = 0.0
 ) -> ChannelNoise:
@@ -103,7 +126,7 @@ def measure_channel_noise(
     for rho in LAG1_GRID:
         shape = _ar1_shape(f, sample_time_s, float(rho))
         design = np.column_stack([shape / p, 1.0 / p])
-        (a, b), misfit = nnls(design, np.ones(f.size))
+        (a, b), misfit = two_column_nnls(design, np.ones(f.size))
         if best is None or misfit < best[0]:
             best = (float(misfit), float(rho), float(a), float(b))
     assert best is not None
