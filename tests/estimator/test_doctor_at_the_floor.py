@@ -12,15 +12,12 @@ the classes over more draws (BENCHMARKS.md).
 from __future__ import annotations
 
 import tempfile
-from dataclasses import replace
 from pathlib import Path
 
-from daq.formats.recording_csv import read_recording_csv
-from daq.formats.vehicle_file import read_vehicle
+from independent_recordings import recorded
+
 from estimator.doctor import DiagnoseOptions, DiagnosisResult, diagnose
-from estimator.vehicle import REFERENCE_SAMPLE_TIME_S
-from simulators.independent.cases import Case, draw_case, simulate_case
-from simulators.independent.files import write_recording
+from simulators.independent.cases import Case
 
 SWEEP_S = 10.0
 DELAY_ACCURACY = 0.05
@@ -31,13 +28,8 @@ damper differ; a complete model identifies stiffnesses a few per cent off)."""
 
 
 def _diagnosed(label: str, seed: int, max_steps: int) -> tuple[Case, DiagnosisResult]:
-    case = draw_case(label, seed, sweep_s=SWEEP_S)
-    case = replace(case, settings=replace(case.settings, theta_reference_s=REFERENCE_SAMPLE_TIME_S))
-    world = simulate_case(case)
     with tempfile.TemporaryDirectory(prefix="doctor-floor-") as name:
-        csv_path, toml_path = Path(name) / "r.csv", Path(name) / "v.toml"
-        write_recording(world, csv_path, toml_path)
-        recording, vehicle = read_recording_csv(csv_path), read_vehicle(toml_path)
+        case, _, recording, vehicle = recorded(label, seed, Path(name), SWEEP_S)
     return case, diagnose(recording, vehicle, DiagnoseOptions(max_steps=max_steps))
 
 

@@ -12,22 +12,18 @@ draws are in BENCHMARKS.md (benchmarks/bench_doctor_independent.py).
 
 from __future__ import annotations
 
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pytest
+from independent_recordings import recorded
 
-from daq.formats.recording_csv import read_recording_csv
-from daq.formats.vehicle_file import read_vehicle
-from estimator import vehicle as vehicle_module
 from estimator.doctor import DiagnoseOptions, diagnose
 from estimator.doctor.diagnose import DiagnosisResult
 from estimator.doctor.noise import ChannelNoise, measure_channel_noise, reading_quantum_m
 from estimator.recording import Recording
 from estimator.vehicle import TyreModel, VehicleParameters
-from simulators.independent.cases import Case, draw_case, simulate_case
-from simulators.independent.files import write_recording
+from simulators.independent.cases import Case
 from simulators.independent.sensors import SensorNoise
 
 SWEEP_S = 6.0
@@ -39,12 +35,8 @@ NOISE_SEEDS = range(12)
 
 def _recorded(label: str, seed: int, folder: Path) -> tuple[Case, Recording, VehicleParameters]:
     """Draw, simulate, write as the recording CSV and vehicle TOML, read back."""
-    case = draw_case(label, seed, sweep_s=SWEEP_S)
-    reference = getattr(vehicle_module, "REFERENCE_SAMPLE_TIME_S", None)
-    case = replace(case, settings=replace(case.settings, theta_reference_s=reference))
-    csv_path, toml_path = folder / f"{label}_{seed}.csv", folder / f"{label}_{seed}.toml"
-    write_recording(simulate_case(case), csv_path, toml_path)
-    return case, read_recording_csv(csv_path), read_vehicle(toml_path)
+    case, _, recording, vehicle = recorded(label, seed, folder, SWEEP_S)
+    return case, recording, vehicle
 
 
 def _diagnosed(label: str, seed: int, folder: Path) -> tuple[Case, DiagnosisResult]:

@@ -11,14 +11,11 @@ lift-off physically: the contact force max(0, ...) and the tyre's Maxwell elemen
 
 from __future__ import annotations
 
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+from independent_recordings import recorded
 
-from daq.formats.recording_csv import read_recording_csv
-from daq.formats.vehicle_file import read_vehicle
-from estimator import vehicle as vehicle_module
 from estimator.damper import PiecewiseLinearCurve
 from estimator.doctor import DiagnoseOptions, diagnose
 from estimator.doctor.catalog import EffectInstance, EffectName
@@ -26,8 +23,7 @@ from estimator.doctor.model import FitSettings, Reference, fit, starting_structu
 from estimator.dynamics import CornerPhysics
 from estimator.recording import Recording
 from estimator.vehicle import TyreModel, VehicleParameters
-from simulators.independent.cases import Case, draw_case, simulate_case
-from simulators.independent.files import write_recording
+from simulators.independent.cases import Case
 from simulators.independent.world import WorldRecording
 
 SWEEP_S = 10.0
@@ -40,14 +36,7 @@ flight it came out at 2647 µm on the van, and 389 µm passed as 0.15x)."""
 
 
 def _world(seed: int, folder: Path) -> tuple[Case, WorldRecording, Recording, VehicleParameters]:
-    case = draw_case("tyre_liftoff", seed, sweep_s=SWEEP_S)
-    case = replace(
-        case, settings=replace(case.settings, theta_reference_s=vehicle_module.REFERENCE_SAMPLE_TIME_S)
-    )
-    world = simulate_case(case)
-    csv_path, toml_path = folder / f"liftoff_{seed}.csv", folder / f"liftoff_{seed}.toml"
-    write_recording(world, csv_path, toml_path)
-    return case, world, read_recording_csv(csv_path), read_vehicle(toml_path)
+    return recorded("tyre_liftoff", seed, folder, SWEEP_S)
 
 
 def test_off_the_plate_the_maxwell_element_relaxes() -> None:

@@ -11,21 +11,17 @@ written and read back as `shockbench diagnose` reads them; the benchmark runs th
 from __future__ import annotations
 
 import tempfile
-from dataclasses import replace
 from pathlib import Path
 
 import pytest
+from independent_recordings import recorded
 
-from daq.formats.recording_csv import read_recording_csv
-from daq.formats.vehicle_file import read_vehicle
 from estimator.doctor import DiagnoseOptions, diagnose
 from estimator.doctor.diagnose import DiagnosisResult
 from estimator.doctor.judging import Judging
 from estimator.doctor.model import FittedModel
 from estimator.doctor.rounds import Simulated
-from estimator.vehicle import REFERENCE_SAMPLE_TIME_S
-from simulators.independent.cases import Case, draw_case, simulate_case
-from simulators.independent.files import write_recording
+from simulators.independent.cases import Case
 
 SWEEP_S = 10.0
 REDUCTION = 0.25
@@ -78,13 +74,8 @@ def test_the_gap_above_a_complete_models_decides_criterion_a(
 
 
 def _diagnosed(label: str, seed: int) -> tuple[Case, DiagnosisResult]:
-    case = draw_case(label, seed, sweep_s=SWEEP_S)
-    case = replace(case, settings=replace(case.settings, theta_reference_s=REFERENCE_SAMPLE_TIME_S))
-    world = simulate_case(case)
     with tempfile.TemporaryDirectory(prefix="doctor-pairs-") as name:
-        csv_path, toml_path = Path(name) / "r.csv", Path(name) / "v.toml"
-        write_recording(world, csv_path, toml_path)
-        recording, vehicle = read_recording_csv(csv_path), read_vehicle(toml_path)
+        case, _, recording, vehicle = recorded(label, seed, Path(name), SWEEP_S)
     return case, diagnose(recording, vehicle, DiagnoseOptions())
 
 
