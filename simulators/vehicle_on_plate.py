@@ -142,7 +142,7 @@ class VehicleOnPlate:
             keep = min(entries, max(0, int((self._time_s - float(times_s[0])) / self.step_s) + 3))
             while keep < entries and self._history_times_s[entries - keep] > float(times_s[0]):
                 keep = min(entries, 2 * keep + 1)
-            hist_t = list(itertools.islice(self._history_times_s, len(self._history_times_s) - keep, None))
+            hist_t = list(itertools.islice(self._history_times_s, entries - keep, None))
             hist_v = [
                 v[column]
                 for v in itertools.islice(self._history_outputs, len(self._history_outputs) - keep, None)
