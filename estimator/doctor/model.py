@@ -27,7 +27,6 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
-from scipy import ndimage
 
 from estimator.damper import PiecewiseLinearCurve
 from estimator.doctor.catalog import (
@@ -40,6 +39,7 @@ from estimator.doctor.catalog import (
     FitContext,
 )
 from estimator.doctor.columns import EquationSignals, restrict, with_columns
+from estimator.doctor.spline_shift import shift_signal
 from estimator.equations import LinearResiduals, build
 from estimator.errors import InvalidValueError
 from estimator.recording import Recording
@@ -96,7 +96,7 @@ class ChannelCorrections:
         x = measured
         delay = self.delay_s.get(name, 0.0)
         if delay:
-            x = ndimage.shift(x, -delay / sample_time_s, order=3, mode="nearest")
+            x = shift_signal(x, -delay / sample_time_s)
         return x - self.offset_m.get(name, 0.0)
 
     def distort(self, name: str, true: np.ndarray, sample_time_s: float) -> np.ndarray:
@@ -105,8 +105,7 @@ class ChannelCorrections:
         x = true
         delay = self.delay_s.get(name, 0.0)
         if delay:
-            shift = (delay / sample_time_s, 0) if np.ndim(x) == 2 else delay / sample_time_s
-            x = ndimage.shift(x, shift, order=3, mode="nearest")
+            x = shift_signal(x, delay / sample_time_s)
         return x + self.offset_m.get(name, 0.0)
 
     def apply(self, recording: Recording) -> Recording:

@@ -124,3 +124,23 @@ def test_identify_with_stated_theta_imports_no_scipy_optimize_nor_linalg(tmp_pat
     for package in ("scipy.optimize", "scipy.linalg"):
         imported = sorted(m for m in modules if m == package or m.startswith(package + "."))
         assert imported == [], f"identify imports {imported[:5]}"
+
+
+def test_diagnose_imports_no_scipy(tmp_path) -> None:
+    """A 12 s `shockbench diagnose` spent about a fifth of its run importing scipy (issue 15, item 2): the
+    doctor's noise fit, its delayed channel's spline shift and its whiteness tail run in numpy instead
+    (estimator.doctor.noise, .spline_shift, .residuals)."""
+    from service.kernel_build import compile_ahead
+
+    assert compile_ahead() == "extension"
+    vehicle = tmp_path / "car.toml"
+    vehicle.write_text(
+        '[vehicle]\nmodel = "quarter-car"\nmass_kg = 300.0\nspring_stiffness_N_per_m = 20000.0\n'
+        "tyre_stiffness_N_per_m = 200000.0\ntyre_viscoelastic_coefficient = 0.97\n"
+    )
+    recording = tmp_path / "sweep.csv"
+    _modules_after(["simulate", "--vehicle", str(vehicle), "--out", str(recording), "--seconds", "4"])
+    modules = _modules_after(["diagnose", str(recording), "--vehicle", str(vehicle), "--json"])
+    assert "estimator.doctor.diagnose" in modules  # it did diagnose
+    imported = sorted(m for m in modules if m == "scipy" or m.startswith("scipy."))
+    assert imported == [], f"diagnose imports {imported[:5]}"
