@@ -14,8 +14,10 @@ Recordings (written once per run, read back by every process with the project's 
 
 "scipy DE" is bench_identify_process.py's child process (its --scipy-de mode, run as it is, not copied):
 it reads the 12 s independent recording, builds the paper's objective and runs
-scipy.optimize.differential_evolution with rand1bin, F 1, CR 0.3, NP 70, 3000 generations, scipy's default
-"immediate" updating. The rounds alternate the processes, so the machine's load falls on all alike; the
+scipy.optimize.differential_evolution with rand1bin, F 1, CR 0.3, NP 70, 3000 generations, in each of
+scipy's updating modes asked (--updating, default both): "deferred" (the population evaluated as one
+vectorised batch, the faster reading of the seed's DE) and "immediate" (scipy's default). The rounds
+alternate the processes, so the machine's load falls on all alike; the
 figures are medians of wall time, which includes the interpreter's start and every import (and the
 largest peak RSS, GNU time's, of each command). Targets: the
 12 s diagnoses at least TARGET_RATIO times faster than the DE, the 30 s one under TARGET_LONG_S.
@@ -93,6 +95,9 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=3, help="rounds (default 3; the figures are medians)")
     parser.add_argument("--generations", type=int, default=3000, help="DE generations (default 3000)")
+    parser.add_argument(
+        "--updating", default="deferred,immediate", help="scipy DE updating modes, comma-separated"
+    )
     args = parser.parse_args()
     with tempfile.TemporaryDirectory(prefix="bench_doctor_speed_") as name:
         folder = Path(name)
@@ -101,12 +106,14 @@ def main() -> None:
             Case("diagnose 12 s, 1 kHz, project simulator", *write_project_recording(folder)),
             Case("diagnose 30 s, 500 Hz, independent", *write_long_motorcycle_recording(folder)),
         ]
-        de_name = "scipy DE (immediate), 12 s independent"
         commands = {case.name: diagnose_command(case) for case in cases}
-        commands[de_name] = [
-            sys.executable, bench_identify_process.__file__, "--scipy-de", str(cases[0].recording),
-            str(cases[0].vehicle), "--mode", "immediate", "--generations", str(args.generations),
-        ]  # fmt: skip
+        modes = args.updating.split(",")
+        de_names = [f"scipy DE ({mode}), 12 s independent" for mode in modes]
+        for mode, de_name in zip(modes, de_names, strict=True):
+            commands[de_name] = [
+                sys.executable, bench_identify_process.__file__, "--scipy-de", str(cases[0].recording),
+                str(cases[0].vehicle), "--mode", mode, "--generations", str(args.generations),
+            ]  # fmt: skip
         times: dict[str, list[float]] = {name: [] for name in commands}
         cpu: dict[str, list[float]] = {name: [] for name in commands}
         peaks: dict[str, list[float]] = {name: [] for name in commands}
@@ -117,18 +124,22 @@ def main() -> None:
                 times[name].append(seconds)
                 cpu[name].append(cpu_s)
                 peaks[name].append(peak_MiB)
-                if name != de_name:
+                if name not in de_names:
                     verdicts[name] = json.loads(out)["conclusion"]
                 print(f"round {round_index + 1} {name}: {seconds:.2f} s", file=sys.stderr)
     print(f"machine: {platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}")
-    de = statistics.median(times[de_name])
+    de_medians = {name: statistics.median(times[name]) for name in de_names}
     for name, values in times.items():
         median = statistics.median(values)
-        ratio = "" if name == de_name else f"; DE / diagnose {de / median:.1f}x"
+        ratios = "".join(
+            f"; {mode} DE / diagnose {de_medians[de] / median:.1f}x"
+            for mode, de in zip(modes, de_names, strict=True)
+            if name not in de_names
+        )
         runs = ", ".join(f"{v:.2f}" for v in values)
         cpu_s = statistics.median(cpu[name])
         print(
-            f"{name}: median {median:.2f} s ({runs}){ratio}; CPU {cpu_s:.2f} s (the doctor's fits run in "
+            f"{name}: median {median:.2f} s ({runs}){ratios}; CPU {cpu_s:.2f} s (the doctor's fits run in "
             f"threads); peak RSS {max(peaks[name]):.0f} MiB"
         )
     for name, verdict in verdicts.items():
