@@ -101,8 +101,8 @@ def run(job: JobContext) -> JobOutcome:
         raise InterruptedError("identification cancelled")
     job.progress.stage("plotting")
     artefacts = {}
-    for fmt in PLOT_FORMATS:
+    for fmt, content in curve_plot_bytes(result, PLOT_FORMATS).items():
         name = f"plot.{fmt}"
-        (job.output_dir / name).write_bytes(curve_plot_bytes(result, fmt))
+        (job.output_dir / name).write_bytes(content)
         artefacts[name] = name
     return JobOutcome(finite_json(result.to_json()), artefacts)
