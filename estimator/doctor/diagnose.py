@@ -93,7 +93,7 @@ from estimator.doctor.rounds import (
     mark_chosen,
     simulated_column,
 )
-from estimator.doctor.simulation import BatchOutputError, simulate_models
+from estimator.doctor.simulation import BatchOutputError, diverged, simulate_models
 from estimator.identify import IdentifyOptions, identify
 from estimator.recording import Recording
 from estimator.vehicle import TyreModel, VehicleConstant, VehicleParameters
@@ -514,9 +514,7 @@ class _Doctor(Judging):
             if not np.isfinite(truths.gap_m()[0]):
                 return float("nan"), float("inf")
         measured = {name: recording.channels[name] for name in final.residual}
-        residual = {
-            name: r if np.all(np.isfinite(r)) else measured[name] for name, r in final.residual.items()
-        }
+        residual = {name: measured[name] if diverged(r) else r for name, r in final.residual.items()}
         noise = measure_noise(residual, measured, dt, self.reference.filters.excitation_top_Hz)
         predicted = {name: p[:, 0] for name, p in truths.predicted.items()}
 

@@ -21,6 +21,7 @@ import numpy as np
 
 from estimator.digital_filters import welch_density
 from estimator.doctor.model import FittedModel
+from estimator.doctor.simulation import diverged
 
 BAND_WIDTH_HZ = 2.0
 WINDOW_S = 0.5
@@ -224,14 +225,22 @@ class Localisation:
 
 
 def locate(model: FittedModel, output_residual: dict[str, np.ndarray], gap_m: float) -> Localisation:
-    """Residual analysis of one fitted model; output_residual: its output error per channel (m)."""
+    """Residual analysis of one fitted model; output_residual: its output error per channel (m). A model
+    whose simulation diverged has residuals near the float range's end: their squares overflow to inf,
+    which is what the localisation should say of it, without numpy's overflow warnings on a user's
+    terminal."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        return _locate(model, output_residual, gap_m)
+
+
+def _locate(model: FittedModel, output_residual: dict[str, np.ndarray], gap_m: float) -> Localisation:
     signals = model.signals
     dt = signals.sample_time_s
     index = model.system.sample_index
     filters = model.system.filters
     plate = model.signals.recording.channels["x_r_l" if model.vehicle.is_axle else "x_r"]
     frequency = sweep_frequency_Hz(plate, dt)
-    finite = {c: r for c, r in output_residual.items() if np.all(np.isfinite(r))}
+    finite = {c: r for c, r in output_residual.items() if not diverged(r)}
     equation_residual = model.residuals()
     equations = dict(zip(signals.equations, equation_residual, strict=True))
     by_variable = []  # of the first corner (the left one of an axle)

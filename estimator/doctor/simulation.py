@@ -32,6 +32,14 @@ from estimator.simulation_kernel import integrate_compiled
 from estimator.vehicle import TyreModel
 
 
+def diverged(residual_m: np.ndarray) -> bool:
+    """A channel's output error (m) from a simulation that diverged: its RMS infinite or at least
+    DIVERGED_GAP_M (the bench moves millimetres), as gap_m counts a model."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        rms = float(np.sqrt(np.mean(np.square(residual_m))))
+    return not (np.isfinite(rms) and rms < DIVERGED_GAP_M)
+
+
 @dataclass
 class BatchOutputError:
     """Per model (column): predicted readings and their residuals, channel -> (samples, models), m."""
