@@ -3,9 +3,8 @@ numpy: the same knot slopes (Fritsch-Butland weighted harmonic mean, Moler's one
 cubic Hermite coefficients, evaluated in the same order of operations as scipy's piecewise polynomials (a sum
 of powers, not Horner), so the values are the same to the last bit (tests/estimator/test_pchip.py).
 
-Why not scipy: importing scipy.interpolate costs a diagnosis some 0.03-0.1 s of CPU beyond the scipy
-modules it needs anyway (scipy.ndimage, scipy.optimize's nnls), for the one smooth curve of
-estimator.doctor.expected.
+Why not scipy: importing scipy.interpolate (with scipy itself) costs a diagnosis, which imports no other
+scipy module, some 0.1-0.2 s for the one smooth curve of estimator.doctor.expected.
 """
 
 from __future__ import annotations
