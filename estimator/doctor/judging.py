@@ -164,7 +164,7 @@ class Judging:
             reasons.append("no better on held-out data")
         if bic > -options.bic_margin:
             reasons.append("the information criterion does not favour it")
-        if correlation < options.min_correlation:
+        if correlation < self.min_correlation(gap_ratio if np.isfinite(gap_m) else 1.0):
             reasons.append(f"the residual does not follow its signal (correlation {correlation:.2f})")
         # (a) on the part of the gap a complete model would not leave, asked only of a candidate that meets
         # every other criterion (the floor costs a few fits)
@@ -236,6 +236,16 @@ class Judging:
         stiffness = instance.name in STIFFNESSES
         strong = max(ratio, heldout) <= 1.0 - options.strong_objective_reduction
         return options.stiffness_min_gap_reduction if stiffness and strong else options.min_gap_reduction
+
+    def min_correlation(self, gap_ratio: float) -> float:
+        """Criterion (e)'s limit: min_correlation, or confirmed_min_correlation when the gap falls by
+        min_gap_reduction on its own. The correlation is about the square root of the share of the most
+        affected equation's residual the candidate explains, and those residuals carry the noise of twice
+        differentiated displacements: a real effect the output confirms can be a small share of them."""
+        options = self.options
+        if gap_ratio <= 1.0 - options.min_gap_reduction:
+            return options.confirmed_min_correlation
+        return options.min_correlation
 
     def parameter_spread(
         self, instance: EffectInstance, structure: ModelStructure, full: FittedModel
