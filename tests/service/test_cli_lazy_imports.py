@@ -10,6 +10,7 @@ import argparse
 import json
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
@@ -104,21 +105,28 @@ def test_the_names_the_parsers_use_equal_the_libraries() -> None:
     assert (sweep.SETTLE_S, sweep.REST_S) == (DEFAULT_SETTLE_S, DEFAULT_REST_S)
 
 
+def _simulated_sweep(folder: Path) -> tuple[Path, Path]:
+    """A 4 s quarter-car sweep (`shockbench simulate`) and its vehicle file, with the kernel's extension
+    built (as `shockbench demo` builds it), so that a command's imports are those of a lane's machine."""
+    from service.kernel_build import compile_ahead
+
+    assert compile_ahead() == "extension"
+    vehicle = folder / "car.toml"
+    vehicle.write_text(
+        '[vehicle]\nmodel = "quarter-car"\nmass_kg = 300.0\nspring_stiffness_N_per_m = 20000.0\n'
+        "tyre_stiffness_N_per_m = 200000.0\ntyre_viscoelastic_coefficient = 0.97\n"
+    )
+    recording = folder / "sweep.csv"
+    _modules_after(["simulate", "--vehicle", str(vehicle), "--out", str(recording), "--seconds", "4"])
+    return recording, vehicle
+
+
 def test_identify_with_stated_theta_imports_no_scipy_optimize_nor_linalg(tmp_path) -> None:
     """A whole `shockbench identify` spent about a quarter of its time importing scipy.optimize (issue 15,
     item 1): the tanh fit refines without it and the ϑ search imports it only when ϑ is searched. Then a
     fifth importing scipy.linalg for the recursive filters' banded solve: with the kernel's extension built
     (as `shockbench demo` builds it) the filters' recursion runs in the extension instead."""
-    from service.kernel_build import compile_ahead
-
-    assert compile_ahead() == "extension"
-    vehicle = tmp_path / "car.toml"
-    vehicle.write_text(
-        '[vehicle]\nmodel = "quarter-car"\nmass_kg = 300.0\nspring_stiffness_N_per_m = 20000.0\n'
-        "tyre_stiffness_N_per_m = 200000.0\ntyre_viscoelastic_coefficient = 0.97\n"
-    )
-    recording = tmp_path / "sweep.csv"
-    _modules_after(["simulate", "--vehicle", str(vehicle), "--out", str(recording), "--seconds", "4"])
+    recording, vehicle = _simulated_sweep(tmp_path)
     modules = _modules_after(["identify", str(recording), "--vehicle", str(vehicle), "--json"])
     assert "estimator.tanh_fit" in modules and "estimator.identify" in modules  # it did identify
     for package in ("scipy.optimize", "scipy.linalg"):
@@ -130,16 +138,7 @@ def test_diagnose_imports_no_scipy(tmp_path) -> None:
     """A 12 s `shockbench diagnose` spent about a fifth of its run importing scipy (issue 15, item 2): the
     doctor's noise fit, its delayed channel's spline shift and its whiteness tail run in numpy instead
     (estimator.doctor.noise, .spline_shift, .residuals)."""
-    from service.kernel_build import compile_ahead
-
-    assert compile_ahead() == "extension"
-    vehicle = tmp_path / "car.toml"
-    vehicle.write_text(
-        '[vehicle]\nmodel = "quarter-car"\nmass_kg = 300.0\nspring_stiffness_N_per_m = 20000.0\n'
-        "tyre_stiffness_N_per_m = 200000.0\ntyre_viscoelastic_coefficient = 0.97\n"
-    )
-    recording = tmp_path / "sweep.csv"
-    _modules_after(["simulate", "--vehicle", str(vehicle), "--out", str(recording), "--seconds", "4"])
+    recording, vehicle = _simulated_sweep(tmp_path)
     modules = _modules_after(["diagnose", str(recording), "--vehicle", str(vehicle), "--json"])
     assert "estimator.doctor.diagnose" in modules  # it did diagnose
     imported = sorted(m for m in modules if m == "scipy" or m.startswith("scipy."))
