@@ -130,8 +130,8 @@ class DiagnoseOptions:
     min_correlation: float = 0.2
     confirmed_min_correlation: float = 0.1
     """(e)'s limit for a candidate whose gap falls by min_gap_reduction (Judging.min_correlation).
-    Independent world, 400 recordings of 15 classes: true bump stops the gap confirmed (-29%, -41%) at 0.12 and 0.19;
-    stand-ins with gap falls of 36-47% at 0.05-0.085 (a bump stop, a lag)."""
+    Independent world, 400 recordings of 15 classes: true bump stops the gap confirmed (-29%, -41%) at
+    0.12 and 0.19; stand-ins with gap falls of 36-47% at 0.05-0.085 (a bump stop, a lag)."""
     tie_tolerance: float = 0.02
     max_parameter_spread: float = 1.0
     strong_objective_reduction: float = 0.1
