@@ -77,6 +77,7 @@ from estimator.doctor.model import (
     ModelStructure,
     Reference,
     fit,
+    like,
     starting_structure,
 )
 from estimator.doctor.noise import measure_noise
@@ -335,7 +336,7 @@ class _Doctor(Judging):
         friction = EffectInstance(EffectName.COULOMB_FRICTION)
         if friction not in self.candidates(structure):
             return False
-        model = fit(self.reference, structure.with_effect(friction), warm=current)
+        model = fit(self.reference, structure.with_effect(friction), warm=current, two_stage=False)
         # the negative friction as clear as a friction must be to be named (share of the peak force,
         # standard errors): a few newtons either way are the curve's ordinary misfit
         mirrored = {"coulomb_friction_N": -model.value("coulomb_friction_N")}
@@ -357,6 +358,8 @@ class _Doctor(Judging):
         models += [fits.full[i] for i in fits.kept]
         based = [i for i in fits.kept if i in fits.bases]
         models += [fits.bases[i][0] for i in based]
+        # and the first stage of those (model.fit), which their base is compared with
+        models += [like(fits.full[i]) for i in based]
         # nothing to simulate when the current model was simulated already and no candidate was kept
         batch: BatchOutputError | None = None
         if models:
@@ -369,7 +372,16 @@ class _Doctor(Judging):
             simulated, offset = simulated_column(batch, 0, gaps), 1
         outcomes = {i: simulated_column(batch, offset + k, gaps) for k, i in enumerate(fits.kept) if batch}
         base_columns = {i: offset + len(fits.kept) + k for k, i in enumerate(based)}
+        first_stage = {i: float(gaps[offset + len(fits.kept) + len(based) + k]) for k, i in enumerate(based)}
         heldout_base = heldout_objective(state.held, rows)
+        for i in based:
+            if batch is not None and not first_stage[i] > outcomes[i].gap_m:
+                # the output prefers the first stage's curve (the line across the friction band): the
+                # candidate is that model, its curve kept so in later rounds and refits (free_curve)
+                k = offset + len(fits.kept) + len(based) + based.index(i)
+                fits.full[i] = _first_stage(fits.full[i])
+                fits.held[i] = _first_stage(fits.held[i])
+                outcomes[i] = simulated_column(batch, k, gaps)
         scores, eligible, above_floor = [], [], []
         for instance in instances:
             score, ok, floor_only = self.score(
@@ -384,6 +396,7 @@ class _Doctor(Judging):
                 simulated_column(batch, base_columns[instance], gaps)
                 if batch and instance in base_columns
                 else None,
+                first_stage.get(instance),
             )
             scores.append(score)
             if ok:
@@ -409,7 +422,7 @@ class _Doctor(Judging):
             located_after=locate(model, after.residual, after.gap_m),
             predicted_after=after.predicted,
         )
-        return named, RoundState(state.structure.with_effect(chosen), model, played.fits.held[chosen], after)
+        return named, RoundState(model.structure, model, played.fits.held[chosen], after)
 
     def rejudge(
         self,
@@ -432,7 +445,9 @@ class _Doctor(Judging):
         named = list(state.structure.effects[start:])
         for effect in named[:-1]:
             self.report(len(steps), f"judging {effect.label} again")
-            without = ModelStructure(tuple(e for e in state.structure.effects if e != effect))
+            without = replace(
+                state.structure, effects=tuple(e for e in state.structure.effects if e != effect)
+            )
             model = fit(self.reference, without, warm=state.current)
             reduced = RoundState(without, model, fit(self.reference, without, rows, warm=model), None)
             # its fit starts where it is in the current model: one Gauss-Newton step from zero can miss a
@@ -555,8 +570,10 @@ class _Doctor(Judging):
             ),
             instances,
         )
+        # like with like: a candidate with a base of its own is measured by its first stage (model.fit)
         ratios = {
-            i: m.objective / (bases[i][0] if i in bases else current).objective for i, m in trials.items()
+            i: (like(m).objective / bases[i][0].objective if i in bases else m.objective / current.objective)
+            for i, m in trials.items()
         }
         kept = [i for i in instances if ratios[i] <= 1.0 - self.options.screen_reduction]
         full = self.each(
@@ -660,6 +677,13 @@ class _Doctor(Judging):
             sweep_frequency_Hz=self.frequency,
             final_model=final_model,
         )
+
+
+def _first_stage(model: FittedModel) -> FittedModel:
+    """A two-stage friction model's first stage, as a model of a structure that keeps it so (free_curve
+    False)."""
+    first = like(model)
+    return replace(first, structure=replace(first.structure, free_curve=False))
 
 
 def _best_rejected(scores: list[CandidateScore]) -> str | None:

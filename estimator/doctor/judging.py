@@ -16,6 +16,7 @@ import numpy as np
 from estimator.doctor.catalog import SIGNIFICANCE_Z, EffectInstance, EffectName
 from estimator.doctor.evidence import gather
 from estimator.doctor.model import FittedModel, ModelStructure, fit
+from estimator.doctor.model import like as first
 from estimator.doctor.result import CandidateScore
 from estimator.doctor.rounds import (
     Candidates,
@@ -105,18 +106,27 @@ class Judging:
         heldout_base: float,
         rows: np.ndarray,
         like: Simulated | None = None,
+        first_stage_gap_m: float | None = None,
     ) -> tuple[CandidateScore, bool, bool]:
         """A candidate's score, whether it qualifies to be named (criteria (a)-(f) of the module
         docstring), and whether only with (a) on the gap above the floor (shrinks_above_floor). like: the
         simulated base of a candidate with one (fits.bases): (a)-(c) then compare the candidate with that
-        base, and its gap must not exceed the current model's either."""
+        base, and its gap must not exceed the current model's either. first_stage_gap_m: the gap of such a
+        candidate's first stage (model.fit: the friction on the friction grid and constraint), which (a)-(c)
+        compare with that base; the model named has the curve refitted on the reference grid (gap_m), and it
+        is that gap which must not exceed the current model's."""
         ratio, trial = fits.ratios[instance], fits.trials[instance]
         now, model_now = simulated, current
+        full, held = fits.full.get(instance), fits.held.get(instance)
+        named_gap_m = gap_m
         if like is not None and instance in fits.bases:
             base_full, base_held = fits.bases[instance]
             current, simulated = base_full, like
             heldout_base = heldout_objective(base_held, rows)
-        full, held = fits.full.get(instance), fits.held.get(instance)
+            full = None if full is None else first(full)
+            held = None if held is None else first(held)
+            if first_stage_gap_m is not None:
+                gap_m = first_stage_gap_m
         options = self.options
         if full is None or held is None or gap_m is None:
             verdict = f"screened out: the objective falls only {100 * (1 - ratio):.1f}%"
@@ -158,8 +168,12 @@ class Judging:
             )
         # like with like, but the output must not contradict it either: a gap above the current model's
         # beyond what counts as a tie elsewhere (choose, at_the_floor)
-        if simulated is not now and np.isfinite(gap_m) and gap_m > now.gap_m * (1.0 + options.tie_tolerance):
-            reasons.append("the gap is larger than the current model's")
+        if simulated is not now and named_gap_m is not None:
+            if not np.isfinite(named_gap_m):
+                if np.isfinite(gap_m):
+                    reasons.append("the model with it diverges")
+            elif named_gap_m > now.gap_m * (1.0 + options.tie_tolerance):
+                reasons.append("the gap is larger than the current model's")
         if heldout > 1.0 - options.min_heldout_reduction:
             reasons.append("no better on held-out data")
         if bic > -options.bic_margin:

@@ -59,9 +59,12 @@ class ModelStructure:
     """The effects a model has beyond the vehicle file's constants, in the order they were added."""
 
     effects: tuple[EffectInstance, ...] = ()
+    free_curve: bool = True
+    """With coulomb_friction: the curve refitted on the reference grid with the friction held (fit's second
+    stage); False where the output preferred the first stage's curve (_Doctor.play)."""
 
     def with_effect(self, effect: EffectInstance) -> ModelStructure:
-        return ModelStructure((*self.effects, effect))
+        return replace(self, effects=(*self.effects, effect))
 
     def has(self, name: EffectName) -> bool:
         return any(e.name is name for e in self.effects)
@@ -142,6 +145,10 @@ class FittedModel:
     objective: float
     curve_override: tuple[PiecewiseLinearCurve, ...] | None = None
     """Damper curves to simulate instead of the fitted points (the expected-gap truth's smooth curves)."""
+    constrained: FittedModel | None = None
+    """With coulomb_friction: the first stage of the two-stage fit (fit), the friction identified with the
+    curve on the friction grid and constraint. This model keeps its friction and has the curve refitted on
+    the reference grid; the standard errors and the like-with-like comparisons come from the first stage."""
 
     def value(self, name: str, default: float = 0.0) -> float:
         names = self.system.parameter_names
@@ -197,6 +204,8 @@ class FittedModel:
         """Standard errors of the named unknowns of θ (those it has; channel parameters have none) from the
         samples where `rows` is True (all when None): sandwich covariance with a block long-run variance
         of the score (estimator.uncertainty)."""
+        if self.constrained is not None:
+            return self.constrained.standard_errors(names, rows)
         present = [n for n in names if n in self.system.parameter_names]
         if not present:
             return {}
@@ -254,6 +263,12 @@ class FittedModel:
         its test of the value against its standard error)."""
         context = self.context() if significance else replace(self.context(), standard_error={})
         return CATALOG[effect.name].implausible(self.effect_values(effect), context)
+
+
+def like(model: FittedModel) -> FittedModel:
+    """The model as it is compared with a base on the friction grid: its first stage when it has one
+    (FittedModel.constrained), else itself."""
+    return model.constrained if model.constrained is not None else model
 
 
 BUILD_CACHE_ENTRIES = 8
@@ -463,8 +478,21 @@ def _cached(cache: dict, lock: threading.Lock, key: tuple, make: Callable[[], ob
     return value
 
 
+FREE_CURVE_GRID = "low_speed"
+"""The grid of a friction model's second stage (_free_curve): "low_speed" (the reference grid with low-speed
+knots) or "reference"."""
+
+
+def _grids(reference: Reference, friction: bool | str) -> list[np.ndarray]:
+    """The damper grids of a build: the friction grids (True), the reference grids (False), or those with
+    low-speed knots ("low_speed")."""
+    if friction == "low_speed":
+        return reference.grids if reference.settings.low_speed_knots else low_speed_grids(reference.grids)
+    return friction_grids(reference.grids) if friction else reference.grids
+
+
 def _base_system(
-    reference: Reference, corrections: ChannelCorrections, friction: bool
+    reference: Reference, corrections: ChannelCorrections, friction: bool | str
 ) -> tuple[tuple, LinearResiduals, EquationSignals]:
     """The paper's system (no effect columns) on the recording as `corrections` correct it, with the
     friction grids or not; built once per Reference and reused (the low-pass filters and the damper basis
@@ -487,7 +515,7 @@ def _base_system(
             settings.points,
             settings.nsample,
             reference.filters,
-            friction_grids(reference.grids) if friction else reference.grids,
+            _grids(reference, friction),
         )
         return base, EquationSignals(recording, reference.vehicle, base)
 
@@ -502,8 +530,12 @@ def _build(
     airborne: list[np.ndarray] | None,
     tyre: tuple[float, float, float],
     friction_grid: bool = False,
+    free_grid: bool = False,
 ) -> tuple[LinearResiduals, EquationSignals, list[np.ndarray]]:
-    friction = friction_grid or structure.has(EffectName.COULOMB_FRICTION)
+    """The extended system of `structure` (free_grid: on the reference grid even with coulomb_friction)."""
+    friction: bool | str = friction_grid or structure.has(EffectName.COULOMB_FRICTION)
+    if free_grid:
+        friction = FREE_CURVE_GRID if FREE_CURVE_GRID == "low_speed" else False
     key, base, signals = _base_system(reference, corrections, friction)
     corners = len(signals.corners)
     liftoff = structure.has(EffectName.TYRE_LIFTOFF)
@@ -567,13 +599,17 @@ def fit(
     warm: FittedModel | None = None,
     iterations: int = GAUSS_NEWTON_ITERATIONS,
     friction_grid: bool = False,
+    two_stage: bool = True,
 ) -> FittedModel:
     """Identify `structure` on the reference recording, using only the selected samples where `rows` is
     True (all when None). warm: a fitted model of a similar structure to start from (its unknowns and
     channel parameters; new ones start at zero). iterations: Gauss-Newton steps at most (channel effects).
     friction_grid: the damper curve on the grid and under the constraint a model with coulomb_friction has
     (friction_grids, friction_constraints) even without the friction term: the base a friction candidate is
-    compared with, so that the comparison measures the friction term and not the coarser curve near zero."""
+    compared with, so that the comparison measures the friction term and not the coarser curve near zero.
+    two_stage: a structure with coulomb_friction is fitted in two stages (_free_curve): the friction
+    identified on the friction grid and constraint, then the curve refitted on the reference grid with the
+    friction held (False: the first stage only)."""
     friction = friction_grid or structure.has(EffectName.COULOMB_FRICTION)
     channel_effects = structure.channel_effects
     kinds = [CATALOG[e.name].channel_kind for e in channel_effects]
@@ -582,7 +618,7 @@ def fit(
     liftoff = structure.has(EffectName.TYRE_LIFTOFF)
     tyre = (0.0, 0.0, 0.0)
     final_pass = False
-    previous = warm
+    previous = warm.constrained if warm is not None and warm.constrained is not None else warm
     for iteration in range(iterations + 1):
         corrections = _corrections(channel_effects, values)
         system, signals, airborne = _build(reference, structure, corrections, None, tyre, friction)
@@ -619,7 +655,7 @@ def fit(
         small = all(abs(d) < GAUSS_NEWTON_TOLERANCE[str(k)] for d, k in zip(increment, kinds, strict=True))
         affine = all(k == "offset" for k in kinds) and not liftoff
         final_pass = small or affine or iteration == iterations - 1
-    return FittedModel(
+    model = FittedModel(
         structure=structure,
         vehicle=reference.vehicle,
         theta=theta,
@@ -628,4 +664,52 @@ def fit(
         channel_values={e: float(v) for e, v in zip(channel_effects, values, strict=True)},
         airborne=airborne if liftoff else [],
         objective=objective,
+    )
+    if two_stage and structure.free_curve and structure.has(EffectName.COULOMB_FRICTION):
+        return _free_curve(reference, model, rows, warm)
+    return model
+
+
+FRICTION_UNKNOWN = "coulomb_friction_N"
+
+
+def _free_curve(
+    reference: Reference, constrained: FittedModel, rows: np.ndarray | None, warm: FittedModel | None
+) -> FittedModel:
+    """The second stage of a model with coulomb_friction: the friction (N), channel parameters and airborne
+    samples of the first stage (`constrained`, on the friction grid and constraint, which is what makes the
+    friction identifiable) held, the rest identified again with the damper curve on the reference grid. One
+    straight line across the friction band cannot follow a damper whose dead band and steep rise lie inside
+    it (FSAE s5: a few newtons up to 4 mm/s, 350 N at 23 mm/s); the model simulated, named and carried into
+    later rounds has the curve the data support."""
+    structure = constrained.structure
+    airborne = constrained.airborne if structure.has(EffectName.TYRE_LIFTOFF) else None
+    system, signals, airborne = _build(
+        reference, structure, constrained.corrections, airborne, (0.0, 0.0, 0.0), free_grid=True
+    )
+    used = restrict(system, rows) if rows is not None else system
+    index = used.parameter_names.index(FRICTION_UNKNOWN)
+    friction = constrained.value(FRICTION_UNKNOWN)
+    keep = [k for k in range(used.n_params) if k != index]
+    held = replace(
+        used,
+        matrix=used.matrix[:, :, keep],
+        offset=used.offset + friction * used.matrix[:, :, index],
+        parameter_names=[used.parameter_names[k] for k in keep],
+        _flat=None,
+        _flat_offset=None,
+    )
+    same_grid = warm is not None and all(
+        np.array_equal(a, b) for a, b in zip(warm.system.grids_m_s, system.grids_m_s, strict=True)
+    )
+    start = _initial(used, warm) if same_grid else None
+    reduced, objective = _minimise(held, None if start is None else start[keep], 1e-10)
+    return replace(
+        constrained,
+        theta=np.insert(reduced, index, friction),
+        system=system,
+        signals=signals,
+        airborne=airborne if structure.has(EffectName.TYRE_LIFTOFF) else [],
+        objective=objective,
+        constrained=constrained,
     )

@@ -1,0 +1,61 @@
+"""Coulomb friction on the independent world (issue 13, item 4): a model with coulomb_friction is fitted in
+two stages (estimator.doctor.model.fit). The friction is identified with the damper curve one line across the
+friction band (the friction grid and constraint, which is what makes it identifiable); the model simulated,
+named and carried on then holds that friction and has its curve refitted on the reference grid with
+low-speed knots, unless the output prefers the first stage's line (_Doctor.play).
+
+The draws are those of benchmarks/bench_doctor_independent.py (10 s sweep, ϑ referred to 1 ms), simulated,
+written and read back as `shockbench diagnose` reads them; the benchmark runs the class over more draws
+(BENCHMARKS.md).
+"""
+
+from __future__ import annotations
+
+import tempfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+from independent_recordings import recorded
+
+from estimator.doctor import DiagnoseOptions, diagnose
+from estimator.doctor.catalog import FRICTION_BAND_M_S
+
+SWEEP_S = 10.0
+LOW_FRICTION = 0.5
+HIGH_FRICTION = 1.6
+"""The named friction within these multiples of the hidden one (the world's friction is F·tanh(v/band), the
+doctor's a step; with a dead band inside the friction band the first stage's line takes part of it)."""
+
+
+@pytest.mark.parametrize(
+    ("seed", "named"),
+    [
+        # motorcycle, FSAE s5 table x2.20 (a dead band rising to 770 N at 23 mm/s), 1 ms, 293 N of friction,
+        # lift-off 6.7%: the friction model with the band's line had a gap of 694 µm against 533 µm of the
+        # model with the lift-off named; with the curve refitted 507 µm
+        (20, ["coulomb_friction", "tyre_liftoff"]),
+        # car, SUV table x0.68, 1 ms, 90 N: with the band's line the gap was 52 µm, 4.9x a complete model's
+        # (unexplained); with the curve refitted 26 µm
+        (30, ["coulomb_friction"]),
+    ],
+)
+def test_friction_is_named_with_the_curve_refitted_under_it(seed: int, named: list[str], hit_rate) -> None:
+    with tempfile.TemporaryDirectory(prefix="doctor-friction-") as name:
+        case, _, recording, vehicle = recorded("coulomb_friction", seed, Path(name), SWEEP_S)
+    result = diagnose(recording, vehicle, DiagnoseOptions())
+    hidden = case.vehicle.effects.coulomb_friction_N
+    friction = next((s.parameters for s in result.steps if s.effect == "coulomb_friction"), None)
+    found = float(friction["coulomb_friction_N"]) if friction is not None else float("nan")
+    hit = (
+        sorted(result.effects_named) == named
+        and not result.unexplained
+        and LOW_FRICTION * hidden <= found <= HIGH_FRICTION * hidden
+    )
+    line = f"{case.description}: named {result.effects_named}, friction {found:.0f} N; {result.conclusion}"
+    hit_rate("independent world: friction with the curve refitted", line, hit)
+    assert hit, line
+    # the model ended with has its curve refitted: knots inside the friction band, not one line across it
+    curve = result.final_model.curves[0].velocity_m_s
+    inside = curve[np.abs(curve) < FRICTION_BAND_M_S - 1e-9]
+    assert inside.size >= 3, line
