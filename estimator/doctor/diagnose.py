@@ -29,7 +29,11 @@ Every round:
    `stiffness_min_gap_reduction` in (a).
    coulomb_friction is measured in (a)-(c) and in the screen against the current structure refitted on its
    own damper grid (one line across the band around zero velocity, _Doctor.like_bases), like with like,
-   and its gap must not exceed the current model's by more than `tie_tolerance`.
+   and its gap must not exceed the current model's by more than `tie_tolerance`. It is fitted in two stages
+   (estimator.doctor.model.fit): (a)-(c) and the screen measure the first (the curve one line across the
+   band), the gap compared with the current model's is that of the model with the curve refitted under the
+   friction, or of the first stage where that one's is smaller, and the candidate is the model of the two
+   with the smaller gap (ModelStructure.free_curve says which, for later rounds and the expected gap).
    When no candidate qualifies alone, the one strongest in the equations is tried together with the best
    of one more round (_Doctor.look_ahead). When that names nothing either, a candidate that meets (a) on
    the part of the gap above what a complete model of the current structure leaves (the excess
@@ -76,8 +80,8 @@ from estimator.doctor.model import (
     FittedModel,
     ModelStructure,
     Reference,
+    first_stage,
     fit,
-    like,
     starting_structure,
 )
 from estimator.doctor.noise import measure_noise
@@ -359,7 +363,7 @@ class _Doctor(Judging):
         based = [i for i in fits.kept if i in fits.bases]
         models += [fits.bases[i][0] for i in based]
         # and the first stage of those (model.fit), which their base is compared with
-        models += [like(fits.full[i]) for i in based]
+        models += [first_stage(fits.full[i]) for i in based]
         # nothing to simulate when the current model was simulated already and no candidate was kept
         batch: BatchOutputError | None = None
         if models:
@@ -372,16 +376,16 @@ class _Doctor(Judging):
             simulated, offset = simulated_column(batch, 0, gaps), 1
         outcomes = {i: simulated_column(batch, offset + k, gaps) for k, i in enumerate(fits.kept) if batch}
         base_columns = {i: offset + len(fits.kept) + k for k, i in enumerate(based)}
-        first_stage = {i: float(gaps[offset + len(fits.kept) + len(based) + k]) for k, i in enumerate(based)}
+        first_columns = {i: offset + len(fits.kept) + len(based) + k for k, i in enumerate(based)}
+        first_gaps = {i: float(gaps[k]) for i, k in first_columns.items()}
         heldout_base = heldout_objective(state.held, rows)
         for i in based:
-            if batch is not None and not first_stage[i] > outcomes[i].gap_m:
+            if batch is not None and not first_gaps[i] > outcomes[i].gap_m:
                 # the output prefers the first stage's curve (the line across the friction band): the
                 # candidate is that model, its curve kept so in later rounds and refits (free_curve)
-                k = offset + len(fits.kept) + len(based) + based.index(i)
-                fits.full[i] = _first_stage(fits.full[i])
-                fits.held[i] = _first_stage(fits.held[i])
-                outcomes[i] = simulated_column(batch, k, gaps)
+                fits.full[i] = _kept_at_first_stage(fits.full[i])
+                fits.held[i] = _kept_at_first_stage(fits.held[i])
+                outcomes[i] = simulated_column(batch, first_columns[i], gaps)
         scores, eligible, above_floor = [], [], []
         for instance in instances:
             score, ok, floor_only = self.score(
@@ -396,7 +400,7 @@ class _Doctor(Judging):
                 simulated_column(batch, base_columns[instance], gaps)
                 if batch and instance in base_columns
                 else None,
-                first_stage.get(instance),
+                first_gaps.get(instance),
             )
             scores.append(score)
             if ok:
@@ -572,7 +576,11 @@ class _Doctor(Judging):
         )
         # like with like: a candidate with a base of its own is measured by its first stage (model.fit)
         ratios = {
-            i: (like(m).objective / bases[i][0].objective if i in bases else m.objective / current.objective)
+            i: (
+                first_stage(m).objective / bases[i][0].objective
+                if i in bases
+                else m.objective / current.objective
+            )
             for i, m in trials.items()
         }
         kept = [i for i in instances if ratios[i] <= 1.0 - self.options.screen_reduction]
@@ -679,10 +687,10 @@ class _Doctor(Judging):
         )
 
 
-def _first_stage(model: FittedModel) -> FittedModel:
+def _kept_at_first_stage(model: FittedModel) -> FittedModel:
     """A two-stage friction model's first stage, as a model of a structure that keeps it so (free_curve
     False)."""
-    first = like(model)
+    first = first_stage(model)
     return replace(first, structure=replace(first.structure, free_curve=False))
 
 

@@ -15,8 +15,7 @@ import numpy as np
 
 from estimator.doctor.catalog import SIGNIFICANCE_Z, EffectInstance, EffectName
 from estimator.doctor.evidence import gather
-from estimator.doctor.model import FittedModel, ModelStructure, fit
-from estimator.doctor.model import like as first
+from estimator.doctor.model import FittedModel, ModelStructure, first_stage, fit
 from estimator.doctor.result import CandidateScore
 from estimator.doctor.rounds import (
     Candidates,
@@ -123,8 +122,8 @@ class Judging:
             base_full, base_held = fits.bases[instance]
             current, simulated = base_full, like
             heldout_base = heldout_objective(base_held, rows)
-            full = None if full is None else first(full)
-            held = None if held is None else first(held)
+            full = None if full is None else first_stage(full)
+            held = None if held is None else first_stage(held)
             if first_stage_gap_m is not None:
                 gap_m = first_stage_gap_m
         options = self.options

@@ -12,6 +12,13 @@ counts: kelvin-voigt starts with tyre_damping, maxwell with tyre_viscoelastic). 
    offsets) are found by Gauss-Newton steps: the residual's change per unit of each channel parameter is
    taken by finite differences at the current solution, appended as columns, solved jointly, repeated.
    With tyre_liftoff the airborne samples come from the fitted tyre force and are re-determined once.
+4. with coulomb_friction, in two stages: the friction is identified with the damper curve one line across
+   the friction band (friction_grids, friction_constraints: otherwise the curve makes the step itself);
+   then, the friction, channel parameters and airborne samples held, the rest is identified again with the
+   curve on the reference grid with low-speed knots (_free_curve). The first stage is kept with the model
+   (FittedModel.constrained): the friction's standard error and the comparison with a base on the friction
+   grid come from it; the model simulated has the curve the data support (a damper dead band inside the
+   band, as the FSAE s5 table has, is what one line across it cannot follow).
 
 Speed: a diagnosis fits a hundred or so models of one recording, most of them on the same corrected
 recording, so the equations built on it and the effects' columns are kept per Reference (a small
@@ -24,7 +31,7 @@ from __future__ import annotations
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 
@@ -265,7 +272,7 @@ class FittedModel:
         return CATALOG[effect.name].implausible(self.effect_values(effect), context)
 
 
-def like(model: FittedModel) -> FittedModel:
+def first_stage(model: FittedModel) -> FittedModel:
     """The model as it is compared with a base on the friction grid: its first stage when it has one
     (FittedModel.constrained), else itself."""
     return model.constrained if model.constrained is not None else model
@@ -478,31 +485,29 @@ def _cached(cache: dict, lock: threading.Lock, key: tuple, make: Callable[[], ob
     return value
 
 
-FREE_CURVE_GRID = "low_speed"
-"""The grid of a friction model's second stage (_free_curve): "low_speed" (the reference grid with low-speed
-knots) or "reference"."""
+GridKind = Literal["reference", "friction", "low_speed"]
+"""The damper grids of a build: the reference grids, the friction grids (friction_grids) or the reference
+grids with low-speed knots (low_speed_grids; the reference grids when they have them already)."""
 
 
-def _grids(reference: Reference, friction: bool | str) -> list[np.ndarray]:
-    """The damper grids of a build: the friction grids (True), the reference grids (False), or those with
-    low-speed knots ("low_speed")."""
-    if friction == "low_speed":
+def _grids(reference: Reference, kind: GridKind) -> list[np.ndarray]:
+    if kind == "low_speed":
         return reference.grids if reference.settings.low_speed_knots else low_speed_grids(reference.grids)
-    return friction_grids(reference.grids) if friction else reference.grids
+    return friction_grids(reference.grids) if kind == "friction" else reference.grids
 
 
 def _base_system(
-    reference: Reference, corrections: ChannelCorrections, friction: bool | str
+    reference: Reference, corrections: ChannelCorrections, kind: GridKind
 ) -> tuple[tuple, LinearResiduals, EquationSignals]:
-    """The paper's system (no effect columns) on the recording as `corrections` correct it, with the
-    friction grids or not; built once per Reference and reused (the low-pass filters and the damper basis
+    """The paper's system (no effect columns) on the recording as `corrections` correct it, on the grids
+    of `kind`; built once per Reference and reused (the low-pass filters and the damper basis
     are most of a fit's time otherwise). The key identifies it for the effect columns' cache."""
     # a zero delay or offset leaves the channel as it is (ChannelCorrections.correct), so it is left out of
     # the key: the candidates' first trial at zero then reuses the uncorrected build (bit for bit the same)
     key = (
         tuple(sorted((name, value) for name, value in corrections.delay_s.items() if value)),
         tuple(sorted((name, value) for name, value in corrections.offset_m.items() if value)),
-        friction,
+        kind,
     )
 
     def make() -> tuple[LinearResiduals, EquationSignals]:
@@ -515,7 +520,7 @@ def _base_system(
             settings.points,
             settings.nsample,
             reference.filters,
-            _grids(reference, friction),
+            _grids(reference, kind),
         )
         return base, EquationSignals(recording, reference.vehicle, base)
 
@@ -532,11 +537,14 @@ def _build(
     friction_grid: bool = False,
     free_grid: bool = False,
 ) -> tuple[LinearResiduals, EquationSignals, list[np.ndarray]]:
-    """The extended system of `structure` (free_grid: on the reference grid even with coulomb_friction)."""
-    friction: bool | str = friction_grid or structure.has(EffectName.COULOMB_FRICTION)
+    """The extended system of `structure`, on the friction grids with coulomb_friction or friction_grid, on
+    the grids with low-speed knots with free_grid (a friction model's second stage, _free_curve)."""
+    kind: GridKind = "reference"
     if free_grid:
-        friction = FREE_CURVE_GRID if FREE_CURVE_GRID == "low_speed" else False
-    key, base, signals = _base_system(reference, corrections, friction)
+        kind = "low_speed"
+    elif friction_grid or structure.has(EffectName.COULOMB_FRICTION):
+        kind = "friction"
+    key, base, signals = _base_system(reference, corrections, kind)
     corners = len(signals.corners)
     liftoff = structure.has(EffectName.TYRE_LIFTOFF)
     if airborne is None:
