@@ -27,10 +27,10 @@ SWEEP_S = 10.0
 @pytest.mark.parametrize(
     ("seed", "named", "within"),
     [
-        # motorcycle, FSAE s5 table x2.20 (a dead band to 4 mm/s, then a steep rise inside ±20 mm/s), 1 ms, 293 N of friction,
-        # lift-off 6.7%: the friction model with the band's line had a gap of 694 µm against 533 µm of the
-        # model with the lift-off named; with the curve refitted 507 µm (205 N found: the first stage's line
-        # takes part of the friction's step)
+        # motorcycle, FSAE s5 table x2.20 (a dead band to 4 mm/s, then a steep rise inside ±20 mm/s), 1 ms,
+        # 293 N of friction, lift-off 6.7%: the friction model with the band's line had a gap of 694 µm
+        # against 533 µm of the model with the lift-off named; with the curve refitted 507 µm (205 N found:
+        # the first stage's line takes part of the friction's step)
         (20, ["coulomb_friction", "tyre_liftoff"], (0.5, 1.1)),
         # car, SUV table x0.68, 1 ms, 90 N: with the band's line the gap was 52 µm, 4.9x a complete model's
         # (unexplained); with the curve refitted 26 µm. The friction is the first stage's, 174 N: the band's
