@@ -172,7 +172,10 @@ class Judging:
                 if np.isfinite(gap_m):
                     reasons.append("the model with it diverges")
             elif named_gap_m > now.gap_m * (1.0 + options.tie_tolerance):
-                reasons.append("the gap is larger than the current model's")
+                reasons.append(
+                    f"the gap of the model it would name, {named_gap_m * 1e6:.1f} µm, is larger than the "
+                    f"current model's {now.gap_m * 1e6:.1f} µm"
+                )
         if heldout > 1.0 - options.min_heldout_reduction:
             reasons.append("no better on held-out data")
         if bic > -options.bic_margin:
