@@ -27,6 +27,13 @@ from estimator.vehicle import TyreModel
 COULOMB_SMOOTHING_M_S = 0.005
 """Coulomb friction is F_c·tanh(v / this): a smooth sign function, so the ODE stays integrable."""
 
+
+def coulomb_sign(velocity_m_s: np.ndarray) -> np.ndarray:
+    """The smooth sign the Coulomb friction force is F_c times: tanh(v / COULOMB_SMOOTHING_M_S) (the
+    compiled kernel, estimator.simulation_kernel_numba, spells the same law out)."""
+    return np.tanh(velocity_m_s / COULOMB_SMOOTHING_M_S)
+
+
 RK4_STABLE_STEP = 2.0
 """Largest |λ|·step the Runge-Kutta is run at for the fastest decay a model has (RK4's real-axis limit is
 2.79). Measured on a motorcycle whose identified curve has a 41 kN·s/m segment near zero velocity (λ 3170/s):
@@ -150,7 +157,7 @@ class CornerPhysics:
         """Q: force pushing the wheel up and the body down (damper + spring + friction + progression)."""
         force = self.damper.force(velocity_m_s) + self.spring_stiffness_N_per_m * deflection_m
         if self._friction:
-            force = force + self.coulomb_friction_N * np.tanh(velocity_m_s / COULOMB_SMOOTHING_M_S)
+            force = force + self.coulomb_friction_N * coulomb_sign(velocity_m_s)
         if self._cubic:
             force = force + self.cubic_spring_N_per_m3 * deflection_m**3
         return force

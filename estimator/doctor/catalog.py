@@ -31,7 +31,7 @@ from enum import StrEnum
 import numpy as np
 
 from estimator.doctor.columns import EquationSignals, interval_mean
-from estimator.dynamics import COULOMB_SMOOTHING_M_S
+from estimator.dynamics import coulomb_sign
 from estimator.recording import Recording
 from estimator.vehicle import VehicleConstant, VehicleParameters
 
@@ -59,11 +59,6 @@ class EffectInstance:
     @property
     def label(self) -> str:
         return f"{self.name.value}({self.channel})" if self.channel else self.name.value
-
-
-def _smooth_sign(velocity_m_s: np.ndarray) -> np.ndarray:
-    """The friction law of the doctor's simulation (estimator.dynamics): tanh(v / COULOMB_SMOOTHING_M_S)."""
-    return np.tanh(velocity_m_s / COULOMB_SMOOTHING_M_S)
 
 
 MAX_DELAY_S = 0.02
@@ -173,7 +168,7 @@ class Effect:
             return {"maxwell_damping_Ns_per_m": signals.tyre_column(series)}
         if self.name is EffectName.COULOMB_FRICTION:
             # the step's share of each sample interval, not its value at the sample instant
-            series = [interval_mean(_smooth_sign, c.velocity_m_s) for c in corners]
+            series = [interval_mean(coulomb_sign, c.velocity_m_s) for c in corners]
             return {"coulomb_friction_N": signals.suspension_column(series)}
         if self.name is EffectName.PROGRESSIVE_SPRING:
             return {"cubic_spring_N_per_m3": signals.suspension_column([c.deflection_m**3 for c in corners])}
