@@ -626,7 +626,7 @@ def fit(
     liftoff = structure.has(EffectName.TYRE_LIFTOFF)
     tyre = (0.0, 0.0, 0.0)
     final_pass = False
-    previous = warm.constrained if warm is not None and warm.constrained is not None else warm
+    previous = first_stage(warm) if warm is not None else None
     for iteration in range(iterations + 1):
         corrections = _corrections(channel_effects, values)
         system, signals, airborne = _build(reference, structure, corrections, None, tyre, friction)
@@ -692,7 +692,7 @@ def _free_curve(
     later rounds has the curve the data support."""
     structure = constrained.structure
     airborne = constrained.airborne if structure.has(EffectName.TYRE_LIFTOFF) else None
-    system, signals, airborne = _build(
+    system, signals, _ = _build(
         reference, structure, constrained.corrections, airborne, (0.0, 0.0, 0.0), free_grid=True
     )
     used = restrict(system, rows) if rows is not None else system
@@ -717,7 +717,6 @@ def _free_curve(
         theta=np.insert(reduced, index, friction),
         system=system,
         signals=signals,
-        airborne=airborne if structure.has(EffectName.TYRE_LIFTOFF) else [],
         objective=objective,
         constrained=constrained,
     )
