@@ -29,7 +29,8 @@ Every round:
    `stiffness_min_gap_reduction` in (a).
    coulomb_friction is measured in (a)-(c) and in the screen against the current structure refitted on its
    own damper grid (one line across the band around zero velocity, _Doctor.like_bases), like with like,
-   and its gap must not exceed the current model's by more than `tie_tolerance`. It is fitted in two stages
+   and its gap must not exceed both the current model's and what a complete model of the current structure
+   leaves (Judging.larger_than_current) by more than `tie_tolerance`. It is fitted in two stages
    (estimator.doctor.model.fit): (a)-(c) and the screen measure the first (the curve one line across the
    band), the gap compared with the current model's is that of the model with the curve refitted under the
    friction, or of the first stage where that one's is smaller, and the candidate is the model of the two
