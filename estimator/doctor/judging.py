@@ -13,7 +13,12 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from estimator.doctor.catalog import SIGNIFICANCE_Z, EffectInstance, EffectName
+from estimator.doctor.catalog import (
+    CONFIRMED_SIGNIFICANCE_Z,
+    SIGNIFICANCE_Z,
+    EffectInstance,
+    EffectName,
+)
 from estimator.doctor.evidence import gather
 from estimator.doctor.model import FittedModel, ModelStructure, first_stage, fit
 from estimator.doctor.result import CandidateScore
@@ -152,7 +157,8 @@ class Judging:
         # still lacks, not the noise (independent world, 27 N of friction on a motorcycle that lifts off:
         # 24 N fitted, objective 0.63 and held-out 0.62 of the base's, gap -62%, standard error 10 N)
         waived = strong and heldout <= 1.0 - options.strong_objective_reduction
-        implausible = full.implausible(instance, significance=not waived)
+        confirmed = gap_ratio if np.isfinite(gap_m) else 1.0
+        implausible = full.implausible(instance, None if waived else self.significance_z(confirmed))
         if implausible:
             reasons.append(implausible)
         reduction = self.min_gap_reduction(instance, ratio, heldout)
@@ -289,6 +295,13 @@ class Judging:
         if gap_ratio <= 1.0 - options.min_gap_reduction:
             return options.confirmed_min_correlation
         return options.min_correlation
+
+    def significance_z(self, gap_ratio: float) -> float:
+        """Criterion (d)'s standard errors: SIGNIFICANCE_Z, or CONFIRMED_SIGNIFICANCE_Z when the gap falls by
+        min_gap_reduction on its own (as min_correlation: the output confirms what the equations say)."""
+        if gap_ratio <= 1.0 - self.options.min_gap_reduction:
+            return CONFIRMED_SIGNIFICANCE_Z
+        return SIGNIFICANCE_Z
 
     def parameter_spread(
         self, instance: EffectInstance, structure: ModelStructure, full: FittedModel

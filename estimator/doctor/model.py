@@ -40,6 +40,7 @@ from estimator.doctor.catalog import (
     CATALOG,
     FRICTION_BAND_M_S,
     MAX_DELAY_S,
+    SIGNIFICANCE_Z,
     STIFFNESS_UNKNOWNS,
     EffectInstance,
     EffectName,
@@ -265,10 +266,16 @@ class FittedModel:
     def parameters(self, effect: EffectInstance) -> dict[str, float | str]:
         return CATALOG[effect.name].report(effect, self.effect_values(effect), self.context())
 
-    def implausible(self, effect: EffectInstance, significance: bool = True) -> str | None:
-        """Why the fitted effect cannot be what it says (catalog's Effect.implausible; significance: with
-        its test of the value against its standard error)."""
-        context = self.context() if significance else replace(self.context(), standard_error={})
+    def implausible(
+        self, effect: EffectInstance, significance_z: float | None = SIGNIFICANCE_Z
+    ) -> str | None:
+        """Why the fitted effect cannot be what it says (catalog's Effect.implausible), with the value tested
+        against significance_z of its standard errors (None: not tested)."""
+        context = self.context()
+        if significance_z is None:
+            context = replace(context, standard_error={})
+        else:
+            context = replace(context, significance_z=significance_z)
         return CATALOG[effect.name].implausible(self.effect_values(effect), context)
 
 
