@@ -11,15 +11,16 @@ from __future__ import annotations
 
 import json
 import warnings
-from dataclasses import fields
+from dataclasses import fields, replace
 
 import numpy as np
 import pytest
 
+from estimator.damper import PiecewiseLinearCurve
 from estimator.doctor.catalog import EffectInstance, EffectName
 from estimator.doctor.model import FitSettings, Reference, fit, starting_structure
 from estimator.doctor.result import model_json
-from estimator.doctor.simulation import diverged, simulate_models
+from estimator.doctor.simulation import MAX_SUBSTEPS, diverged, simulate_models, substeps
 from estimator.model_io import ModelFormatError, model_from_json
 from estimator.output_error import IdentifiedModel
 from estimator.sweep import SweepSettings
@@ -117,3 +118,18 @@ def test_a_diverged_channel_is_told_without_numpy_warnings() -> None:
         assert diverged(np.array([np.nan, 0.0, 1e-6]))
         assert diverged(np.full(1000, 2.0))  # metres off a bench that moves millimetres
         assert not diverged(np.random.default_rng(0).normal(0.0, 5e-6, 1000))
+
+
+def test_a_curve_stiffer_than_any_damper_is_reported_diverged_not_simulated(fitted) -> None:
+    """A smooth truth re-identified with twice the points once had a 2e11 N·s/m segment at the velocities the
+    sweep hardly reaches (a fresh independent draw): the Runge-Kutta asked for millions of steps per sample
+    and 339 GiB. Such a model is reported as diverged beside a sound one, which simulates as it does alone."""
+    model, a, _ = fitted
+    curve = model.curves[0]
+    force = curve.force_N.copy()
+    force[-1] = force[-2] + 1e8  # 10⁸ N across the last interval
+    steep = replace(model, curve_override=(PiecewiseLinearCurve(curve.velocity_m_s, force),))
+    assert substeps(steep, a.sample_time_s) > MAX_SUBSTEPS
+    gaps = simulate_models([model, steep], a).gap_m()
+    assert gaps[0] == pytest.approx(float(simulate_models([model], a).gap_m()[0]), rel=1e-12)
+    assert np.isinf(gaps[1])
