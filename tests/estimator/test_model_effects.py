@@ -20,7 +20,16 @@ from estimator.damper import PiecewiseLinearCurve
 from estimator.doctor.catalog import EffectInstance, EffectName
 from estimator.doctor.model import FitSettings, Reference, fit, starting_structure
 from estimator.doctor.result import model_json
-from estimator.doctor.simulation import MAX_SUBSTEPS, diverged, simulate_models, substeps
+from estimator.doctor.simulation import (
+    MAX_SUBSTEPS,
+    RUNAWAY_GAP_RATIO,
+    BatchOutputError,
+    _corner,
+    dissipative_force,
+    diverged,
+    simulate_models,
+    substeps,
+)
 from estimator.model_io import ModelFormatError, model_from_json
 from estimator.output_error import IdentifiedModel
 from estimator.sweep import SweepSettings
@@ -133,3 +142,42 @@ def test_a_curve_stiffer_than_any_damper_is_reported_diverged_not_simulated(fitt
     gaps = simulate_models([model, steep], a).gap_m()
     assert gaps[0] == pytest.approx(float(simulate_models([model], a).gap_m()[0]), rel=1e-12)
     assert np.isinf(gaps[1])
+
+
+def test_a_curve_that_slopes_back_at_its_end_is_extended_flat(fitted) -> None:
+    """Beyond its end knots a curve keeps its end slope where that is not negative and stays flat where it
+    is (dissipative_force): a fitted curve that slopes back at its last knots (few samples there) would
+    otherwise push with the motion beyond them, and its simulation ran away (independent pair 115)."""
+    model, a, _ = fitted
+    curve = model.curves[0]
+    knots, force = curve.velocity_m_s, curve.force_N.copy()
+    force[-1] = force[-2] - 1e5 * (knots[-1] - knots[-2])  # slopes back at -10⁵ N·s/m
+    back = PiecewiseLinearCurve(knots, force)
+    inside = np.linspace(knots[0], knots[-1], 101)
+    np.testing.assert_array_equal(dissipative_force(back, inside), back.force(inside))
+    beyond = knots[-1] + np.array([0.01, 0.1, 1.0])
+    np.testing.assert_array_equal(dissipative_force(back, beyond), np.full(3, force[-1]))
+    below = knots[0] - np.array([0.01, 0.1])
+    np.testing.assert_allclose(dissipative_force(back, below), back.force(below), rtol=1e-12)
+    # the population the simulation runs is that curve so extended, beside a sound model with wider knots
+    sloped = replace(model, curve_override=(back,))
+    wider = replace(model, curve_override=(curve.resampled(np.linspace(knots[0], 2 * knots[-1], 40)),))
+    damper = _corner([sloped, wider], 0, a.sample_time_s).damper
+    far = np.array([knots[-1] + 1.0, knots[-1] + 1.0])
+    assert damper.force(far)[0] == pytest.approx(force[-1], rel=1e-12)
+    assert damper.force(far)[1] == pytest.approx(wider.curves[0].force(far[1]), rel=1e-12)
+    assert np.isfinite(simulate_models([sloped], a).gap_m()[0])
+
+
+def test_a_model_far_more_off_than_the_motion_it_predicts_counts_as_diverged() -> None:
+    """BatchOutputError.gap_m: a gap of RUNAWAY_GAP_RATIO times the measured motion's RMS or more is a model
+    that ran away (bounded by the curves' flat extension, not by physics), counted as diverged like one
+    whose simulation overflowed; below it the gap is kept."""
+    rng = np.random.default_rng(0)
+    motion_m = 2e-3
+    residual = rng.normal(0.0, 1.0, (1000, 3)) * np.array([0.5, 2.9, 3.1]) * motion_m
+    batch = BatchOutputError({"x_s": residual}, {"x_s": residual}, np.full(3, motion_m))
+    gaps = batch.gap_m()
+    ratio = np.sqrt(np.mean(residual**2, axis=0)) / motion_m
+    np.testing.assert_array_equal(np.isinf(gaps), ratio >= RUNAWAY_GAP_RATIO)
+    assert np.isfinite(gaps[0]) and np.isinf(gaps[2])
