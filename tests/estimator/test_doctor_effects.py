@@ -29,8 +29,10 @@ from daq.formats.vehicle_file import read_vehicle
 from estimator.doctor import DiagnoseOptions, DiagnosisResult, diagnose
 from estimator.doctor.catalog import (
     CATALOG,
+    CONFIRMED_SIGNIFICANCE_Z,
     FRICTION_BAND_M_S,
     MIN_STIFFNESS_CHANGE,
+    SIGNIFICANCE_Z,
     EffectInstance,
     EffectName,
     FitContext,
@@ -304,3 +306,16 @@ def test_a_wrong_rate_is_named_where_the_gap_is_already_at_the_floor(hit_rate) -
     assert hit, result.conclusion
     assert result.gap_after_m <= 1.1 * result.expected_gap_m
     assert result.residual_ratio <= 1.0
+
+
+def test_the_friction_significance_is_the_one_the_judging_asks() -> None:
+    """FitContext.significance_z: 69 N of friction at a standard error of 28 N (2.5 of them) is refused at
+    SIGNIFICANCE_Z and accepted at CONFIRMED_SIGNIFICANCE_Z, and the refusal names the limit applied."""
+    friction = CATALOG[EffectName.COULOMB_FRICTION]
+    values = {"coulomb_friction_N": 69.0}
+    said = friction.implausible(values, _car_context(standard_error={"coulomb_friction_N": 28.0}))
+    assert said is not None and f"within {SIGNIFICANCE_Z:g} standard errors (28 N)" in said
+    confirmed = _car_context(
+        standard_error={"coulomb_friction_N": 28.0}, significance_z=CONFIRMED_SIGNIFICANCE_Z
+    )
+    assert friction.implausible(values, confirmed) is None

@@ -12,7 +12,6 @@ written and read back as `shockbench diagnose` reads them; the benchmark runs th
 from __future__ import annotations
 
 import tempfile
-from dataclasses import replace
 from pathlib import Path
 from types import SimpleNamespace
 from typing import cast
@@ -22,14 +21,7 @@ import pytest
 from independent_recordings import recorded
 
 from estimator.doctor import DiagnoseOptions, diagnose
-from estimator.doctor.catalog import (
-    CATALOG,
-    CONFIRMED_SIGNIFICANCE_Z,
-    FRICTION_BAND_M_S,
-    SIGNIFICANCE_Z,
-    EffectName,
-    FitContext,
-)
+from estimator.doctor.catalog import CONFIRMED_SIGNIFICANCE_Z, FRICTION_BAND_M_S, SIGNIFICANCE_Z
 from estimator.doctor.judging import Judging
 from estimator.doctor.model import FittedModel
 from estimator.doctor.rounds import Simulated
@@ -125,24 +117,9 @@ def test_a_refitted_gap_above_the_current_one_contradicts_only_above_the_floor(
 
 
 def test_the_gap_confirming_a_candidate_lowers_the_standard_errors_it_needs() -> None:
-    """Judging.significance_z: 3 standard errors, 2 when the gap falls by min_gap_reduction on its own;
-    the catalog's friction test says which it applied."""
+    """Judging.significance_z: 3 standard errors, 2 when the gap falls by min_gap_reduction on its own (the
+    catalog applies it: test_doctor_effects)."""
     judge = _Judge(float("nan"))
     limit = 1.0 - judge.options.min_gap_reduction
     assert judge.significance_z(limit + 0.01) == SIGNIFICANCE_Z
     assert judge.significance_z(limit) == CONFIRMED_SIGNIFICANCE_Z < SIGNIFICANCE_Z
-    friction = CATALOG[EffectName.COULOMB_FRICTION]
-    context = FitContext(
-        spring_stiffness=20_000.0,
-        static_wheel_load_N=3_000.0,
-        maxwell_time_constant_s=0.03,
-        peak_deflection_m=0.01,
-        airborne_fraction=0.0,
-        stated_stiffness_N_per_m={},
-        standard_error={"coulomb_friction_N": 28.0},
-        peak_damper_force_N=1_000.0,
-    )
-    values = {"coulomb_friction_N": 69.0}  # 2.46 standard errors
-    said = friction.implausible(values, context)
-    assert said is not None and "within 3 standard errors (28 N)" in said
-    assert friction.implausible(values, replace(context, significance_z=CONFIRMED_SIGNIFICANCE_Z)) is None
