@@ -263,12 +263,15 @@ def _simulate(
                 continue
             columns.append(model.corrections.distort(name, column, dt))
         predicted[name] = np.stack(columns, axis=1)
-        measured = [
-            (ref if ref is not None else recording).channels[name]
-            for ref in (references or [None] * len(models))
-        ]
+        measured = np.stack(
+            [
+                (ref if ref is not None else recording).channels[name]
+                for ref in (references or [None] * len(models))
+            ],
+            axis=1,
+        )
         with np.errstate(over="ignore", invalid="ignore"):
-            residual[name] = predicted[name] - np.stack(measured, axis=1)
-        motion.append(np.stack(measured, axis=1) - np.mean(np.stack(measured, axis=1), axis=0))
+            residual[name] = predicted[name] - measured
+        motion.append(measured - np.mean(measured, axis=0))
     response = np.sqrt(np.mean(np.stack(motion) ** 2, axis=(0, 1)))
     return BatchOutputError(predicted, residual, response)
