@@ -185,7 +185,7 @@ class Judging:
             reasons.append("no better on held-out data")
         if bic > -options.bic_margin:
             reasons.append("the information criterion does not favour it")
-        if correlation < self.min_correlation(gap_ratio if np.isfinite(gap_m) else 1.0):
+        if correlation < self.min_correlation(confirmed):
             reasons.append(f"the residual does not follow its signal (correlation {correlation:.2f})")
         # (a) on the part of the gap a complete model would not leave, asked only of a candidate that meets
         # every other criterion (the floor costs a few fits)
