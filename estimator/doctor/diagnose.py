@@ -539,7 +539,9 @@ class _Doctor(Judging):
             if not np.isfinite(truths.gap_m()[0]):
                 return float("nan"), float("inf")
         measured = {name: recording.channels[name] for name in final.residual}
-        residual = {name: measured[name] if diverged(r) else r for name, r in final.residual.items()}
+        residual = {
+            name: measured[name] if diverged(r, measured[name]) else r for name, r in final.residual.items()
+        }
         noise = measure_noise(residual, measured, dt, self.reference.filters.excitation_top_Hz)
         predicted = {name: p[:, 0] for name, p in truths.predicted.items()}
 

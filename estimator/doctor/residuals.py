@@ -240,7 +240,8 @@ def _locate(model: FittedModel, output_residual: dict[str, np.ndarray], gap_m: f
     filters = model.system.filters
     plate = model.signals.recording.channels["x_r_l" if model.vehicle.is_axle else "x_r"]
     frequency = sweep_frequency_Hz(plate, dt)
-    finite = {c: r for c, r in output_residual.items() if not diverged(r)}
+    measured = model.signals.recording.channels
+    finite = {c: r for c, r in output_residual.items() if not diverged(r, measured[c])}
     equation_residual = model.residuals()
     equations = dict(zip(signals.equations, equation_residual, strict=True))
     by_variable = []  # of the first corner (the left one of an axle)

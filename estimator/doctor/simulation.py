@@ -42,14 +42,6 @@ cost before), and one verdict moved: friction 35, where one of the two expected-
 diverged."""
 
 
-def diverged(residual_m: np.ndarray) -> bool:
-    """A channel's output error (m) from a simulation that diverged: its RMS infinite or at least
-    DIVERGED_GAP_M (the bench moves millimetres), as gap_m counts a model."""
-    with np.errstate(over="ignore", invalid="ignore"):
-        rms = float(np.sqrt(np.mean(np.square(residual_m))))
-    return not (np.isfinite(rms) and rms < DIVERGED_GAP_M)
-
-
 RUNAWAY_GAP_RATIO = 3.0
 """A model whose gap is at least this many times the RMS of the measured motion it predicts (body and wheel
 channels about their means, validate's response_rms_m) has run away, and counts as diverged: predicting no
@@ -57,6 +49,18 @@ motion at all would be a third as far off. With the curves extended dissipativel
 model that once grew without bound swings instead, bounded but metres or tens of millimetres off (the
 complete models re-identified for the expected gap of three recordings with a top mount outside the
 catalog: 44, 274 and 689 mm against motions of a few millimetres)."""
+
+
+def diverged(residual_m: np.ndarray, measured_m: np.ndarray | None = None) -> bool:
+    """A channel's output error (m) from a simulation that diverged: its RMS infinite or at least
+    DIVERGED_GAP_M (the bench moves millimetres), or, given the channel's measured readings, at least
+    RUNAWAY_GAP_RATIO times their RMS about their mean, as BatchOutputError.gap_m counts a model."""
+    limit = DIVERGED_GAP_M
+    if measured_m is not None:
+        limit = min(limit, RUNAWAY_GAP_RATIO * float(np.std(measured_m)))
+    with np.errstate(over="ignore", invalid="ignore"):
+        rms = float(np.sqrt(np.mean(np.square(residual_m))))
+    return not (np.isfinite(rms) and rms < limit)
 
 
 @dataclass

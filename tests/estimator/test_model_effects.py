@@ -131,6 +131,12 @@ def test_a_diverged_channel_is_told_without_numpy_warnings() -> None:
         assert diverged(np.array([np.nan, 0.0, 1e-6]))
         assert diverged(np.full(1000, 2.0))  # metres off a bench that moves millimetres
         assert not diverged(np.random.default_rng(0).normal(0.0, 5e-6, 1000))
+        # beside its measured readings, a channel off by the runaway ratio of their motion or more
+        motion = 2e-3 * np.sin(np.linspace(0.0, 60.0, 1000)) + 0.01  # 1.4 mm RMS about a 10 mm mean
+        off = np.full(1000, 1.0)
+        assert diverged(off * 1.01 * RUNAWAY_GAP_RATIO * np.std(motion), motion)
+        assert not diverged(off * 0.99 * RUNAWAY_GAP_RATIO * np.std(motion), motion)
+        assert not diverged(off * 1.01 * RUNAWAY_GAP_RATIO * np.std(motion))
 
 
 def test_a_curve_stiffer_than_any_damper_is_reported_diverged_not_simulated(fitted) -> None:
