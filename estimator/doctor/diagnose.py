@@ -72,7 +72,7 @@ from typing import TypeVar
 
 import numpy as np
 
-from estimator.doctor.catalog import CATALOG, EffectInstance, EffectName
+from estimator.doctor.catalog import CATALOG, ENTANGLED, EffectInstance, EffectName
 from estimator.doctor.evidence import gather, sentence
 from estimator.doctor.expected import plausible_truth, refit_on, smooth_truth, synthetic_recording
 from estimator.doctor.judging import Judging
@@ -288,11 +288,23 @@ class _Doctor(Judging):
                 f"{state.simulated.gap_m * 1e6:.1f} µm to {then.gaps[second] * 1e6:.1f} µm"
             )
             rounds.append(mark_chosen(played.scores, first, together))
+            before = state.current
             named, state = self.advance(state, played, first, rows)
-            steps.append(named)
+            gaps = (named.gap_before_m, named.gap_after_m)
             rounds.append(mark_chosen(then.scores, second, "named"))
-            named, state = self.advance(state, then, second, rows)
-            steps.append(named)
+            second_named, state = self.advance(state, then, second, rows)
+            # the first as the pair fitted it: alone it can have come out otherwise (a spring rate -7.6%
+            # alone, -19% beside the bump stop it is entangled with); its evidence is the pair's
+            pair_model = state.current
+            evidence = gather(first, before, pair_model, self.frequency)
+            steps.append(
+                replace(
+                    named,
+                    parameters=pair_model.parameters(first),
+                    evidence=f"{sentence(first, evidence, *gaps)} (with {second.label}, fitted together)",
+                )
+            )
+            steps.append(second_named)
             state = self.rejudge(state, len(start_labels), steps, rounds, rows)
         assert state.simulated is not None and initial is not None and located_before is not None
         self.report(len(steps), "simulating the expected gap")
@@ -484,25 +496,55 @@ class _Doctor(Judging):
         leaves it and the gap grew 13%). The candidate strongest in the equations (strong_in_equations) is
         added on trial and one more round played on it; if a candidate qualifies there and the two together
         meet criteria (a)-(c) against the model without either, both are named (the first, the second and
-        that round). None otherwise."""
+        that round). If not, a candidate whose entangled partner (catalog.ENTANGLED) is missing too is
+        added on trial with a round of that partner alone: the pair is named the same way, and only if the
+        first is physically possible as fitted together with the second (alone it was not, which is why it
+        did not qualify). None otherwise."""
         assert state.simulated is not None
-        strong = [i for i in played.fits.kept if self.strong_in_equations(i, played)]
-        if not strong:
-            return None
-        first = min(strong, key=lambda i: played.fits.full[i].objective)
-        _, trial = self.advance(state, played, first, rows)
-        then = self.play(trial, step + 1, self.candidates(trial.structure), rows)
-        second = self.choose(then.eligible, then.gaps, then.fits.full) or self.choose(
-            then.above_floor, then.gaps, then.fits.full
-        )
-        if second is None:
-            return None
+        for first, partners in self.trials(state, played):
+            _, trial = self.advance(state, played, first, rows)
+            then = self.play(trial, step + 1, partners or self.candidates(trial.structure), rows)
+            second = self.choose(then.eligible, then.gaps, then.fits.full) or self.choose(
+                then.above_floor, then.gaps, then.fits.full
+            )
+            if second is None or then.fits.full[second].implausible(first) is not None:
+                continue
+            if self.pair_qualifies(state, played, then, second, rows):
+                return first, second, then
+        return None
+
+    def trials(
+        self, state: RoundState, played: Played
+    ) -> list[tuple[EffectInstance, list[EffectInstance] | None]]:
+        """The candidates look_ahead adds on trial, each with the candidates of its round (None: all): the
+        strongest in the equations, then each kept candidate (lowest objective first) with its missing
+        entangled partner."""
+        kept = played.fits.kept
+        trials: list[tuple[EffectInstance, list[EffectInstance] | None]] = []
+        strong = [i for i in kept if self.strong_in_equations(i, played)]
+        if strong:
+            trials.append((min(strong, key=lambda i: played.fits.full[i].objective), None))
+        present = set(state.structure.effects) | self.removed
+        for first in sorted(kept, key=lambda i: played.fits.full[i].objective):
+            partner_name = ENTANGLED.get(first.name)
+            if partner_name is None or any(f == first for f, _ in trials):
+                continue
+            partner = EffectInstance(partner_name)
+            if partner not in present:
+                trials.append((first, [partner]))
+        return trials
+
+    def pair_qualifies(
+        self, state: RoundState, played: Played, then: Played, second: EffectInstance, rows: np.ndarray
+    ) -> bool:
+        """Criteria (a)-(c) for a pair: the model with both against the current model without either."""
+        assert state.simulated is not None
         options = self.options
         gap_m, model = then.gaps[second], then.fits.full[second]
         heldout = heldout_objective(then.fits.held[second], rows) / played.heldout_base
         bic = bic_difference(state.simulated, gap_m, added_unknowns(state.current, model))
         shrinks = gap_m <= (1.0 - options.min_gap_reduction) * state.simulated.gap_m
-        passes = (
+        return (
             heldout <= 1.0 - options.min_heldout_reduction
             and bic <= -options.bic_margin
             and (
@@ -512,7 +554,6 @@ class _Doctor(Judging):
                 )
             )
         )
-        return (first, second, then) if passes else None
 
     def floor_m(self, current: FittedModel, simulated: Simulated) -> float:
         """The expected gap of `current` (see expected), computed once per model."""

@@ -141,3 +141,26 @@ def test_a_gap_that_confirms_a_candidate_asks_less_correlation(
         assert 0.1 <= named_score.correlation < 0.2, line
     else:
         assert any(c.correlation < 0.1 and (c.gap_ratio or 1.0) <= 0.75 for c in weak), line
+
+
+def test_a_wrong_spring_rate_and_a_bump_stop_are_fitted_together(hit_rate) -> None:
+    """Draw pair 113 (car, valve model, 1 ms, 7.3 µm noise): the spring rate stated x1.21 and a bump stop of
+    +31% at 6 mm. Each alone cannot be fitted right while the other is missing (the rate change came out
+    -7.6%, the bump stop softened the spring) and nothing qualified: the doctor concluded "nothing missing".
+    The two are entangled (catalog.ENTANGLED: ΔK_s on the deflection, k3 on its cube), so the doctor adds
+    them together (_Doctor.look_ahead), and each comes out near the truth."""
+    case, result = _diagnosed("pair", 113)
+    hidden_k3 = case.vehicle.effects.cubic_spring_N_per_m3
+    true_change = 1.0 / case.vehicle.effects.stated_spring_factor - 1.0
+    spring = next((s.parameters for s in result.steps if s.effect == "spring_stiffness"), None)
+    bump = next((s.parameters for s in result.steps if s.effect == "progressive_spring"), None)
+    named = sorted(result.effects_named)
+    hit = named == ["progressive_spring", "spring_stiffness"] and not result.unexplained
+    line = f"{case.description}: named {result.effects_named}, spring {spring}, bump stop {bump}"
+    hit_rate("independent world: entangled effects fitted together", line, hit)
+    assert hit, line
+    assert spring is not None and bump is not None
+    # the first step reports the rate the pair was fitted with, not the -7.6% it had alone
+    assert abs(float(spring["change_percent"]) / 100.0 - true_change) <= 0.03, line
+    assert abs(float(bump["cubic_spring_N_per_m3"]) / hidden_k3 - 1.0) <= 0.15, line
+    assert result.gap_after_m <= 0.75 * result.gap_before_m, line
