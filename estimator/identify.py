@@ -466,10 +466,17 @@ def identify(
         tyre_damping_Ns_per_m=system.value(theta, TYRE_DAMPING) or 0.0,
         roll_inertia_kg_m2=float(theta[1]) if vehicle.is_axle else None,
     )
-    gap = simulate_identified(model, recording, system.kinematics).gap_m if options.output_error else None
+    noise_m = system.filters.noise_floor_m
+    gap = (
+        simulate_identified(model, recording, system.kinematics, noise_m).gap_m
+        if options.output_error
+        else None
+    )
     refined_gap = None
     if options.refine_output_error:
-        model, refined_gap = refine_on_output_error(model, recording, system.kinematics, cancel=cancel)
+        model, refined_gap = refine_on_output_error(
+            model, recording, system.kinematics, noise_m, cancel=cancel
+        )
     inspection, balance = _inspection(model, recording, system)
     corners = ["single"] if not vehicle.is_axle else ["left", "right"]
     fitted = [

@@ -26,7 +26,7 @@ from estimator.dynamics import (
     sample_substeps,
 )
 from estimator.recording import Recording
-from estimator.signals import Kinematics
+from estimator.signals import Kinematics, initial_state
 from estimator.simulation_kernel import integrate_compiled
 from estimator.solvers.differential_evolution import DEProgress, DESettings, DifferentialEvolution
 from estimator.vehicle import TyreModel, VehicleParameters
@@ -99,11 +99,18 @@ class OutputErrorResult:
     measured: dict[str, np.ndarray]
 
 
-def _measured_drive(kin: Mapping[str, Kinematics], vehicle: VehicleParameters):
-    """The plate drive (position, rate) and the initial state, from the low-passed measured channels."""
+def _measured_drive(
+    kin: Mapping[str, Kinematics],
+    channels: Mapping[str, np.ndarray],
+    sample_time_s: float,
+    noise_m: float,
+    vehicle: VehicleParameters,
+):
+    """The plate drive (position, rate: the low-passed measured plate) and the initial state (each channel's
+    start, signals.initial_state, from its readings `channels` with the noise floor noise_m)."""
 
     def at0(name: str) -> tuple[float, float]:
-        return float(kin[name].position_m[0]), float(kin[name].velocity_m_s[0])
+        return initial_state(channels[name], sample_time_s, noise_m)
 
     if not vehicle.is_axle:
         plate, rate = kin["x_r"].position_m, kin["x_r"].velocity_m_s
@@ -160,16 +167,20 @@ def simulate_identified(
     model: IdentifiedModel,
     recording: Recording,
     kinematics: Mapping[str, Kinematics],
-    curves: tuple[object, ...] | None = None,
+    noise_m: float,
+    curves: tuple[PiecewiseLinearCurve | CurveBatch, ...] | None = None,
     batch: int | None = None,
 ) -> OutputErrorResult:
     """Drive the model with the measured plate; `kinematics` are the recording's channels low-passed (as
-    LinearResiduals.kinematics holds them); `curves` may be CurveBatch objects with `batch` columns."""
-    plate, rate, state0 = _measured_drive(kinematics, model.vehicle)
-    physics = model.physics(curves)
+    LinearResiduals.kinematics holds them), noise_m the sensor noise floor (signals.FilterChoice), which
+    the initial state is fitted within; `curves` may be CurveBatch objects with `batch` columns."""
+    dt = recording.sample_time_s
+    plate, rate, state0 = _measured_drive(kinematics, recording.channels, dt, noise_m, model.vehicle)
+    # beyond its end knots a curve is extended as a damper is (damper.dissipative_table), as the model
+    # doctor simulates it: a curve that slopes back at its ends would otherwise push the model away
+    physics = model.physics(tuple(c.dissipative() for c in curves or model.curves))
     if batch is not None:
         state0 = np.repeat(state0[:, None], batch, axis=1)
-    dt = recording.sample_time_s
     steps = _substeps(model, curves or model.curves, dt, physics)
     with np.errstate(over="ignore", invalid="ignore"):  # an unstable model is reported as a diverged gap
         states = integrate_compiled(
@@ -188,6 +199,7 @@ def refine_on_output_error(
     model: IdentifiedModel,
     recording: Recording,
     kinematics: Mapping[str, Kinematics],
+    noise_m: float,
     settings: DESettings = REFINE_SETTINGS,
     spread: float = 0.15,
     callback: Callable[[DEProgress], bool | None] | None = None,
@@ -215,7 +227,7 @@ def refine_on_output_error(
             curves.append(CurveBatch(grid, population[:, offset : offset + size].T))
             offset += size
         candidate = replace(model, tyre_damping_Ns_per_m=population[:, -1])
-        return simulate_identified(candidate, recording, kinematics, tuple(curves), batch=p).gap_m
+        return simulate_identified(candidate, recording, kinematics, noise_m, tuple(curves), batch=p).gap_m
 
     result = DifferentialEvolution(gaps, bounds, settings, callback, cancel, initial=start).solve()
     theta, offset, refined_curves = result.theta, 0, []

@@ -124,3 +124,23 @@ def kinematics(x: np.ndarray, cutoff_Hz: float, sample_time_s: float) -> Kinemat
     position = lowpass(x, cutoff_Hz, sample_time_s)
     velocity = derivative(position, sample_time_s)
     return Kinematics(position, velocity, derivative(velocity, sample_time_s))
+
+
+INITIAL_WINDOW_S = 0.2
+"""Longest stretch at the start of a recording a quadratic is fitted to for the initial state."""
+
+
+def initial_state(x_m: np.ndarray, sample_time_s: float, noise_m: float) -> tuple[float, float]:
+    """Position (m) and velocity (m/s) of a channel at its first sample: a quadratic fitted to the longest
+    stretch from the start (up to INITIAL_WINDOW_S, halved until it fits within twice the noise). The
+    low-passed kinematics are least reliable at the very first sample (the filter's edge), and a wrong
+    initial velocity sets the body ringing for the first second of a simulation. Every simulation from a
+    measured plate starts so (estimator.output_error for identify and validate, the model doctor)."""
+    window = max(8, round(INITIAL_WINDOW_S / sample_time_s))
+    while True:
+        t = np.arange(min(window, x_m.size)) * sample_time_s
+        coefficients = np.polyfit(t, x_m[: t.size], 2)
+        misfit = float(np.sqrt(np.mean((np.polyval(coefficients, t) - x_m[: t.size]) ** 2)))
+        if misfit <= 2.0 * noise_m or window <= 8:
+            return float(coefficients[2]), float(coefficients[1])
+        window //= 2

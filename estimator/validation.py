@@ -73,9 +73,9 @@ def validate(model: IdentifiedModel, recording: Recording) -> ValidationResult:
     )
     dt = recording.sample_time_s
     driven = corrections.apply(recording)  # the true motion as the model's channel effects say
-    cutoff = choose_filters(recording.channels, dt).kinematics_cutoff_Hz
-    kin = {name: kinematics(x, cutoff, dt) for name, x in driven.channels.items()}
-    simulated = simulate_identified(model, driven, kin)
+    filters = choose_filters(recording.channels, dt)
+    kin = {name: kinematics(x, filters.kinematics_cutoff_Hz, dt) for name, x in driven.channels.items()}
+    simulated = simulate_identified(model, driven, kin, filters.noise_floor_m)
     residuals = []
     with np.errstate(over="ignore", invalid="ignore"):  # a diverging model is reported as such
         for name, motion in simulated.simulated.items():

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from estimator.damper import CurveBatch, PiecewiseLinearCurve
+from estimator.damper import CurveBatch
 from estimator.doctor.catalog import EffectName
 from estimator.doctor.model import FittedModel
 from estimator.dynamics import (
@@ -28,6 +28,7 @@ from estimator.dynamics import (
 )
 from estimator.output_error import DIVERGED_GAP_M
 from estimator.recording import Recording
+from estimator.signals import initial_state
 from estimator.simulation_kernel import integrate_compiled
 from estimator.vehicle import TyreModel
 
@@ -45,8 +46,9 @@ diverged."""
 RUNAWAY_GAP_RATIO = 3.0
 """A model whose gap is at least this many times the RMS of the measured motion it predicts (body and wheel
 channels about their means, validate's response_rms_m) has run away, and counts as diverged: predicting no
-motion at all would be a third as far off. With the curves extended dissipatively (dissipative_force) a
-model that once grew without bound swings instead, bounded but metres or tens of millimetres off (the
+motion at all would be a third as far off. With the curves extended dissipatively
+(estimator.damper.dissipative_table) a model that once grew without bound swings instead, bounded but metres
+or tens of millimetres off (the
 complete models re-identified for the expected gap of three recordings with a top mount outside the
 catalog: 44, 274 and 689 mm against motions of a few millimetres)."""
 
@@ -85,23 +87,6 @@ class BatchOutputError:
         return {name: r[:, index] for name, r in self.residual.items()}
 
 
-def dissipative_force(curve: PiecewiseLinearCurve, velocity_m_s: np.ndarray) -> np.ndarray:
-    """The curve's force (N) at velocity_m_s, extended beyond its end knots with its end slopes where they
-    are not negative and flat where they are: a damper's force does not fall back as the suspension moves
-    faster than the sweep made it. A curve fitted to the few samples at its ends can slope back there, and
-    its linear extension then turns into a force that pushes with the motion, so the simulated model runs
-    away once it passes the end knots (independent world, a car at 2 ms with 351 N of friction and a body
-    laser lagging 4.8 ms: the model with the delay had an end slope of -8611 N·s/m and diverged; extended
-    flat, its gap was 445 µm against the current model's 644 µm)."""
-    knots, force = curve.velocity_m_s, curve.force_N
-    low = max((force[1] - force[0]) / (knots[1] - knots[0]), 0.0)
-    high = max((force[-1] - force[-2]) / (knots[-1] - knots[-2]), 0.0)
-    velocity = np.asarray(velocity_m_s, dtype=float)
-    inside = curve.force(np.clip(velocity, knots[0], knots[-1]))
-    below, above = np.minimum(velocity - knots[0], 0.0), np.maximum(velocity - knots[-1], 0.0)
-    return inside + low * below + high * above
-
-
 def _corner(models: list[FittedModel], side: int, sample_time_s: float) -> CornerPhysics:
     vehicle = models[0].vehicle
     # one grid for the whole population: the union of every model's knots and a knot a span beyond each
@@ -110,7 +95,7 @@ def _corner(models: list[FittedModel], side: int, sample_time_s: float) -> Corne
     grid = grid[np.concatenate([[True], np.diff(grid) > 1e-9])]
     span = grid[-1] - grid[0]
     grid = np.concatenate([[grid[0] - span], grid, [grid[-1] + span]])
-    forces = np.stack([dissipative_force(m.curves[side], grid) for m in models], axis=1)
+    forces = np.stack([m.curves[side].dissipative().force(grid) for m in models], axis=1)
 
     def each(name: str) -> np.ndarray:
         return np.array([m.value(name) for m in models])
@@ -131,25 +116,6 @@ def _corner(models: list[FittedModel], side: int, sample_time_s: float) -> Corne
     )
 
 
-INITIAL_WINDOW_S = 0.2
-"""Longest stretch at the start of the recording a quadratic is fitted to for the initial state."""
-
-
-def _start(x: np.ndarray, sample_time_s: float, noise_m: float) -> tuple[float, float]:
-    """Position and velocity at the first sample: a quadratic fitted to the longest stretch from the start
-    (up to INITIAL_WINDOW_S, halved until it fits within twice the noise). The low-passed kinematics used by
-    estimator.output_error are least reliable at the very first sample (the filter's edge), and a wrong
-    initial velocity sets the body ringing for the first second of the simulation."""
-    window = max(8, round(INITIAL_WINDOW_S / sample_time_s))
-    while True:
-        t = np.arange(min(window, x.size)) * sample_time_s
-        coefficients = np.polyfit(t, x[: t.size], 2)
-        misfit = float(np.sqrt(np.mean((np.polyval(coefficients, t) - x[: t.size]) ** 2)))
-        if misfit <= 2.0 * noise_m or window <= 8:
-            return float(coefficients[2]), float(coefficients[1])
-        window //= 2
-
-
 def _drive(model: FittedModel) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Plate position and rate (the model's corrected plate channel(s), low-passed) and the initial state."""
     vehicle = model.vehicle
@@ -162,7 +128,7 @@ def _drive(model: FittedModel) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     noise = model.system.filters.noise_floor_m
 
     def at0(name: str) -> tuple[float, float]:
-        return _start(channels[name], dt, noise)
+        return initial_state(channels[name], dt, noise)
 
     if not vehicle.is_axle:
         return plate, rate, np.array([*at0("x_s"), *at0("x_t"), 0.0])

@@ -23,9 +23,13 @@ def test_a_negative_tyre_damping_refines_from_zero_within_ordered_bounds() -> No
     options = IdentifyOptions(tyre=TyreModel.KELVIN_VOIGT, output_error=False)
     identified = identify(recording, vehicle.known, options).model
     negative = replace(identified, tyre_damping_Ns_per_m=-136.0)
-    kinematics = build(recording, vehicle.known, TyreModel.KELVIN_VOIGT, None, options.nsample).kinematics
+    system = build(recording, vehicle.known, TyreModel.KELVIN_VOIGT, None, options.nsample)
     refined, gap = refine_on_output_error(
-        negative, recording, kinematics, settings=DESettings(generations=3, population_size=8, seed=1)
+        negative,
+        recording,
+        system.kinematics,
+        system.filters.noise_floor_m,
+        settings=DESettings(generations=3, population_size=8, seed=1),
     )
     assert 0.0 <= refined.tyre_damping_Ns_per_m <= 50.0  # searched in [0, 50] from 0, not refused
     assert np.isfinite(gap)
