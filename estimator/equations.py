@@ -101,6 +101,31 @@ class LinearResiduals:
             matrix[equation, :, column] = maxwell_regressor(rate, theta)[self.sample_index]
         return replace(self, matrix=matrix, tyre_theta=theta, _flat=None, _flat_offset=None)
 
+    def with_unknown_held(self, name: str, value: float) -> LinearResiduals:
+        """The same system with the unknown `name` held at `value`: its column moved into the offset and
+        dropped from θ (parameter_names without it)."""
+        index = self.parameter_names.index(name)
+        keep = [k for k in range(self.n_params) if k != index]
+        return replace(
+            self,
+            matrix=self.matrix[:, :, keep],
+            offset=self.offset + value * self.matrix[:, :, index],
+            parameter_names=[self.parameter_names[k] for k in keep],
+            _flat=None,
+            _flat_offset=None,
+        )
+
+    def reparametrised(self, basis: np.ndarray, names: list[str]) -> LinearResiduals:
+        """The same residuals in new unknowns z, θ = basis·z (basis of shape (len θ, len z)), named `names`:
+        how linear equality constraints on θ are eliminated."""
+        return replace(
+            self,
+            matrix=np.einsum("enp,pq->enq", self.matrix, basis),
+            parameter_names=list(names),
+            _flat=None,
+            _flat_offset=None,
+        )
+
     def subset(self, keep: np.ndarray) -> LinearResiduals:
         """The same system on some of its selected samples (keep: indices or a mask over sample_index)."""
         return replace(

@@ -427,13 +427,7 @@ def _solve(
     basis[keep, np.arange(len(keep))] = 1.0
     for row, pivot in zip(rows, pivots, strict=True):
         basis[pivot] = -row[keep] / row[pivot]
-    reduced = replace(
-        system,
-        matrix=np.einsum("enp,pq->enq", system.matrix, basis),
-        parameter_names=[system.parameter_names[k] for k in keep],
-        _flat=None,
-        _flat_offset=None,
-    )
+    reduced = system.reparametrised(basis, [system.parameter_names[k] for k in keep])
     start = None if initial is None else np.asarray(initial)[keep]
     theta, objective = _minimise(reduced, start, tolerance)
     return basis @ theta, objective
@@ -706,14 +700,7 @@ def _free_curve(
     index = used.parameter_names.index(FRICTION_UNKNOWN)
     friction = constrained.value(FRICTION_UNKNOWN)
     keep = [k for k in range(used.n_params) if k != index]
-    held = replace(
-        used,
-        matrix=used.matrix[:, :, keep],
-        offset=used.offset + friction * used.matrix[:, :, index],
-        parameter_names=[used.parameter_names[k] for k in keep],
-        _flat=None,
-        _flat_offset=None,
-    )
+    held = used.with_unknown_held(FRICTION_UNKNOWN, friction)
     same_grid = warm is not None and all(
         np.array_equal(a, b) for a, b in zip(warm.system.grids_m_s, system.grids_m_s, strict=True)
     )

@@ -113,3 +113,21 @@ def test_raw_coordinates_remain_available_and_are_documented_as_slower() -> None
         gaps[coordinates] = (result.objective - exact.objective) / exact.objective
     assert gaps[Coordinates.DECORRELATED] < 0.01
     assert gaps[Coordinates.RAW] > 1.0
+
+
+def test_an_unknown_held_and_a_reparametrised_system_give_the_same_residuals() -> None:
+    """LinearResiduals.with_unknown_held moves a column into the offset, reparametrised substitutes
+    θ = basis·z (how the doctor holds the friction of its second stage and eliminates constraints); both
+    evaluate the objective from a fresh matrix, not the original's cached flat copy."""
+    system = _random_system(7)
+    theta = np.array([0.3, -1.2, 2.0, 0.7])
+    system.objective(theta)  # fills the cached flat matrix
+    held = system.with_unknown_held("p2", 2.0)
+    assert held.parameter_names == ["p0", "p1", "p3"]
+    np.testing.assert_allclose(held.residuals(theta[[0, 1, 3]]), system.residuals(theta), atol=1e-12)
+    assert held.objective(theta[[0, 1, 3]]) == pytest.approx(float(system.objective(theta)), rel=1e-12)
+    basis = np.array([[1.0, 0.0], [0.0, 1.0], [2.0, 0.0], [0.0, -1.0]])
+    z = np.array([0.4, 1.5])
+    reduced = system.reparametrised(basis, ["a", "b"])
+    assert reduced.parameter_names == ["a", "b"] and reduced.n_params == 2
+    assert reduced.objective(z) == pytest.approx(float(system.objective(basis @ z)), rel=1e-12)
