@@ -47,13 +47,16 @@ class Judging:
 
     options: DiagnoseOptions
 
-    def strong_in_equations(self, instance: EffectInstance, played: Played) -> bool:
+    def strong_in_equations(
+        self, instance: EffectInstance, played: Played, reduction: float | None = None
+    ) -> bool:
         """The candidate is physically possible, follows the residual, and lowers the objective by at least
-        strong_objective_reduction on all samples and on the held-out blocks (whatever its gap did)."""
+        `reduction` (default strong_objective_reduction) on all samples and on the held-out blocks (whatever
+        its gap did)."""
         options = self.options
         score = next(s for s in played.scores if s.effect == instance.label)
         model = played.fits.full[instance]
-        limit = 1.0 - options.strong_objective_reduction
+        limit = 1.0 - (options.strong_objective_reduction if reduction is None else reduction)
         return (
             instance in played.outcomes
             and np.isfinite(played.outcomes[instance].gap_m)
@@ -79,18 +82,26 @@ class Judging:
         1.9-3.1 before, 0.6-1.0 with it) whose gap fell 11-19%, to 0.8-1.35 times the expected gap, and one of
         1.59 ms (objective 0.43) whose gap rose 0.9%, to 1.05 times it; a lift-off of 1.4% with a bump stop
         named (objective 0.85, gap -5%) and a bump stop with a lift-off named (objective 0.73, gap -5%), both
-        at 1.06-1.26 times the expected gap. On clean recordings no physically possible candidate was strong
-        in the last round; on recordings with an effect outside the catalog the strong ones (delays, bump
-        stops, rates standing in for it) left 1.6-9 times a complete model's residual. The candidate and its
-        share of a complete model's objective, or None."""
+        at 1.06-1.26 times the expected gap. A candidate that adds no unknown (tyre_liftoff) need only be
+        strong by unknown_free_objective_reduction. On clean recordings no physically possible candidate was
+        strong in the last round; on recordings with an effect outside the catalog the strong ones (delays,
+        bump stops, rates standing in for it) left 1.6-9 times a complete model's residual. The candidate
+        and its share of a complete model's objective, or None."""
         if not np.isfinite(expected) or not np.isfinite(residual_ratio) or state.simulated is None:
             return None
-        no_worse_m = state.simulated.gap_m * (1.0 + self.options.tie_tolerance)
+        options = self.options
+        no_worse_m = state.simulated.gap_m * (1.0 + options.tie_tolerance)
+
+        def reduction(instance: EffectInstance) -> float:
+            # a candidate with no unknown of its own (tyre_liftoff) cannot lower the objective by fitting
+            free = added_unknowns(state.current, played.fits.full[instance]) == 0
+            return options.unknown_free_objective_reduction if free else options.strong_objective_reduction
+
         shares = {
             i: residual_ratio * played.fits.ratios[i]
             for i in played.fits.kept
             if i not in played.fits.bases
-            and self.strong_in_equations(i, played)
+            and self.strong_in_equations(i, played, reduction(i))
             and played.gaps[i] <= max(expected, no_worse_m)
             and residual_ratio * played.fits.ratios[i] <= 1.0
         }
