@@ -99,15 +99,17 @@ class OutputErrorResult:
     measured: dict[str, np.ndarray]
 
 
-def _measured_drive(
+def measured_drive(
     kin: Mapping[str, Kinematics],
     channels: Mapping[str, np.ndarray],
     sample_time_s: float,
     noise_m: float,
     vehicle: VehicleParameters,
-):
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The plate drive (position, rate: the low-passed measured plate) and the initial state (each channel's
-    start, signals.initial_state, from its readings `channels` with the noise floor noise_m)."""
+    start, signals.initial_state, from its readings `channels` with the noise floor noise_m). The model
+    doctor drives its simulations with it too (estimator.doctor.simulation), so that validate's gap of a
+    diagnosed model is the doctor's."""
 
     def at0(name: str) -> tuple[float, float]:
         return initial_state(channels[name], sample_time_s, noise_m)
@@ -175,7 +177,7 @@ def simulate_identified(
     LinearResiduals.kinematics holds them), noise_m the sensor noise floor (signals.FilterChoice), which
     the initial state is fitted within; `curves` may be CurveBatch objects with `batch` columns."""
     dt = recording.sample_time_s
-    plate, rate, state0 = _measured_drive(kinematics, recording.channels, dt, noise_m, model.vehicle)
+    plate, rate, state0 = measured_drive(kinematics, recording.channels, dt, noise_m, model.vehicle)
     # beyond its end knots a curve is extended as a damper is (damper.dissipative_table), as the model
     # doctor simulates it: a curve that slopes back at its ends would otherwise push the model away
     physics = model.physics(tuple(c.dissipative() for c in curves or model.curves))

@@ -26,9 +26,8 @@ from estimator.dynamics import (
     model_substeps,
     sample_substeps,
 )
-from estimator.output_error import DIVERGED_GAP_M
+from estimator.output_error import DIVERGED_GAP_M, measured_drive
 from estimator.recording import Recording
-from estimator.signals import initial_state
 from estimator.simulation_kernel import integrate_compiled
 from estimator.vehicle import TyreModel
 
@@ -117,25 +116,15 @@ def _corner(models: list[FittedModel], side: int, sample_time_s: float) -> Corne
 
 
 def _drive(model: FittedModel) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Plate position and rate (the model's corrected plate channel(s), low-passed) and the initial state."""
-    vehicle = model.vehicle
-    kinematics = model.system.kinematics
-    plates = [kinematics[name] for name in (("x_r_l", "x_r_r") if vehicle.is_axle else ("x_r",))]
-    plate = np.stack([p.position_m for p in plates]) if vehicle.is_axle else plates[0].position_m
-    rate = np.stack([p.velocity_m_s for p in plates]) if vehicle.is_axle else plates[0].velocity_m_s
-    channels = model.signals.recording.channels
-    dt = model.signals.sample_time_s
-    noise = model.system.filters.noise_floor_m
-
-    def at0(name: str) -> tuple[float, float]:
-        return initial_state(channels[name], dt, noise)
-
-    if not vehicle.is_axle:
-        return plate, rate, np.array([*at0("x_s"), *at0("x_t"), 0.0])
-    (sl, vl), (sr, vr) = at0("x_s_l"), at0("x_s_r")
-    b = float(vehicle.track_m)
-    heave_roll = [0.5 * (sl + sr), 0.5 * (vl + vr), (sl - sr) / b, (vl - vr) / b]
-    return plate, rate, np.array([*heave_roll, *at0("x_t_l"), *at0("x_t_r"), 0.0, 0.0])
+    """Plate position and rate (the model's corrected plate channel(s), low-passed) and the initial state,
+    as validate and identify's output error take them (estimator.output_error.measured_drive)."""
+    return measured_drive(
+        model.system.kinematics,
+        model.signals.recording.channels,
+        model.signals.sample_time_s,
+        model.system.filters.noise_floor_m,
+        model.vehicle,
+    )
 
 
 def substeps(model: FittedModel, sample_time_s: float) -> int:
