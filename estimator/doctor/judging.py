@@ -72,25 +72,25 @@ class Judging:
         is mostly what a complete model leaves too (the curve's discretisation): strong in the equations
         (strong_in_equations), with it the objective at most that of the complete models re-identified for the
         expected gap (residual ratio times its objective ratio at most 1: it explains all the equations lack),
-        and its gap at or below the expected gap or not above the current model's beyond tie_tolerance (the
-        output does not contradict it). Candidates measured against a base of their own (coulomb_friction,
-        fits.bases) are not: their objective ratio is not against the current model. Independent world
-        (held-out draws, valve dampers, 2 ms or no lift-off): tyre rate ×0.78, ×0.75 and spring rate ×0.78
-        found right (+28.1%, +33.6%, +26.7%) with objective 0.49-0.59 on all samples and held out, but the gap
-        moved by -4% to +8%, at the expected 277-364 µm; the final model's residual ratio 1.43-1.95. Channel
-        delays of 1.1-3.4 ms found within 2% (objective 0.19-0.49, correlation 0.90-0.99, residual ratio
-        1.9-3.1 before, 0.6-1.0 with it) whose gap fell 11-19%, to 0.8-1.35 times the expected gap, and one of
-        1.59 ms (objective 0.43) whose gap rose 0.9%, to 1.05 times it; a lift-off of 1.4% with a bump stop
-        named (objective 0.85, gap -5%) and a bump stop with a lift-off named (objective 0.73, gap -5%), both
-        at 1.06-1.26 times the expected gap. A candidate that adds no unknown (tyre_liftoff) need only be
-        strong by unknown_free_objective_reduction. On clean recordings no physically possible candidate was
-        strong in the last round; on recordings with an effect outside the catalog the strong ones (delays,
-        bump stops, rates standing in for it) left 1.6-9 times a complete model's residual. The candidate
-        and its share of a complete model's objective, or None."""
+        and its gap at or below the expected gap or not above the current model's beyond floor_tie_tolerance
+        (the output does not contradict it). Candidates measured against a base of their own
+        (coulomb_friction, fits.bases) are not: their objective ratio is not against the current model.
+        Independent world (held-out draws, valve dampers, 2 ms or no lift-off): tyre rate ×0.78, ×0.75 and
+        spring rate ×0.78 found right (+28.1%, +33.6%, +26.7%) with objective 0.49-0.59 on all samples and
+        held out, but the gap moved by -4% to +8%, at the expected 277-364 µm; the final model's residual
+        ratio 1.43-1.95. Channel delays of 1.1-3.4 ms found within 2% (objective 0.19-0.49, correlation
+        0.90-0.99, residual ratio 1.9-3.1 before, 0.6-1.0 with it) whose gap fell 11-19%, to 0.8-1.35 times
+        the expected gap, and one of 1.59 ms (objective 0.43) whose gap rose 0.9%, to 1.05 times it; a
+        lift-off of 1.4% with a bump stop named (objective 0.85, gap -5%) and a bump stop with a lift-off
+        named (objective 0.73, gap -5%), both at 1.06-1.26 times the expected gap. A candidate that adds no
+        unknown (tyre_liftoff) need only be strong by unknown_free_objective_reduction. On clean recordings no
+        physically possible candidate was strong in the last round; on recordings with an effect outside the
+        catalog the strong ones (delays, bump stops, rates standing in for it) left 1.6-9 times a complete
+        model's residual. The candidate and its share of a complete model's objective, or None."""
         if not np.isfinite(expected) or not np.isfinite(residual_ratio) or state.simulated is None:
             return None
         options = self.options
-        no_worse_m = state.simulated.gap_m * (1.0 + options.tie_tolerance)
+        no_worse_m = state.simulated.gap_m * (1.0 + options.floor_tie_tolerance)
 
         def reduction(instance: EffectInstance) -> float:
             # a candidate with no unknown of its own (tyre_liftoff) cannot lower the objective by fitting

@@ -90,3 +90,27 @@ def test_a_small_lift_off_is_named_at_the_floor_without_an_unknown(hit_rate) -> 
     # strong enough without an unknown, not by the rule for candidates with one
     assert 1.0 - DiagnoseOptions().strong_objective_reduction < named.objective_ratio <= 0.96, line
     assert result.gap_after_m < result.gap_before_m, line
+
+
+def test_a_delay_whose_gap_rises_a_little_at_the_floor_is_named(hit_rate) -> None:
+    """Draw channel_delay 145 (motorcycle, valve model, 1 ms, the body laser lags 3.13 ms): the delay is
+    found right and lowers the objective to a fifth, leaving the equations as complete as a complete
+    model's, but the refitted gap is 5% above the current model's (248.9 -> 261.6 µm, a complete model
+    leaves about 215 µm). With the 2% tie of the rounds it ended "unexplained"; at the floor the gap may be
+    up to floor_tie_tolerance above the current one's."""
+    case, result = _diagnosed("channel_delay", 145, max_steps=2)
+    hidden = case.vehicle.effects.channel_delay_s
+    step = result.steps[0] if result.steps else None
+    hit = (
+        result.effects_named == ["channel_delay"]
+        and not result.unexplained
+        and step is not None
+        and step.parameters["channel"] in hidden
+        and abs(float(step.parameters["delay_s"]) / hidden[str(step.parameters["channel"])] - 1.0)
+        <= DELAY_ACCURACY
+    )
+    hit_rate("independent world: a delay at the floor with its gap a little higher", _line(case, result), hit)
+    assert hit, _line(case, result)
+    options = DiagnoseOptions()
+    assert 1.0 + options.tie_tolerance < result.gap_after_m / result.gap_before_m, _line(case, result)
+    assert result.gap_after_m / result.gap_before_m <= 1.0 + options.floor_tie_tolerance, _line(case, result)
