@@ -47,9 +47,8 @@ RUNAWAY_GAP_RATIO = 3.0
 channels about their means, validate's response_rms_m) has run away, and counts as diverged: predicting no
 motion at all would be a third as far off. With the curves extended dissipatively
 (estimator.damper.dissipative_table) a model that once grew without bound swings instead, bounded but metres
-or tens of millimetres off (the
-complete models re-identified for the expected gap of three recordings with a top mount outside the
-catalog: 44, 274 and 689 mm against motions of a few millimetres)."""
+or tens of millimetres off (the complete models re-identified for the expected gap of three recordings with
+a top mount outside the catalog: 44, 274 and 689 mm against motions of a few millimetres)."""
 
 
 def diverged(residual_m: np.ndarray, measured_m: np.ndarray | None = None) -> bool:
