@@ -13,6 +13,16 @@ Two kinds of amplifier, told apart by the bench configuration (`LaserConfig.samp
   host's clock at the middle of the request (`Clock.HOST_MONOTONIC`). The rate is whatever the line allows;
   `statistics().achieved_rate_Hz` says what it was, and the recording carries it.
 
+A lost reply: after a request its amplifier did not answer, OMRON's rule keeps the whole line quiet until
+a late reply can no longer come (`LinkSettings.late_reply_s`, 3 s; drivers/compowayf/transport.py). A
+`poll` in that wait sends nothing and returns 0 (`line_waits`); the samples the wait costs are a gap in
+the recording (streaming: those the amplifier's ring could not hold until the next read, counted in
+`lost_samples`; polled: the reads not made), never filled. `line_lost_reply_since_data` tells the sweep's
+silence check that the line is in that documented wait (daq/sweep/silence.py).
+
+Errors: every failed read keeps its error in `statistics().last_error` (timeouts included); a source
+whose polls are held back by its line's wait after another node's lost reply says so, naming that failure.
+
 Values: `LaserConfig.to_channel_m` of the reading (the recorder subtracts the channel's mean at rest, taken
 by the sweep orchestration). An out-of-range reading is NaN (a gap in the recording, never a value).
 
@@ -56,6 +66,9 @@ class SourceStatistics:
     nominal_rate_Hz: float | None
     """The amplifier's own sampling rate (streaming), None for a polled amplifier."""
     last_error: str
+    """The newest failure ("ErrorClass: message"), or why the line held this source back; "" if none."""
+    line_waits: int = 0
+    """Polls that sent nothing: the line was waiting out a late reply (OMRON's wait after no reply)."""
 
 
 class LaserSource:
@@ -87,6 +100,9 @@ class LaserSource:
         self._last_sample_host_s = math.nan
         self._last_data_host_s: float | None = None  # when the last read brought new samples
         self._last_error = ""
+        self._failed_since_data = False
+        self._line_waits = 0
+        self._unanswered_at_data = amplifier.port.counters.unanswered  # the line's count at the last data
 
     @property
     def name(self) -> str:
@@ -106,15 +122,34 @@ class LaserSource:
 
     def poll(self) -> int:
         """Read the amplifier once and append what came in; returns the number of new samples. A failed
-        read is counted and re-raised (a drivers.compowayf error) for the caller to judge."""
+        read is counted and re-raised (a drivers.compowayf error) for the caller to judge. While the line
+        waits out a late reply nothing is sent and 0 is returned (see the module)."""
+        port = self.amplifier.port
+        if port.quiet_s() > 0:
+            with self._lock:
+                self._line_waits += 1
+                if not self._failed_since_data:
+                    self._last_error = f"its line waits out a late reply after {port.last_failure}"
+            return 0
         try:
             count = self._poll_stream() if self.streaming else self._poll_present_value()
         except Exception as exc:
             with self._lock:
                 self._failed += 1
+                self._failed_since_data = True
                 self._last_error = f"{type(exc).__name__}: {exc}"
             raise
         return count
+
+    def line_quiet_s(self) -> float:
+        """Seconds this source's line must still stay quiet (OMRON's wait after an unanswered request)."""
+        return self.amplifier.port.quiet_s()
+
+    def line_lost_reply_since_data(self) -> bool:
+        """Whether the line has had a request go unanswered since this source's last new samples, or is
+        waiting for a reply now: its silence may then be the line's documented wait, not a dead source."""
+        port = self.amplifier.port
+        return port.awaiting_reply or port.counters.unanswered != self._unanswered_at_data
 
     def _channel_m(self, counts: list[int]) -> np.ndarray:
         measured = self.amplifier.config.measured
@@ -173,6 +208,8 @@ class LaserSource:
                     self._first_sample_host_s = first_s
                 self._last_sample_host_s = last_s
                 self._last_data_host_s = received_s
+                self._failed_since_data = False
+                self._unanswered_at_data = self.amplifier.port.counters.unanswered
 
     # ---- reporting ------------------------------------------------------------------------------------
 
@@ -192,6 +229,7 @@ class LaserSource:
                 achieved_rate_Hz=rate,
                 nominal_rate_Hz=None if self.period_s is None else 1.0 / self.period_s,
                 last_error=self._last_error,
+                line_waits=self._line_waits,
             )
 
     def seconds_since_data(self) -> float:

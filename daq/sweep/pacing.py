@@ -73,7 +73,7 @@ class RealtimePacing:
         next_s = time.monotonic()
         while not self._stop.is_set():
             ok = all([_poll(source) for source in sources])
-            if not ok:
+            if not ok or any(source.line_quiet_s() > 0 for source in sources):  # or a late-reply wait
                 self._stop.wait(ERROR_BACKOFF_S)
             if streaming:
                 next_s += self.poll_interval_s

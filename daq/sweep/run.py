@@ -16,7 +16,9 @@ recording is kept, closed as complete or as incomplete with the reason:
 * `abort` set (operator, service) or the task cancelled (Ctrl-C): controlled stop, "aborted ...";
 * `emergency` set (the service's emergency stop): emergency stop, "emergency stop by the operator";
 * a source silent for `silence_timeout_s` (no new samples: the line is down, the amplifier stopped
-  answering or sampling): controlled stop, "sensor silence: ...";
+  answering or sampling), longer when its line has lost a reply and is in OMRON's wait for a late one
+  (daq/sweep/silence.py): controlled stop, "sensor silence: ..." with the source's last error. One lost
+  reply is a gap in that line's channels, not a stop;
 * the exciter's link lost (status cannot be read): controlled stop attempted, "lost link to exciter ...";
   the drive refuses the status read (an exception code): controlled stop, "exciter refused ...";
 * the exciter reports a fault: emergency stop, "exciter fault 0x....";
@@ -64,6 +66,7 @@ from daq.sweep.model import (
 )
 from daq.sweep.pacing import Pacing, RealtimePacing
 from daq.sweep.plan import SweepPlan
+from daq.sweep.silence import NO_ERROR, silence_reason
 from drivers.compowayf.amplifier import ZxlAmplifier
 from drivers.compowayf.transport import CompowayFPort
 from drivers.exciter.codes import ExciterState
@@ -110,6 +113,7 @@ async def run_sweep(
     silence_timeout_s: float = DEFAULT_SILENCE_TIMEOUT_S,
     abort_reason: Callable[[], str] | None = None,
     live: LiveView | None = None,
+    open_port: Callable[[str], CompowayFPort] = CompowayFPort,
 ) -> SweepOutcome:
     """Run one planned sweep (daq.sweep.plan.plan_sweep on this `config`) on the bench `config` describes
     and record it at out_path (HDF5). See the module.
@@ -118,7 +122,8 @@ async def run_sweep(
     are looked at every orchestration cycle, STEP_S). abort_reason: what an abort is recorded as (default
     "aborted by the operator"; the service says "service stopped" when its own stop aborts the sweep).
     live: a daq.live_view.LiveView the recorder copies its rows to, decimated, for screens (its owner
-    starts it with the bench's channels)."""
+    starts it with the bench's channels). open_port: opens a laser line from its URL (a simulated bench on a
+    manual clock passes one that reaches its amplifiers in process on that clock)."""
     if plan.bench != config.name:  # a programming error, not an input: plans are made for one bench
         raise ValueError(f"a sweep planned for bench {plan.bench!r} cannot run on bench {config.name!r}")
     run = _SweepRun(config, plan.request, Path(out_path), pacing or RealtimePacing(), progress, abort)
@@ -127,6 +132,7 @@ async def run_sweep(
     run.emergency = emergency or threading.Event()
     run.silence_timeout_s = silence_timeout_s
     run.live = live
+    run.open_port = open_port
     return await run.run()
 
 
@@ -159,6 +165,7 @@ class _SweepRun:
         self.emergency = threading.Event()
         self.silence_timeout_s = DEFAULT_SILENCE_TIMEOUT_S
         self.ports: list[CompowayFPort] = []
+        self.open_port: Callable[[str], CompowayFPort] = CompowayFPort
         self.sources: list[LaserSource] = []
         self.models: dict[str, str] = {}
         self.exciter: PlateExciter | None = None
@@ -231,7 +238,7 @@ class _SweepRun:
             port = next((p for p in self.ports if p.pyserial_url == url), None)
             try:
                 if port is None:
-                    port = await asyncio.to_thread(CompowayFPort, laser.url)
+                    port = await asyncio.to_thread(self.open_port, laser.url)
                     self.ports.append(port)
                 amplifier = ZxlAmplifier(port, node, laser.amplifier_config())
                 self.models[laser.name] = await asyncio.to_thread(amplifier.read_model)
@@ -252,6 +259,8 @@ class _SweepRun:
             raise SweepError(f"exciter in fault 0x{status.fault_code:04X}: reset the drive first")
         if status.state is not ExciterState.IDLE:
             raise SweepError(f"the plate is not at rest (drive state {status.state}); stop it first")
+        for port in self.ports:  # the sources wait out a late reply by skipping polls, not in the port
+            port.waits_for_late_replies = False
         self.pacing.start(list(lines.values()))
 
     async def _zero(self) -> dict[str, tuple[float, float]]:
@@ -267,7 +276,7 @@ class _SweepRun:
             values = result.values[:, 0]
             where = f"laser {source.name!r} ({source.channel})"
             if result.count < REST_MIN_SAMPLES:
-                error = source.statistics().last_error or "no error reported"
+                error = source.statistics().last_error or NO_ERROR
                 raise SweepError(
                     f"{where}: {result.count} samples in {self.request.rest_s:g} s at rest ({error})"
                 )
@@ -369,14 +378,9 @@ class _SweepRun:
         """The cycle's checks, run after the status read and before the keep-alive (SweepFaultError)."""
         if status.is_fault:
             raise SweepFaultError(f"exciter fault 0x{status.fault_code:04X}", emergency=True)
-        for source in self.sources:
-            silent_s = source.seconds_since_data()
-            if silent_s > self.silence_timeout_s:
-                error = source.statistics().last_error or "no error reported"
-                raise SweepFaultError(
-                    f"sensor silence: laser {source.name!r} ({source.channel}) delivered nothing for "
-                    f"{silent_s:.2f} s (last error: {error})"
-                )
+        silence = silence_reason(self.sources, self.silence_timeout_s)
+        if silence is not None:
+            raise SweepFaultError(silence)
 
     # ---- stopping and finishing -------------------------------------------------------------------------
 

@@ -77,6 +77,13 @@ class PortLostError(PortError):
     retryable = True
 
 
+class LineQuietError(CompowayFError):
+    """Nothing was sent: the line is still in OMRON's wait after an unanswered request (a late reply may
+    still come, `LinkSettings.late_reply_s`) and the port was told not to wait itself
+    (`CompowayFPort.waits_for_late_replies` off). Not a failure of the line: ask again once
+    `CompowayFPort.quiet_s()` is 0."""
+
+
 class DeviceUrlError(CompowayFError, UserError, ValueError):
     """A device URL that cannot be understood (unknown scheme option, node out of 00..99, bad number)."""
 

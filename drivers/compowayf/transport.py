@@ -20,7 +20,16 @@ Reading a reply:
   After a request got no reply, the next exchange on the port first waits until `late_reply_s` after that
   request was sent, discarding whatever arrives, unless the late reply itself arrives first. The reply to
   the next request can then not be confused with it.
+  A caller that must not hold its thread that long (the acquisition: one line's thread, or a simulated
+  bench's only thread) turns `waits_for_late_replies` off: the port then never waits itself. A request
+  while the line must stay quiet raises LineQuietError at once, nothing sent; a timed-out attempt is not
+  retried when its retry would have to wait (the timeout is raised); the caller asks `quiet_s()` (which
+  takes a late reply that has come meanwhile, ending the wait early) and comes back. The rule is the same:
+  nothing goes on the line until late_reply_s after an unanswered request, or its late reply came.
 * A reply cut short (no ETX or no BCC) counts as a timeout (IncompleteResponseError).
+
+Every failed attempt, retried or not, is kept in `last_failure` (one line, naming the error class), so a
+caller can say why a line delivers nothing while its retries are still going on.
 
 Errors whose class is `retryable` (timeouts, corrupted or malformed replies, transmission end codes, a lost
 port) are retried up to `LinkSettings.retries` times, re-opening the port first when it was lost; the last
@@ -52,6 +61,7 @@ from drivers.compowayf.codec import (
 from drivers.compowayf.errors import (
     CompowayFError,
     IncompleteResponseError,
+    LineQuietError,
     MissingEchoError,
     PortError,
     PortLostError,
@@ -126,7 +136,8 @@ class LinkCounters:
 
     discarded_frames: well-formed replies that did not answer the request in hand (late, other node or
     service, other content); skipped_bytes: bytes dropped before an STX; late_reply_waits: exchanges that
-    first waited out a reply owed by an unanswered request."""
+    first waited out a reply owed by an unanswered request; unanswered: attempts that got no complete
+    reply in time (each starts a late-reply wait)."""
 
     requests: int = 0
     attempts: int = 0
@@ -136,6 +147,7 @@ class LinkCounters:
     discarded_frames: int = 0
     skipped_bytes: int = 0
     late_reply_waits: int = 0
+    unanswered: int = 0
 
 
 ReplyMatcher = Callable[[ResponseFrame], bool]
@@ -180,6 +192,13 @@ class CompowayFPort:
         self.counters = LinkCounters()
         self._clock = clock
         self._unanswered_sent_s: float | None = None  # send time of a request whose reply may come late
+        self._late_bytes = b""  # what arrived of a late reply so far (quiet_s reads without waiting)
+        self.waits_for_late_replies = True
+        """False: never wait out a late reply here (see the module): LineQuietError, no waiting retries."""
+        self.last_failure = ""
+        """The newest failed attempt on this line, any node, retried or not: "ErrorClass: message"."""
+        self.awaiting_reply = False
+        """True while an attempt waits for its reply (read from any thread: a silence check)."""
         self._opener = opener or self._open_with_pyserial
         self._lock = threading.RLock()
         self._port: SerialLike | None = None
@@ -275,16 +294,24 @@ class CompowayFPort:
             normal = response.end_code == NORMAL_END and response.response_code == NORMAL_COMPLETION
             return not normal or matches is None or matches(response)
 
+        label = f"node {node:02d} on {self.pyserial_url}"
         with self._lock:
+            if not self.waits_for_late_replies and (quiet_s := self._quiet_s()) > 0:
+                raise LineQuietError(
+                    f"{label}: nothing sent, the line waits {quiet_s:.2f} s more for a late reply "
+                    f"(up to {self.link.late_reply_s:g} s after an unanswered request)"
+                )
             self.counters.requests += 1
             for attempt in range(self.link.retries + 1):
                 try:
-                    response = self._attempt(frame, f"node {node:02d} on {self.pyserial_url}", answers)
+                    response = self._attempt(frame, label, answers)
                     assert isinstance(response, ResponseFrame)
                     check_response(response, node, service)
                     return response
                 except CompowayFError as exc:
-                    if not exc.retryable or attempt == self.link.retries:
+                    self.last_failure = f"{type(exc).__name__}: {exc}"
+                    waiting_retry = not self.waits_for_late_replies and self._quiet_s() > 0
+                    if not exc.retryable or attempt == self.link.retries or waiting_retry:
                         self.counters.failures += 1
                         raise
                     self.counters.retries += 1
@@ -310,16 +337,52 @@ class CompowayFPort:
             self.counters.reopens += 1
         return self._port
 
+    def quiet_s(self) -> float:
+        """Seconds the line must still stay quiet for a late reply to an unanswered request (0: a request
+        may go now). Takes what has arrived meanwhile without waiting: a late reply ends the wait early
+        (discarded, counted in discarded_frames)."""
+        with self._lock:
+            return self._quiet_s()
+
+    def _quiet_s(self) -> float:
+        sent_s = self._unanswered_sent_s
+        if sent_s is None:
+            return 0.0
+        remaining_s = sent_s + self.link.late_reply_s - self._clock()
+        port = self._port
+        if remaining_s <= 0 or port is None:
+            return max(0.0, remaining_s)
+        try:
+            self._late_bytes += self._read_now(port)
+        except (serial.SerialException, OSError):
+            self._drop_port()  # the next request re-opens it (and says so if it cannot)
+            return remaining_s
+        late, self._late_bytes, skipped = split_reply(self._late_bytes)
+        self.counters.skipped_bytes += skipped
+        if late is None:
+            return remaining_s
+        self.counters.discarded_frames += 1
+        self._unanswered_sent_s, self._late_bytes = None, b""
+        return 0.0
+
+    def _read_now(self, port: SerialLike) -> bytes:
+        """Whatever has arrived, without waiting."""
+        if self._descriptor is not None:
+            ready, _, _ = select.select([self._descriptor], [], [], 0)
+            return port.read(READ_CHUNK_BYTES) if ready else b""
+        waiting = port.in_waiting
+        return port.read(waiting) if waiting else b""
+
     def _wait_out_late_reply(self, port: SerialLike) -> None:
         """Drain the line until late_reply_s after the unanswered request, or until its reply came."""
         sent_s, self._unanswered_sent_s = self._unanswered_sent_s, None
+        received, self._late_bytes = self._late_bytes, b""
         if sent_s is None:
             return
         until_s = sent_s + self.link.late_reply_s
         if self._clock() >= until_s:
             return
         self.counters.late_reply_waits += 1
-        received = b""
         while self._clock() < until_s:
             received += self._read_available(port, until_s)
             late, received, skipped = split_reply(received)
@@ -340,6 +403,7 @@ class CompowayFPort:
         try:
             self._wait_out_late_reply(port)
             port.reset_input_buffer()
+            self.awaiting_reply = True
             port.write(frame)
             sent_s = self._clock()
             deadline = sent_s + self.link.timeout_s
@@ -365,7 +429,10 @@ class CompowayFPort:
         except (serial.SerialException, OSError) as exc:
             self._drop_port()
             raise PortLostError(f"{label}: port lost ({exc})") from exc
+        finally:
+            self.awaiting_reply = False
         self._unanswered_sent_s = sent_s
+        self.counters.unanswered += 1
         if echo_pending:
             raise MissingEchoError(
                 f"{label}: the adapter did not echo the command within {self.link.timeout_s:g} s "

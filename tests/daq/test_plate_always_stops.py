@@ -112,6 +112,8 @@ class Fault:
     """The Modbus drive is reached through a FaultyLink (for outages)."""
     laser_url: str = ""
     """Appended to every laser URL (shorter CompoWay/F timeouts for a silent amplifier)."""
+    cause: str = ""
+    """Also in the reason: the error that names the cause (a laser's last error)."""
 
 
 def is_keepalive(data: bytes) -> bool:
@@ -209,11 +211,31 @@ FAULTS = [
         SENSOR_SILENCE,
         CONTROLLED,
         laser_url="&timeout_s=0.02&late_reply_s=0.02&retries=0",
+        cause="(last error: ResponseTimeoutError: node 02 on socket://",
     ),
-    Fault("Laser answers garbage", "modbus", laser(FaultKind.GARBAGE), SENSOR_SILENCE, CONTROLLED),
-    Fault("Laser reply with a bad BCC", "modbus", laser(FaultKind.BAD_BCC), SENSOR_SILENCE, CONTROLLED),
     Fault(
-        "Laser end code 13 (FCS error)", "modbus", laser(FaultKind.END_CODE, "13"), SENSOR_SILENCE, CONTROLLED
+        "Laser answers garbage",
+        "modbus",
+        laser(FaultKind.GARBAGE),
+        SENSOR_SILENCE,
+        CONTROLLED,
+        cause="(last error: MalformedFrameError: ",
+    ),
+    Fault(
+        "Laser reply with a bad BCC",
+        "modbus",
+        laser(FaultKind.BAD_BCC),
+        SENSOR_SILENCE,
+        CONTROLLED,
+        cause="(last error: BccMismatchError: ",
+    ),
+    Fault(
+        "Laser end code 13 (FCS error)",
+        "modbus",
+        laser(FaultKind.END_CODE, "13"),
+        SENSOR_SILENCE,
+        CONTROLLED,
+        cause="(last error: BccEndCodeError: node 02: end code 13 ",
     ),
     Fault(
         "Laser response code 2204 (refused)",
@@ -221,6 +243,7 @@ FAULTS = [
         laser(FaultKind.RESPONSE_CODE, "2204"),
         SENSOR_SILENCE,
         CONTROLLED,
+        cause="(last error: NotInRunModeError: node 02, service 0101: response code 2204 ",
     ),
     Fault(
         "CAN drive silent (no answers, no heartbeat)",
@@ -326,6 +349,7 @@ def test_the_plate_stops_in_time_and_the_data_is_kept_and_marked(fault: Fault, t
     assert 0.0 <= time_to_stop_s <= STOP_TIME_S
     # the error is clear: one line, naming the cause
     assert outcome.reason.startswith(fault.reason), outcome.reason
+    assert fault.cause in outcome.reason, outcome.reason
     assert "\n" not in outcome.reason and "Traceback" not in outcome.reason
     assert outcome.stop in fault.stops, outcome.stop
     # the data is kept and marked

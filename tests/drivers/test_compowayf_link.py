@@ -365,3 +365,48 @@ def test_echo_suppression_on_a_line_that_does_not_echo_is_a_clear_error(lines: l
     line.script.append(Exchange(ZS_READ, ZS_REPLY_80_5_MM))  # the next request drains the unechoed reply
     line.echo = True
     assert amplifier.read_position_m() == pytest.approx(0.0805)
+
+
+# --- a port that does not wait itself (the acquisition) -------------------------------------------------
+
+
+def test_a_port_that_does_not_wait_sends_nothing_until_omrons_wait_is_over(lines: list[ScriptedLine]) -> None:
+    link = LinkSettings(timeout_s=0.5, retries=2)
+    amplifier, line = _amplifier(lines, [Exchange(READ_ONE)], VARIABLE_C0, link=link)
+    port = amplifier.port
+    port.waits_for_late_replies = False
+    with pytest.raises(errors.ResponseTimeoutError, match=r"no reply within 0\.5 s"):
+        amplifier.read_counts(1)  # not retried: the retry would have to wait
+    assert (port.counters.retries, port.counters.unanswered) == (0, 1)
+    assert port.last_failure == "ResponseTimeoutError: node 01 on loop://: no reply within 0.5 s"
+    assert port.quiet_s() == pytest.approx(OMRON_WORST_CASE_RESPONSE_S - 0.5, abs=0.05)
+    with pytest.raises(errors.LineQuietError, match="nothing sent"):
+        amplifier.read_counts(1)  # the script holds no exchange for it: nothing may reach the line
+    line.now_s = OMRON_WORST_CASE_RESPONSE_S  # the late reply can no longer come
+    assert port.quiet_s() == 0.0
+    line.script.append(Exchange(READ_ONE, REPLY_1000))
+    assert amplifier.read_counts(1) == [1000]
+
+
+def test_a_late_reply_ends_the_quiet_early_and_is_not_taken_for_the_next(lines: list[ScriptedLine]) -> None:
+    link = LinkSettings(timeout_s=0.5, retries=0)
+    script = [Exchange(READ_ONE, REPLY_1000, delay_s=1.2), Exchange(READ_ONE, REPLY_2000)]
+    amplifier, line = _amplifier(lines, script, VARIABLE_C0, link=link)
+    port = amplifier.port
+    port.waits_for_late_replies = False
+    with pytest.raises(errors.ResponseTimeoutError):
+        amplifier.read_counts(1)
+    line.now_s = 1.1
+    assert port.quiet_s() > 0  # the late reply has not come yet
+    line.now_s = 1.25
+    assert port.quiet_s() == 0.0  # it came: taken off the line and discarded, the wait is over
+    assert port.counters.discarded_frames == 1
+    assert amplifier.read_counts(1) == [2000]  # its own reply, not the late 1000
+
+
+def test_a_retried_failure_is_kept_as_the_lines_last_failure(lines: list[ScriptedLine]) -> None:
+    bcc_end_code = frame("01" + "00" + "13")  # short error form: the amplifier got a wrong BCC
+    script = [Exchange(READ_ONE, bcc_end_code), Exchange(READ_ONE, REPLY_1000)]
+    amplifier, _ = _amplifier(lines, script, VARIABLE_C0)
+    assert amplifier.read_counts(1) == [1000]  # the retry succeeded ...
+    assert amplifier.port.last_failure.startswith("BccEndCodeError: node 01: end code 13")  # ... and why
