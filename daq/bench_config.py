@@ -46,7 +46,8 @@ Keys:
 [exciter] name, url: the plate drive, by a drivers.exciter.urls URL: modbus-tcp://HOST:PORT?unit=N,
     modbus-rtu:///dev/ttyUSB1?baudrate=19200&unit=1, can://INTERFACE/CHANNEL (python-can, e.g.
     can://socketcan/can0, can://virtual/vcan0; base_id=0x680 moves the frame set), or
-    canopen://INTERFACE/CHANNEL?node=N for a CiA 402 drive (host_node=127, watchdog_timeout=0.5 ...).
+    canopen://INTERFACE/CHANNEL?node=N for a CiA 402 drive (host_node=127, watchdog_timeout=0.5,
+    transition_timeout=0.5 ...).
     register_map (Modbus only, optional): the drive's
     register map file (format: drivers/exciter/default_register_map.toml), relative to this file;
     checked when the configuration is loaded.

@@ -9,14 +9,25 @@ supervises. PlateExciter's operations map to:
         0x6060 = sweep mode (checked on 0x6061)
     configure_sweep  SDO writes of 0x2100:1..5 (all values range-checked before the first write)
     start            consumer heartbeat 0x1016:1 = host node + watchdog time, one host heartbeat (arms the
-                     drive's watchdog), controlword shutdown -> switch on -> enable operation (statusword
-                     checked at each step), then controlword bit 4 rising edge: the sweep starts
-    stop             controlword halt (bit 8, enable operation kept): the amplitude ramps down; watchdog off
-    emergency stop   controlword quick stop, then disable voltage; watchdog off. Sent at once (no bring-up)
+                     drive's watchdog), controlword shutdown -> switch on -> enable operation (each
+                     transition awaited, see below), then controlword bit 4 rising edge: the sweep starts.
+                     If the power-up fails, disable voltage withdraws it (watchdog off once disabled)
+    stop             halt (bit 8): the amplitude ramps down; once the plate rests, disable operation
+                     (SWITCHED ON); watchdog off only then. A stop that fails leaves the watchdog armed
+    emergency stop   quick stop, QUICK STOP ACTIVE and the end of its ramp awaited, then disable voltage
+                     (sent even if a wait failed); watchdog off once the drive reports a disabled state.
+                     Sent at once (no bring-up)
     reset fault      controlword fault reset (bit 7 rising edge), when the statusword reports FAULT
     status           statusword 0x6041 (+ error code 0x603F in fault), position 0x6064, velocity 0x606C,
                      sweep frequency 0x2101
     keep-alive       the host's own NMT heartbeat (0x700 + host node), consumed by the drive (0x1016)
+
+State transitions (drivers/exciter/cia402_sequences.py): a real drive takes 10..200 ms per transition (a
+brake releasing, a contactor closing), so each one is awaited by polling the statusword, up to
+`transition_timeout_s` (a ramp to rest up to `ramp_timeout_s`) on `clock`, waiting with `sleep` between
+polls; a timeout is DriveStateTimeoutError naming the state the drive last reported. The drive is never
+left enabled and unsupervised: the watchdog is disarmed only once the drive reports a disabled state, and
+the polls of a wait feed it (they read and check the drive, as a supervision step does).
 
 Statusword -> ExciterStatus: FAULT -> fault; FAULT REACTION ACTIVE -> stopping (with the error code); bit
 12 (sweep running) -> running; bit 13 (ramping down) or the plate not yet at rest (bit 10 clear) in
@@ -38,7 +49,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import time
-from collections.abc import Callable
+from collections.abc import Awaitable, Callable
 from typing import Any
 
 import can
@@ -47,6 +58,12 @@ from canopen.sdo import SdoAbortedError, SdoCommunicationError
 
 from drivers.exciter import cia402_objects as objects
 from drivers.exciter.cia402_objects import DriveState
+from drivers.exciter.cia402_sequences import (
+    DEFAULT_RAMP_TIMEOUT_S,
+    DEFAULT_TRANSITION_TIMEOUT_S,
+    Cia402Sequences,
+    DriveAccess,
+)
 from drivers.exciter.codes import CommandCode, ExciterState, LawCode
 from drivers.exciter.envelope import SafetyEnvelope
 from drivers.exciter.errors import (
@@ -71,16 +88,6 @@ NMT_START = 0x01
 NMT_STATE_BOOT_UP = 0
 NMT_STATE_STOPPED = 4
 NMT_STATE_OPERATIONAL = 5
-STATE_STEP_POLLS = 20
-"""Statusword reads allowed per state-machine step (within reply_timeout_s) before giving up."""
-
-_ENABLE_STEP = {
-    DriveState.NOT_READY_TO_SWITCH_ON: objects.CW_SHUTDOWN,
-    DriveState.SWITCH_ON_DISABLED: objects.CW_SHUTDOWN,
-    DriveState.READY_TO_SWITCH_ON: objects.CW_SWITCH_ON,
-    DriveState.SWITCHED_ON: objects.CW_ENABLE_OPERATION,
-    DriveState.QUICK_STOP_ACTIVE: objects.CW_DISABLE_VOLTAGE,  # leave quick stop the long way round
-}
 
 
 class Cia402Exciter(PlateExciter):
@@ -89,7 +96,10 @@ class Cia402Exciter(PlateExciter):
     host_node_id: the node id of the host's heartbeat (the keep-alive the drive consumes).
     reply_timeout_s: SDO answer timeout. heartbeat_period_s: the drive's heartbeat (0x1017), supervised
     with heartbeat_timeout_s. watchdog_timeout_s: how long the drive waits for a host heartbeat while a
-    sweep runs (0x1016) before its fault reaction stops the plate.
+    sweep runs (0x1016) before its fault reaction stops the plate. transition_timeout_s: how long each
+    state transition may take; ramp_timeout_s: how long a halt or quick-stop ramp may take to rest.
+    sleep: how the host waits between statusword polls (asyncio.sleep; with a simulated `clock`, a sleep
+    that advances it).
     """
 
     def __init__(
@@ -104,14 +114,21 @@ class Cia402Exciter(PlateExciter):
         heartbeat_period_s: float = 0.1,
         heartbeat_timeout_s: float = 0.5,
         watchdog_timeout_s: float = 0.5,
+        transition_timeout_s: float = DEFAULT_TRANSITION_TIMEOUT_S,
+        ramp_timeout_s: float = DEFAULT_RAMP_TIMEOUT_S,
         envelope: SafetyEnvelope | None = None,
         keepalive_interval_s: float | None = DEFAULT_KEEPALIVE_INTERVAL_S,
         clock: Callable[[], float] = time.monotonic,
+        sleep: Callable[[float], Awaitable[None]] = asyncio.sleep,
     ) -> None:
         super().__init__(envelope=envelope, keepalive_interval_s=keepalive_interval_s, clock=clock)
         for name, value in (("node_id", node_id), ("host_node_id", host_node_id)):
             if not 1 <= value <= 127:
                 raise ExciterConfigError(f"CANopen {name} must be 1..127, got {value}")
+        timeouts_s = {"transition_timeout_s": transition_timeout_s, "ramp_timeout_s": ramp_timeout_s}
+        for name, timeout_s in timeouts_s.items():
+            if not timeout_s > 0:
+                raise ExciterConfigError(f"{name} must be > 0 s, got {timeout_s}")
         if node_id == host_node_id:
             raise ExciterConfigError(f"the drive and the host cannot both be CANopen node {node_id}")
         self.interface = interface
@@ -135,10 +152,36 @@ class Cia402Exciter(PlateExciter):
         self._supervising_heartbeat = False
         self._last_heartbeat_s = 0.0
         self._boot_seen = False
+        self._watchdog_armed = False
+        self._last_controlword: int | None = None
+        """The last controlword written since bring-up (None: unknown), for the bit 4 edge."""
+        self._sequences = Cia402Sequences(
+            DriveAccess(
+                self.where,
+                lambda supervise: self._drive_state(supervise=supervise),
+                lambda what, word, supervise: self._controlword(what, word, supervise=supervise),
+                lambda: self._read("read error code", objects.ERROR_CODE),
+                self._feed_watchdog_while_waiting,
+            ),
+            clock=clock,
+            sleep=sleep,
+            transition_timeout_s=transition_timeout_s,
+            ramp_timeout_s=ramp_timeout_s,
+        )
 
     @property
     def where(self) -> str:
         return f"CANopen node {self.node_id} on {self.interface}/{self.channel}"
+
+    @property
+    def transition_timeout_s(self) -> float:
+        """How long each state transition may take."""
+        return self._sequences.transition_timeout_s
+
+    @property
+    def ramp_timeout_s(self) -> float:
+        """How long a halt or quick-stop ramp may take to bring the plate to rest."""
+        return self._sequences.ramp_timeout_s
 
     # ---- transport ----------------------------------------------------------------------------------
 
@@ -192,8 +235,8 @@ class Cia402Exciter(PlateExciter):
 
     # ---- SDO transfers ------------------------------------------------------------------------------
 
-    async def _read(self, what: str, index: int, subindex: int = 0) -> int:
-        value = await self._transfer(what, lambda node: _variable(node, index, subindex).raw)
+    async def _read(self, what: str, index: int, subindex: int = 0, *, supervise: bool = True) -> int:
+        value = await self._transfer(what, lambda node: _variable(node, index, subindex).raw, supervise)
         assert isinstance(value, int)
         return value
 
@@ -263,6 +306,7 @@ class Cia402Exciter(PlateExciter):
         if self._ready:
             return
         self.drive_nmt_state = None  # unknown until its next heartbeat
+        self._last_controlword = None
         await self._send("NMT start", lambda _, node: node.nmt.send_command(NMT_START))
         device_type = await self._read("read device type", objects.DEVICE_TYPE)
         if device_type & 0xFFFF != objects.CIA402_PROFILE:
@@ -283,36 +327,23 @@ class Cia402Exciter(PlateExciter):
                 )
         self._ready = True
 
-    async def _drive_state(self) -> tuple[DriveState, int]:
-        statusword = await self._read("read statusword", objects.STATUSWORD)
+    async def _drive_state(self, *, supervise: bool = True) -> tuple[DriveState, int]:
+        statusword = await self._read("read statusword", objects.STATUSWORD, supervise=supervise)
         try:
             return DriveState.of_statusword(statusword), statusword
         except ValueError as exc:
             raise ExciterError(f"{self.where}: {exc}") from None
 
     async def _controlword(self, what: str, word: int, *, supervise: bool = True) -> None:
+        self._last_controlword = None  # a write that fails may or may not have reached the drive
         await self._write(what, objects.CONTROLWORD, word, supervise=supervise)
+        self._last_controlword = word
 
-    async def _enable_operation(self) -> None:
-        """Shutdown -> switch on -> enable operation, each step confirmed by the statusword."""
-        state, _ = await self._drive_state()
-        for _step in range(len(_ENABLE_STEP) + 1):
-            if state is DriveState.OPERATION_ENABLED:
-                return
-            if state in (DriveState.FAULT, DriveState.FAULT_REACTION_ACTIVE):
-                raise ExciterDeviceFaultError(await self._read("read error code", objects.ERROR_CODE))
-            await self._controlword(f"controlword from {state}", _ENABLE_STEP[state])
-            state = await self._await_state_change(state)
-        raise ExciterError(f"{self.where} did not reach OPERATION ENABLED (stuck in {state})")
-
-    async def _await_state_change(self, old: DriveState) -> DriveState:
-        """Poll the statusword until the state leaves `old` (a real drive takes a few ms), bounded."""
-        deadline_s = time.monotonic() + self.reply_timeout_s
-        for _poll in range(STATE_STEP_POLLS):
-            state, _ = await self._drive_state()
-            if state is not old or time.monotonic() > deadline_s:
-                return state
-        return state
+    async def _feed_watchdog_while_waiting(self) -> None:
+        """After a statusword read showing no fault during a state-machine wait: the armed watchdog is
+        fed (at most every keepalive_interval_s), so that a slow drive does not trip it mid-sequence."""
+        if self._watchdog_armed:
+            await self._feed_watchdog_if_due()
 
     # ---- PlateExciter wire side ---------------------------------------------------------------------
 
@@ -340,26 +371,27 @@ class Cia402Exciter(PlateExciter):
             await self._write("configure sweep", objects.SWEEP, value, subindex)
 
     async def _send_command(self, command: CommandCode) -> None:
-        # Stops: each step only after the previous one was accepted (a failed halt leaves the watchdog
-        # armed, to stop the plate); a supervision fault (heartbeat) is reported after the whole sequence.
+        # Stops: the transfers skip the supervision checks, which run once the sequence has been sent
+        # whole; the watchdog is disarmed only once the drive reports a disabled state.
         if command is CommandCode.EMERGENCY_STOP:
-            await self._controlword("emergency stop", objects.CW_QUICK_STOP, supervise=False)
-            await self._controlword("emergency stop", objects.CW_DISABLE_VOLTAGE, supervise=False)
-            await self._disarm_watchdog()
+            outcome = await self._sequences.quick_stop_then_disable()
+            if outcome.state is not None and not outcome.state.enabled:
+                await self._disarm_watchdog()
+            if outcome.error is not None:
+                raise outcome.error
             self._check_supervision("emergency stop")
             return
         await self._ensure_ready()
         if command is CommandCode.START:
             await self._start_sweep()
         elif command is CommandCode.STOP:
-            await self._controlword("stop", objects.CW_ENABLE_OPERATION | objects.CW_HALT, supervise=False)
+            state = await self._sequences.halt_then_disable()
+            if state.enabled:  # cannot happen once the sequence returns; never disarm an enabled drive
+                raise ExciterError(f"{self.where}: stop: the drive is still {state}")
             await self._disarm_watchdog()
             self._check_supervision("stop")
         elif command is CommandCode.RESET_FAULT:
-            state, _ = await self._drive_state()
-            if state is DriveState.FAULT:
-                await self._controlword("reset fault", objects.CW_DISABLE_VOLTAGE)
-                await self._controlword("reset fault", objects.CW_FAULT_RESET)
+            await self._sequences.reset_fault()
         elif command is not CommandCode.NONE:
             raise ExciterError(f"command {command.name} has no CiA 402 equivalent")
 
@@ -369,13 +401,32 @@ class Cia402Exciter(PlateExciter):
             raise ExciterDeviceFaultError(await self._read("read error code", objects.ERROR_CODE))
         consumer = (self.host_node_id << 16) | round(self.watchdog_timeout_s * 1000)
         await self._write("arm the drive watchdog", objects.CONSUMER_HEARTBEAT_TIME, consumer, 1)
+        self._watchdog_armed = True
         await self._send_keepalive(0)  # the consumer supervises from the first heartbeat on
-        await self._enable_operation()
-        await self._controlword("start", objects.CW_ENABLE_OPERATION)  # bit 4 low: the next write is an edge
+        try:
+            await self._sequences.enable_operation()
+        except ExciterError:
+            await self._withdraw_power_up()
+            raise
+        if self._last_controlword is None or self._last_controlword & objects.CW_START_SWEEP:
+            await self._controlword("start", objects.CW_ENABLE_OPERATION)  # bit 4 low: then an edge
         await self._controlword("start", objects.CW_ENABLE_OPERATION | objects.CW_START_SWEEP)
+
+    async def _withdraw_power_up(self) -> None:
+        """A power-up that failed: its enabling controlword (a level the drive may still act on) is
+        replaced by disable voltage; the watchdog is disarmed only once the drive reports it disabled."""
+        try:
+            state = await self._sequences.disable_voltage("start failed")
+            if not state.enabled:
+                await self._disarm_watchdog()
+        except ExciterError as exc:
+            log.warning(
+                "%s: power-up failed, then disabling it failed too (%s): watchdog left armed", self.where, exc
+            )
 
     async def _disarm_watchdog(self) -> None:
         await self._write("disarm the drive watchdog", objects.CONSUMER_HEARTBEAT_TIME, 0, 1, supervise=False)
+        self._watchdog_armed = False
 
     async def _send_keepalive(self, counter: int) -> None:
         """The host's NMT heartbeat (state operational); the drive consumes it as its watchdog feed."""

@@ -7,7 +7,7 @@ Standard objects (CiA 301 communication, CiA 402 drive profile):
     0x1017 producer heartbeat time (ms)                      0x6007 abort connection option code
     0x603F error code                                        0x6040 controlword / 0x6041 statusword
     0x6060 modes of operation / 0x6061 display               0x6064 position actual value
-    0x606C velocity actual value
+    0x606C velocity actual value                             0x605A quick stop option code
 
 Documented assumptions (what a drive must offer to run a plate sweep; a real drive's EDS maps its own
 vendor objects onto these, or the indices here are changed):
@@ -44,6 +44,7 @@ ABORT_CONNECTION_OPTION = 0x6007
 ERROR_CODE = 0x603F
 CONTROLWORD = 0x6040
 STATUSWORD = 0x6041
+QUICK_STOP_OPTION = 0x605A
 HALT_OPTION = 0x605D
 MODES_OF_OPERATION = 0x6060
 MODES_OF_OPERATION_DISPLAY = 0x6061
@@ -67,6 +68,12 @@ SINE_SWEEP_MODE = -16
 
 ABORT_CONNECTION_FAULT = 1
 """0x6007 value: heartbeat loss (or NMT stopped) -> fault, with the fault reaction (a ramp down)."""
+
+QUICK_STOP_RAMP_THEN_DISABLED = 2
+"""0x605A value (CiA 402 default): a quick stop ramps the plate down, then SWITCH ON DISABLED. Values 1..4
+end in SWITCH ON DISABLED, 5..8 stay in QUICK STOP ACTIVE at rest, 0 disables the drive at once."""
+QUICK_STOP_RAMP_THEN_STAY = 6
+"""0x605A value: a quick stop ramps the plate down and the drive stays in QUICK STOP ACTIVE."""
 
 FREQUENCY_UNIT_Hz = 1e-3
 AMPLITUDE_UNIT_m = 1e-6
@@ -118,9 +125,24 @@ class DriveState(StrEnum):
         raise ValueError(f"statusword 0x{statusword:04X} reports no CiA 402 state")
 
     @property
+    def enabled(self) -> bool:
+        """The drive function is (or may be) on: the power stage can move the plate. Every other state
+        is disabled (no torque; the plate held by its brake or at rest)."""
+        return self in (
+            DriveState.OPERATION_ENABLED,
+            DriveState.QUICK_STOP_ACTIVE,
+            DriveState.FAULT_REACTION_ACTIVE,
+        )
+
+    @property
     def state_bits(self) -> int:
         """The statusword bits that encode this state (the `value` of its SW_MASK entry)."""
         return State402.SW_MASK[self.value][1]
+
+
+def plate_at_rest(statusword: int) -> bool:
+    """The statusword says the plate rests: target reached (bit 10), neither running (12) nor ramping (13)."""
+    return bool(statusword & SW_TARGET_REACHED) and not statusword & (SW_SWEEP_RUNNING | SW_RAMPING_DOWN)
 
 
 def object_dictionary() -> ObjectDictionary:
@@ -152,6 +174,17 @@ def object_dictionary() -> ObjectDictionary:
     od.add_object(_variable("Error code", ERROR_CODE, datatypes.UNSIGNED16, "ro", 0))
     od.add_object(_variable("Controlword", CONTROLWORD, datatypes.UNSIGNED16, "rw", 0))
     od.add_object(_variable("Statusword", STATUSWORD, datatypes.UNSIGNED16, "ro", 0))
+    od.add_object(
+        _variable(
+            "Quick stop option code",
+            QUICK_STOP_OPTION,
+            datatypes.INTEGER16,
+            "rw",
+            QUICK_STOP_RAMP_THEN_DISABLED,
+            low=0,
+            high=8,
+        )
+    )
     od.add_object(_variable("Halt option code", HALT_OPTION, datatypes.INTEGER16, "rw", 1, low=1, high=1))
     od.add_object(_variable("Modes of operation", MODES_OF_OPERATION, datatypes.INTEGER8, "rw", 0))
     od.add_object(

@@ -7,7 +7,8 @@
                                    base_id: first CAN id of the exciter frame set (default 0x680)
     canopen://virtual/vcan0?node=5 a CiA 402 drive, CANopen node 5 (drivers/exciter/cia402.py); also
         host_node=127 (the host's heartbeat node id), bitrate=, timeout= (SDO), heartbeat_timeout= (the
-        drive's heartbeat), watchdog_timeout= (the drive's wait for the host's heartbeat)
+        drive's heartbeat), watchdog_timeout= (the drive's wait for the host's heartbeat),
+        transition_timeout= (each state transition, default 0.5), ramp_timeout= (a stop ramp, default 2)
 
 Unknown schemes and query parameters are an ExciterConfigError naming them. `parse_exciter_url` gives the
 typed target without touching any transport; `open_exciter` builds the back end and connects it.
@@ -22,6 +23,7 @@ from urllib.parse import parse_qsl, unquote, urlsplit
 
 from drivers.exciter.can_bus import CanExciter
 from drivers.exciter.cia402 import DEFAULT_HOST_NODE_ID, Cia402Exciter
+from drivers.exciter.cia402_sequences import DEFAULT_RAMP_TIMEOUT_S, DEFAULT_TRANSITION_TIMEOUT_S
 from drivers.exciter.envelope import SafetyEnvelope
 from drivers.exciter.errors import ExciterConfigError
 from drivers.exciter.interface import DEFAULT_KEEPALIVE_INTERVAL_S, PlateExciter
@@ -57,7 +59,7 @@ class CanTarget:
 class Cia402Target:
     """A CiA 402 drive: python-can interface and channel, the drive's CANopen node id, the host's node id
     (its heartbeat is the drive's watchdog feed), optional bitrate, SDO timeout (`timeout_s`, as Modbus),
-    the drive-heartbeat timeout and the drive's watchdog timeout."""
+    the drive-heartbeat timeout, the drive's watchdog timeout, the state-transition and stop-ramp timeouts."""
 
     interface: str
     channel: str
@@ -67,6 +69,8 @@ class Cia402Target:
     timeout_s: float = 0.5
     heartbeat_timeout_s: float = 0.5
     watchdog_timeout_s: float = 0.5
+    transition_timeout_s: float = DEFAULT_TRANSITION_TIMEOUT_S
+    ramp_timeout_s: float = DEFAULT_RAMP_TIMEOUT_S
 
 
 ExciterTarget = ModbusTarget | CanTarget | Cia402Target
@@ -129,7 +133,11 @@ def parse_exciter_url(url: str) -> ExciterTarget:
             query.number("timeout", 0.5),
             query.number("heartbeat_timeout", 0.5),
             query.number("watchdog_timeout", 0.5),
+            query.number("transition_timeout", DEFAULT_TRANSITION_TIMEOUT_S),
+            query.number("ramp_timeout", DEFAULT_RAMP_TIMEOUT_S),
         )
+        if not (target.transition_timeout_s > 0 and target.ramp_timeout_s > 0):
+            raise ExciterConfigError(f"{url}: transition_timeout and ramp_timeout must be > 0 (seconds)")
     else:
         raise ExciterConfigError(
             f"{url}: unknown scheme {parts.scheme!r} (modbus-tcp, modbus-rtu, can or canopen)"
@@ -169,6 +177,8 @@ async def open_exciter(
             reply_timeout_s=target.timeout_s,
             heartbeat_timeout_s=target.heartbeat_timeout_s,
             watchdog_timeout_s=target.watchdog_timeout_s,
+            transition_timeout_s=target.transition_timeout_s,
+            ramp_timeout_s=target.ramp_timeout_s,
             envelope=envelope,
             keepalive_interval_s=keepalive_interval_s,
             clock=clock,

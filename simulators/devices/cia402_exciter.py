@@ -4,9 +4,19 @@ object dictionary of drivers/exciter/cia402_objects.py, its power state machine 
 What it does, on `bench.clock` (simulated time; nothing depends on the wall clock):
 
 * SDO server (canopen's): reads of the statusword and actual values are computed at the moment of the
-  read; writes of the controlword run the state machine (shutdown, switch on, enable operation, quick
-  stop, disable voltage, fault reset; bit 4 starts the sweep, bit 8 halts it); writes out of range or in
-  the wrong state are answered by an SDO abort (0x06090030 value range, 0x08000022 device state).
+  read; writes of the controlword run the state machine (shutdown, switch on, enable operation, disable
+  operation, quick stop, disable voltage, fault reset; bit 4 starts the sweep, bit 8 halts it); writes out
+  of range or in the wrong state are answered by an SDO abort (0x06090030 value range, 0x08000022 device
+  state).
+* Transition times, as a real drive's (a brake releasing, a contactor closing): each commanded transition
+  takes `transition_s` (per target state: `transition_s_to`); the statusword shows the old state until
+  then. The controlword is a level: the same word written again leaves the transition under way alone, a
+  different one replaces it.
+* Ramps: halt (bit 8) ramps the plate down (the plate's own controlled stop, cut at `halt_ramp_s` if
+  given); a quick stop ramps it down for `quick_stop_ramp_s`, then, per the quick stop option code 0x605A,
+  goes to SWITCH ON DISABLED (1..4) or stays in QUICK STOP ACTIVE at rest (5..8); 0 disables at once.
+  Statusword bit 13 while a ramp runs, bit 10 once the plate rests. Disabling the power stage during a
+  ramp halts the plate at once and counts in `ramps_cut_short`.
 * NMT slave (canopen's): boot-up message, start/stop/pre-operational, reset node; while STOPPED it ignores
   SDO requests, and entering STOPPED with the operation enabled is an abort-connection event (0x6007).
 * Heartbeat producer (0x1017): canopen's NMT slave, its periodic frame sent on simulated time by `tick()`.
@@ -15,15 +25,17 @@ What it does, on `bench.clock` (simulated time; nothing depends on the wall cloc
   ramps down (FAULT REACTION ACTIVE), then FAULT.
 
 Fault injection: go_silent() / resume() (no frame in or out), inject_drive_fault(code) (the plate trips).
+Records, for tests: `received` (every controlword with the time, state and statusword it found) and
+`timeline` (every state entered, with its time).
 """
 
 from __future__ import annotations
 
 import struct
 import threading
+from collections.abc import Mapping
 from dataclasses import dataclass
 
-import can
 import canopen
 from canopen.objectdictionary import ODVariable
 from canopen.sdo import SdoAbortedError
@@ -33,9 +45,16 @@ from drivers.exciter.cia402_objects import DriveState
 from drivers.exciter.codes import LawCode
 from estimator.sweep import SweepSettings
 from simulators.coupling import PlatePhysics, PlateState
+from simulators.devices.canopen_sim_network import SimulatedTimeNetwork
+from simulators.devices.cia402_state_machine import (
+    POWERED,
+    PendingTransition,
+    Ramp,
+    ReceivedControlword,
+    commanded_state,
+)
 
 DEFAULT_NODE_ID = 5
-READER_POLL_S = 0.02
 VELOCITY_WINDOW_S = 1e-3
 """The velocity actual value is the plate's displacement over this last interval, divided by it."""
 
@@ -45,7 +64,6 @@ NMT_STOP = 0x02
 NMT_PRE_OPERATIONAL = 0x80
 NMT_RESET_NODE = 0x81
 NMT_RESET_COMMUNICATION = 0x82
-NMT_HEARTBEAT_BASE = 0x700
 
 _SWEEP_FIELDS = {
     objects.SWEEP_START_FREQUENCY: "start_Hz",
@@ -61,12 +79,16 @@ _SWEEP_UNITS = {
     objects.SWEEP_DURATION: objects.DURATION_UNIT_s,
     objects.SWEEP_LAW: 1.0,
 }
-_POWERED = (DriveState.READY_TO_SWITCH_ON, DriveState.SWITCHED_ON, DriveState.OPERATION_ENABLED)
 
 
 class SimulatedCia402Exciter:
     """A CiA 402 plate drive, node `node_id` on python-can `interface`/`channel`. Use `with` (or
-    start()/close()); call tick() or advance() as simulated time passes."""
+    start()/close()); call tick() or advance() as simulated time passes.
+
+    transition_s: how long each commanded state transition takes (0: at once); transition_s_to: per
+    target state, overriding it. quick_stop_ramp_s: the quick stop's ramp. halt_ramp_s: the halt's ramp
+    (None: the plate's own controlled stop).
+    """
 
     def __init__(
         self,
@@ -75,21 +97,34 @@ class SimulatedCia402Exciter:
         channel: str,
         interface: str = "virtual",
         node_id: int = DEFAULT_NODE_ID,
+        transition_s: float = 0.0,
+        transition_s_to: Mapping[DriveState, float] | None = None,
+        quick_stop_ramp_s: float = 0.1,
+        halt_ramp_s: float | None = None,
     ) -> None:
         self.bench = bench
         self.clock = bench.clock
         self.channel = channel
         self.interface = interface
-        self.network = _SimulatedTimeNetwork(self)
+        self.network = SimulatedTimeNetwork(self)
         self.node = canopen.LocalNode(node_id, objects.object_dictionary())
         self.node.add_read_callback(self._on_read)
         self.node.add_write_callback(self._on_write)
-        self.controlwords: list[int] = []
-        """Every controlword written, in order (for tests)."""
+        self.transition_s = transition_s
+        self.transition_s_to = dict(transition_s_to or {})
+        self.quick_stop_ramp_s = quick_stop_ramp_s
+        self.halt_ramp_s = halt_ramp_s
+        self.received: list[ReceivedControlword] = []
+        """Every controlword written, in order, with what the drive was when it came (for tests)."""
+        self.timeline: list[tuple[float, DriveState]] = [(self.clock.now_s(), DriveState.SWITCH_ON_DISABLED)]
+        """Every state entered, with its time (for tests)."""
+        self.ramps_cut_short = 0
         self.host_heartbeats_received = 0
         self.silent = False
         self._lock = threading.RLock()
         self._state = DriveState.SWITCH_ON_DISABLED
+        self._pending: PendingTransition | None = None
+        self._ramp: Ramp | None = None
         self._controlword = 0
         self._mode = 0
         self._error_code = 0
@@ -134,6 +169,11 @@ class SimulatedCia402Exciter:
         with self._lock:
             self._cycle()
             return self._state
+
+    @property
+    def controlwords(self) -> list[int]:
+        """Every controlword written, in order."""
+        return [received.word for received in self.received]
 
     @property
     def heartbeats_sent(self) -> int:
@@ -187,7 +227,8 @@ class SimulatedCia402Exciter:
         with self._lock:
             self.bench.stop(emergency=True)
             self.node.data_store.clear()
-            self._state = DriveState.SWITCH_ON_DISABLED
+            self._pending = self._ramp = None
+            self._set_state(DriveState.SWITCH_ON_DISABLED)
             self._controlword = 0
             self._mode = 0
             self._sweep = {}
@@ -223,7 +264,8 @@ class SimulatedCia402Exciter:
         with self._lock:
             self._cycle()
             if index == objects.CONTROLWORD:
-                self.controlwords.append(value)
+                now = self.clock.now_s()
+                self.received.append(ReceivedControlword(now, value, self._state, self._statusword()))
                 self._on_controlword(value)
             elif index == objects.MODES_OF_OPERATION:
                 if value not in (0, objects.SINE_SWEEP_MODE):
@@ -249,41 +291,94 @@ class SimulatedCia402Exciter:
 
     def _on_controlword(self, word: int) -> None:
         previous, self._controlword = self._controlword, word
+        if self._pending is not None and word == previous:
+            return  # the same level again: the transition under way goes on
+        self._pending = None
         state = self._state
         if state in (DriveState.FAULT, DriveState.FAULT_REACTION_ACTIVE):
             rising_reset = word & objects.CW_FAULT_RESET and not previous & objects.CW_FAULT_RESET
             if state is DriveState.FAULT and rising_reset:
-                self._fault_reset()
+                self._begin(DriveState.SWITCH_ON_DISABLED, word)
             return
         if word & objects.CW_FAULT_RESET:
             return  # a fault reset outside FAULT does nothing
-        command = word & 0x0F
-        if not command & 0x02:  # disable voltage: power stage off, plate held by its brake
-            self._power_off(DriveState.SWITCH_ON_DISABLED)
-        elif command & 0x06 == 0x02:  # quick stop
-            if state is DriveState.OPERATION_ENABLED:
-                self.bench.stop(emergency=True)
-                self._state = DriveState.QUICK_STOP_ACTIVE
-            elif state in (DriveState.READY_TO_SWITCH_ON, DriveState.SWITCHED_ON):
-                self._state = DriveState.SWITCH_ON_DISABLED
-        elif command & 0x07 == 0x06:  # shutdown
-            if state in (DriveState.SWITCH_ON_DISABLED, DriveState.SWITCHED_ON, DriveState.OPERATION_ENABLED):
-                self._power_off(DriveState.READY_TO_SWITCH_ON)
-        elif command == 0x07:  # switch on (from OPERATION ENABLED: disable operation)
-            if state is DriveState.READY_TO_SWITCH_ON:
-                self._state = DriveState.SWITCHED_ON
-            elif state is DriveState.OPERATION_ENABLED:
-                self._power_off(DriveState.SWITCHED_ON)
-        elif command == 0x0F:  # enable operation
-            if state in (DriveState.SWITCHED_ON, DriveState.QUICK_STOP_ACTIVE):
-                self._state = DriveState.OPERATION_ENABLED
-            if self._state is DriveState.OPERATION_ENABLED:
-                self._operate(word, previous)
+        target = commanded_state(state, word & 0x0F)
+        if target is not None:
+            self._begin(target, word)
+        elif state is DriveState.OPERATION_ENABLED and word & 0x0F == 0x0F:
+            self._operate(word, previous)
+
+    def _begin(self, target: DriveState, word: int) -> None:
+        """Start a commanded transition: at once, or after its transition time."""
+        duration_s = self.transition_s_to.get(target, self.transition_s)
+        if duration_s <= 0:
+            self._enter(target)
+        else:
+            self._pending = PendingTransition(word, target, self.clock.now_s() + duration_s)
+
+    def _enter(self, target: DriveState) -> None:
+        """A commanded transition completes, with its effect on the power stage and the plate."""
+        previous = self._state
+        if previous is DriveState.FAULT:
+            self._fault_reset()
+        elif not target.enabled and previous.enabled:
+            self._halt_power_stage()
+        self._set_state(target)
+        if target is DriveState.QUICK_STOP_ACTIVE:
+            self._start_quick_stop()
+
+    def _start_quick_stop(self) -> None:
+        option = self._stored(objects.QUICK_STOP_OPTION)
+        if option == 0:  # disable the drive function at once
+            self._halt_power_stage()
+            self._set_state(DriveState.SWITCH_ON_DISABLED)
+            return
+        then = DriveState.SWITCH_ON_DISABLED if option <= 4 else None
+        now = self.clock.now_s()
+        if self._sweep_moving():
+            self.bench.stop(emergency=False)
+            self._ramp = Ramp(now + self.quick_stop_ramp_s, then)
+        else:
+            self._ramp = Ramp(now, then)
+        self._end_ramp_if_due(now)
+
+    def _end_ramp_if_due(self, now: float) -> None:
+        ramp = self._ramp
+        if ramp is None or now < ramp.end_s:
+            return
+        self._ramp = None
+        self.bench.stop(emergency=True)  # the plate rests where the ramp has brought it
+        if ramp.then is not None and self._state is DriveState.QUICK_STOP_ACTIVE:
+            self._set_state(ramp.then)
+
+    def _halt_power_stage(self) -> None:
+        """The power stage goes off: the plate halts at once (held by its brake), a ramp is cut short."""
+        if self._ramp is not None:
+            self.ramps_cut_short += 1
+            self._ramp = None
+        self.bench.stop(emergency=True)
+
+    def _set_state(self, state: DriveState) -> None:
+        if state is not self._state:
+            self.timeline.append((self.clock.now_s(), state))
+        self._state = state
+
+    def _stored(self, index: int) -> int:
+        """An object's value as stored (or its default), without the read callbacks."""
+        variable = self.node.object_dictionary[index]
+        assert isinstance(variable, ODVariable)
+        data = self.node.data_store.get(index, {}).get(0)
+        value = variable.decode_raw(data) if data is not None else variable.default
+        assert isinstance(value, int)
+        return value
 
     def _operate(self, word: int, previous: int) -> None:
         """Bits 4 and 8 in OPERATION ENABLED: start the sweep on a rising edge of 4, halt on 8."""
         if word & objects.CW_HALT:
-            self.bench.stop(emergency=False)
+            if self._sweep_moving() and self._ramp is None:
+                self.bench.stop(emergency=False)
+                if self.halt_ramp_s is not None:
+                    self._ramp = Ramp(self.clock.now_s() + self.halt_ramp_s)
             return
         if not (word & objects.CW_START_SWEEP and not previous & objects.CW_START_SWEEP):
             return
@@ -301,33 +396,34 @@ class SimulatedCia402Exciter:
         except (ValueError, RuntimeError) as exc:  # settings the drive cannot run, plate in fault
             raise SdoAbortedError(ABORT_VALUE_RANGE) from exc
 
-    def _power_off(self, new_state: DriveState) -> None:
-        if self._state is DriveState.OPERATION_ENABLED:
-            self.bench.stop(emergency=True)
-        self._state = new_state
-
     def _fault_reset(self) -> None:
         plate = getattr(self.bench, "plate", None)
         if plate is not None and hasattr(plate, "reset_fault"):
             plate.reset_fault()
         self._error_code = 0
-        self._state = DriveState.SWITCH_ON_DISABLED
 
     def _enter_fault(self, code: int) -> None:
         self._error_code = code
-        self._state = DriveState.FAULT_REACTION_ACTIVE if self._sweep_moving() else DriveState.FAULT
+        self._pending = self._ramp = None
+        self._set_state(DriveState.FAULT_REACTION_ACTIVE if self._sweep_moving() else DriveState.FAULT)
 
     def _abort_connection(self, code: int) -> None:
         """The 0x6007 reaction (1: fault): the amplitude ramps down, then FAULT."""
-        if self.node.sdo[objects.ABORT_CONNECTION_OPTION].raw != objects.ABORT_CONNECTION_FAULT:
+        if self._stored(objects.ABORT_CONNECTION_OPTION) != objects.ABORT_CONNECTION_FAULT:
             return
         self.bench.stop(emergency=False)
         self._enter_fault(code)
 
     def _cycle(self) -> None:
-        """Cyclic checks (lock held): host heartbeat, plate trips, end of a fault reaction."""
+        """Cyclic checks (lock held): transitions and ramps due, host heartbeat, plate trips, end of a
+        fault reaction."""
         consumer = self._consumer
         now = self.clock.now_s()
+        pending = self._pending
+        if pending is not None and now >= pending.due_s:
+            self._pending = None
+            self._enter(pending.target)
+        self._end_ramp_if_due(now)
         if consumer.last_s is not None and now - consumer.last_s > consumer.timeout_s:
             consumer.last_s = None  # CiA 301: supervision resumes with the next heartbeat received
             if self._state not in (DriveState.FAULT, DriveState.FAULT_REACTION_ACTIVE):
@@ -335,21 +431,22 @@ class SimulatedCia402Exciter:
         plate = self.bench.plate_status()
         if plate.state is PlateState.FAULT and self._state is not DriveState.FAULT:
             self._error_code = plate.fault_code
-            self._state = DriveState.FAULT
+            self._pending = self._ramp = None
+            self._set_state(DriveState.FAULT)
         elif self._state is DriveState.FAULT_REACTION_ACTIVE and plate.state is PlateState.IDLE:
-            self._state = DriveState.FAULT
+            self._set_state(DriveState.FAULT)
 
     def _sweep_moving(self) -> bool:
         return self.bench.plate_status().state in (PlateState.RUNNING, PlateState.STOPPING)
 
     def _statusword(self) -> int:
         word = self._state.state_bits | objects.SW_REMOTE
-        if self._state in _POWERED or self._state is DriveState.QUICK_STOP_ACTIVE:
+        if self._state in POWERED or self._state is DriveState.QUICK_STOP_ACTIVE:
             word |= objects.SW_VOLTAGE_ENABLED
         plate = self.bench.plate_status().state
         if plate is PlateState.RUNNING:
             word |= objects.SW_SWEEP_RUNNING
-        elif plate is PlateState.STOPPING:
+        elif plate is PlateState.STOPPING or self._ramp is not None:
             word |= objects.SW_RAMPING_DOWN
         else:
             word |= objects.SW_TARGET_REACHED
@@ -369,103 +466,3 @@ class _Consumer:
     timeout_s: float = 0.0
     last_s: float | None = None
     """Time of the last host heartbeat; None: not supervising (none received since set or since a trip)."""
-
-
-class _SimulatedTimeNetwork(canopen.Network):
-    """canopen's Network for the simulated drive: periodic frames (the NMT heartbeat) go out on simulated
-    time from tick(), not from a python-can timer thread; a silent drive neither sends nor hears; SDO
-    requests are ignored while the node is NMT STOPPED."""
-
-    def __init__(self, drive: SimulatedCia402Exciter) -> None:
-        super().__init__()
-        self.NOTIFIER_CYCLE = READER_POLL_S  # close() waits at most this long for the reader thread
-        self._drive = drive
-        self._periodic: list[_SimulatedPeriodicTask] = []
-        self._periodic_lock = threading.Lock()
-        self._host_node: int | None = None
-        self.periodic_frames_sent = 0
-        self.frames_ignored = 0
-        """Frames heard while silent (tests wait on it to know a request reached the drive)."""
-
-    def send_periodic(  # type: ignore[override]
-        self, can_id: int, data: bytes, period: float, remote: bool = False
-    ) -> _SimulatedPeriodicTask:
-        task = _SimulatedPeriodicTask(self, can_id, bytes(data), period, self._drive.clock.now_s())
-        with self._periodic_lock:
-            self._periodic.append(task)
-        task.send_due(self._drive.clock.now_s())  # python-can sends the first one at once too
-        return task
-
-    def remove_periodic(self, task: _SimulatedPeriodicTask) -> None:
-        with self._periodic_lock:
-            if task in self._periodic:
-                self._periodic.remove(task)
-
-    def send_due_periodic(self, now_s: float) -> None:
-        with self._periodic_lock:
-            tasks = list(self._periodic)
-        for task in tasks:
-            task.send_due(now_s)
-
-    def send_message(self, can_id: int, data: bytes, remote: bool = False) -> None:
-        if not self._drive.silent:
-            super().send_message(can_id, data, remote)
-
-    def send_periodic_frame(self, can_id: int, data: bytes) -> None:
-        """One frame of a periodic task; a silent drive skips it (no backlog once it speaks again)."""
-        if self._drive.silent:
-            return
-        try:
-            super().send_message(can_id, data)
-        except (can.CanError, RuntimeError):
-            return  # bus closing under the tick
-        self.periodic_frames_sent += 1
-
-    def notify(self, can_id: int, data: bytearray, timestamp: float) -> None:
-        if self._drive.silent:
-            self.frames_ignored += 1
-            return
-        if can_id == self._drive.node.sdo.rx_cobid and self._drive.node.nmt.state == "STOPPED":
-            return
-        super().notify(can_id, data, timestamp)
-
-    def subscribe_host(self, host_node: int | None) -> None:
-        """Hear the heartbeat of `host_node` (None: of nobody)."""
-        self.unsubscribe_host()
-        if host_node is not None:
-            self._host_node = host_node
-            self.subscribe(NMT_HEARTBEAT_BASE + host_node, self._drive.on_host_heartbeat)
-
-    def unsubscribe_host(self) -> None:
-        if self._host_node is not None:
-            self.unsubscribe(NMT_HEARTBEAT_BASE + self._host_node, self._drive.on_host_heartbeat)
-            self._host_node = None
-
-
-class _SimulatedPeriodicTask:
-    """What canopen's NMT slave expects of a periodic task (stop, update), run on simulated time."""
-
-    def __init__(
-        self, network: _SimulatedTimeNetwork, can_id: int, data: bytes, period_s: float, now_s: float
-    ) -> None:
-        self.network = network
-        self.can_id = can_id
-        self.data = data
-        self.period_s = period_s
-        self.next_s = now_s
-        self._lock = threading.Lock()
-
-    def stop(self) -> None:
-        self.network.remove_periodic(self)
-
-    def update(self, data: bytes) -> None:
-        self.data = bytes(data)
-
-    def send_due(self, now_s: float) -> None:
-        with self._lock:
-            due = 0
-            while self.next_s <= now_s + 1e-12:
-                self.next_s += self.period_s
-                due += 1
-        if due:  # one frame however many periods passed: a late tick does not send a backlog
-            self.network.send_periodic_frame(self.can_id, self.data)

@@ -1,14 +1,11 @@
 """CiA 402 back end against the simulated CiA 402 drive (canopen LocalNode) on python-can's virtual bus:
 state machine, sweep start/stop, quick stop, faults, the drive's watchdog (heartbeat consumer), the
-drive's heartbeat, NMT."""
+drive's heartbeat, NMT. A drive that takes its time per transition: test_exciter_cia402_transitions.py.
+The rig (tests/drivers/cia402_rig.py) runs supervision and the back end's waits on the simulated clock."""
 
 from __future__ import annotations
 
 import asyncio
-import time
-import uuid
-from collections.abc import AsyncIterator, Callable
-from contextlib import asynccontextmanager
 
 import can
 import pytest
@@ -31,49 +28,7 @@ from drivers.exciter.urls import Cia402Target, open_exciter, parse_exciter_url
 from estimator.sweep import SweepLaw, SweepSettings
 from simulators.devices.cia402_exciter import SimulatedCia402Exciter
 from simulators.plate import EmptyPlate
-
-SWEEP = SweepSettings(start_Hz=0.0, stop_Hz=20.0, amplitude_m=0.004, duration_s=20.0)
-REPLY_TIMEOUT_S = 0.2
-NODE = 5
-
-
-def fresh_channel() -> str:
-    return f"cia402-test-{uuid.uuid4().hex}"
-
-
-@asynccontextmanager
-async def rig(**exciter_kwargs: object) -> AsyncIterator[tuple[SimulatedCia402Exciter, Cia402Exciter]]:
-    """Simulated drive and back end on one virtual channel, supervision on the simulated clock."""
-    bench = EmptyPlate()
-    channel = fresh_channel()
-    with SimulatedCia402Exciter(bench, channel=channel, node_id=NODE) as sim:
-        exciter = Cia402Exciter(
-            "virtual",
-            channel,
-            node_id=NODE,
-            reply_timeout_s=REPLY_TIMEOUT_S,
-            clock=bench.clock.now_s,
-            **exciter_kwargs,  # type: ignore[arg-type]
-        )
-        async with exciter:
-            yield sim, exciter
-
-
-def wait_until(condition: Callable[[], bool], what: str, timeout_s: float = 2.0) -> None:
-    """Poll with a deadline for something the drive's reader thread does."""
-    deadline_s = time.monotonic() + timeout_s
-    while not condition():
-        assert time.monotonic() < deadline_s, f"timed out waiting for {what}"
-        time.sleep(0.001)
-
-
-def stored(sim: SimulatedCia402Exciter, index: int, subindex: int = 0) -> int:
-    """A value the host wrote into the drive's object dictionary."""
-    entry = sim.node.sdo[index]
-    value = (entry[subindex] if subindex else entry).raw
-    assert isinstance(value, int)
-    return value
-
+from tests.drivers.cia402_rig import HALT, NODE, SWEEP, fresh_channel, rig, stored, wait_until
 
 # ---- statusword -----------------------------------------------------------------------------------------
 
@@ -132,7 +87,7 @@ def test_sweep_start_stop_and_emergency_stop() -> None:
             )
             assert [stored(sim, objects.SWEEP, sub) for sub in range(1, 6)] == [1000, 16000, 3000, 8000, 1]
             await exciter.start()
-            assert sim.controlwords == [0x06, 0x07, 0x0F, 0x0F, 0x1F]
+            assert sim.controlwords == [0x06, 0x07, 0x0F, 0x1F]  # bit 4 was low: 0x1F is its rising edge
             assert sim.state is DriveState.OPERATION_ENABLED
             assert stored(sim, objects.CONSUMER_HEARTBEAT_TIME, 1) == (127 << 16) | 500
             bench = sim.bench
@@ -145,16 +100,14 @@ def test_sweep_start_stop_and_emergency_stop() -> None:
             assert exciter.velocity_m_per_s != 0.0
             assert sim.host_heartbeats_received >= 8  # the start's, then one per supervision step
 
-            await exciter.stop()
-            assert sim.controlwords[-1] == objects.CW_ENABLE_OPERATION | objects.CW_HALT
-            assert stored(sim, objects.CONSUMER_HEARTBEAT_TIME, 1) == 0  # watchdog off
-            sim.advance(0.2)
-            assert (await exciter.status()).state is ExciterState.STOPPING
-            sim.advance(0.4)
+            await exciter.stop()  # halt, the plate's 0.5 s ramp to rest, then disable operation
+            assert sim.controlwords[-2:] == [HALT, objects.CW_SWITCH_ON]
+            assert sim.state is DriveState.SWITCHED_ON
+            assert stored(sim, objects.CONSUMER_HEARTBEAT_TIME, 1) == 0  # watchdog off, the drive disabled
             rest = await exciter.status()
             assert (rest.state, rest.position_m, exciter.velocity_m_per_s) == (ExciterState.IDLE, 0.0, 0.0)
 
-            await exciter.start()  # from OPERATION ENABLED with halt: bit 4 low, then its rising edge
+            await exciter.start()  # from SWITCHED ON: enable operation, then the rising edge of bit 4
             assert sim.controlwords[-2:] == [0x0F, 0x1F]
             sim.advance(0.3)
             assert (await exciter.status()).state is ExciterState.RUNNING
@@ -167,7 +120,7 @@ def test_sweep_start_stop_and_emergency_stop() -> None:
             assert (await exciter.status()).position_m == halted.position_m  # held where it stopped
 
             await exciter.start()  # from SWITCH ON DISABLED: the whole power-up again
-            assert sim.controlwords[-5:] == [0x06, 0x07, 0x0F, 0x0F, 0x1F]
+            assert sim.controlwords[-4:] == [0x06, 0x07, 0x0F, 0x1F]
 
     asyncio.run(scenario())
 
@@ -280,7 +233,7 @@ def test_stale_heartbeat_is_reported_even_when_the_drive_answers() -> None:
 
 def test_emergency_stop_goes_out_whole_before_a_heartbeat_fault_is_reported() -> None:
     async def scenario() -> None:
-        async with rig(heartbeat_timeout_s=0.3) as (sim, exciter):
+        async with rig({"quick_stop_ramp_s": 0.0}, heartbeat_timeout_s=0.3) as (sim, exciter):
             await exciter.configure_sweep(SWEEP)
             await exciter.start()
             sim.advance(0.2)
@@ -408,6 +361,12 @@ def test_canopen_urls_and_node_ids() -> None:
         "&watchdog_timeout=0.8"
     )
     assert target == Cia402Target("socketcan", "can0", 12, 100, 500000, 0.3, 0.4, 0.8)
+    assert (target.transition_timeout_s, target.ramp_timeout_s) == (0.5, 2.0)  # the defaults
+    slow = parse_exciter_url("canopen://socketcan/can0?node=12&transition_timeout=1.5&ramp_timeout=4")
+    assert isinstance(slow, Cia402Target)
+    assert (slow.transition_timeout_s, slow.ramp_timeout_s) == (1.5, 4.0)
+    with pytest.raises(ExciterConfigError, match="transition_timeout and ramp_timeout must be > 0"):
+        parse_exciter_url("canopen://socketcan/can0?node=12&transition_timeout=0")
     with pytest.raises(ExciterConfigError, match="canopen:// needs node="):
         parse_exciter_url("canopen://virtual/vcan0")
     with pytest.raises(ExciterConfigError, match=r"node and host_node must be two different ids 1\.\.127"):
@@ -416,10 +375,15 @@ def test_canopen_urls_and_node_ids() -> None:
         Cia402Exciter("virtual", "x", node_id=200)
     with pytest.raises(ExciterConfigError, match="cannot both be CANopen node 127"):
         Cia402Exciter("virtual", "x", node_id=127)
+    with pytest.raises(ExciterConfigError, match="transition_timeout_s must be > 0 s, got 0"):
+        Cia402Exciter("virtual", "x", node_id=5, transition_timeout_s=0)
 
 
 def test_bench_config_takes_a_canopen_drive() -> None:
     assert ExciterConfig("plate", "canopen://socketcan/can0?node=5").kind == "canopen"
+    assert ExciterConfig("plate", "canopen://socketcan/can0?node=5&transition_timeout=1").kind == "canopen"
+    with pytest.raises(BenchConfigError, match="transition_timeout and ramp_timeout must be > 0"):
+        ExciterConfig("plate", "canopen://socketcan/can0?node=5&ramp_timeout=-1")
     assert ExciterConfig("plate", "can://socketcan/can0?base_id=0x6A0").kind == "can"
     with pytest.raises(BenchConfigError, match=r"bad exciter URL: .*canopen:// needs node="):
         ExciterConfig("plate", "canopen://socketcan/can0")
@@ -431,10 +395,12 @@ def test_opened_from_a_url() -> None:
         channel = fresh_channel()
         with SimulatedCia402Exciter(bench, channel=channel, node_id=9) as sim:
             exciter = await open_exciter(
-                f"canopen://virtual/{channel}?node=9&timeout=0.2", clock=bench.clock.now_s
+                f"canopen://virtual/{channel}?node=9&timeout=0.2&transition_timeout=0.8&ramp_timeout=3",
+                clock=bench.clock.now_s,
             )
             try:
                 assert isinstance(exciter, Cia402Exciter)
+                assert (exciter.transition_timeout_s, exciter.ramp_timeout_s) == (0.8, 3.0)
                 assert (await exciter.status()).state is ExciterState.IDLE
                 assert sim.nmt_state == "OPERATIONAL"
             finally:
