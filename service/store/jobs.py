@@ -13,16 +13,20 @@ from datetime import datetime
 from pathlib import Path
 from typing import Any
 
-from sqlalchemy import func, select, update
+from sqlalchemy import Select, func, select, update
 from sqlalchemy.orm import Session
 
+from service.store.chain_anchor import Head, HeadLog
 from service.store.database import Database
 from service.store.models import JobRow, JobStatus, utcnow
 from service.store.outbox import JOB, queue_finished
-from service.store.result_chain import append_link
+from service.store.quota import KeyQuota, QuotaExceededError, enforce
+from service.store.result_chain import append_link, recording_sha256
 
 RESTART_REASON = "its service stopped each time it ran"
 """Why a job whose instance died while running it, attempt after attempt, is failed (job_queue)."""
+UNFINISHED = (JobStatus.QUEUED.value, JobStatus.RUNNING.value)
+QUOTA_WHAT = "jobs queued or running"
 
 
 @dataclass(frozen=True)
@@ -87,10 +91,12 @@ class JobRecord:
 
 
 class JobStore:
-    def __init__(self, database: Database, lane: str = "") -> None:
-        """lane: stamped on every row this store creates (the service's `--lane`)."""
+    def __init__(self, database: Database, lane: str = "", heads: HeadLog | None = None) -> None:
+        """lane: stamped on every row this store creates (the service's `--lane`); heads: the lane's heads
+        log, which every result stored here checkpoints its chain's new head in (chain_anchor)."""
         self.db = database
         self.lane = lane
+        self.heads = heads
 
     def create(
         self,
@@ -101,9 +107,12 @@ class JobStore:
         input_source: str = "upload",
         sweep_id: int | None = None,
         submitted_by: str | None = None,
+        quota: KeyQuota | None = None,
     ) -> JobRecord:
         """Insert a queued job. `place(job_id)` puts the input where the job will read it (e.g. moves the
-        uploaded files into the job's folder) and says where; if it raises, no job is created."""
+        uploaded files into the job's folder) and says where; if it raises, no job is created. With
+        `quota`, QuotaExceededError (and no job) when its key would have more unfinished jobs than it allows,
+        checked in this transaction (service.store.quota)."""
         with self.db.transaction() as session:
             row = JobRow(
                 lane=self.lane,
@@ -120,12 +129,34 @@ class JobStore:
             )
             session.add(row)
             session.flush()
+            if quota is not None:
+                enforce(session, quota, self._unfinished_of(quota.key_id), QUOTA_WHAT)
             files = place(row.id)
             row.recording_path = str(files.recording_path)
+            row.recording_sha256 = recording_sha256(files.recording_path)  # what its chain link covers
             row.vehicle_path = str(files.vehicle_path)
             row.output_dir = str(files.output_dir)
             session.flush()
             return JobRecord.of(row)
+
+    @staticmethod
+    def _unfinished_of(key_id: str) -> Select[tuple[int]]:
+        """The count of `key_id`'s queued and running jobs (on every lane: the quota is the key's)."""
+        where = (JobRow.submitted_by == key_id, JobRow.status.in_(UNFINISHED))
+        return select(func.count()).select_from(JobRow).where(*where)
+
+    def unfinished_count(self, key_id: str) -> int:
+        """How many jobs `key_id` has queued or running."""
+        with self.db.sessions() as session:
+            return int(session.scalar(self._unfinished_of(key_id)) or 0)
+
+    def check_quota(self, quota: KeyQuota) -> None:
+        """QuotaExceededError when `quota`'s key has as many unfinished jobs as it allows already: a cheap
+        look before the work of taking a job in (copying and checking an upload). Only a look:
+        `create(quota=)` decides, in the transaction that inserts."""
+        active = self.unfinished_count(quota.key_id)
+        if active >= quota.limit:
+            raise QuotaExceededError(QUOTA_WHAT, active, quota.limit)
 
     def get(self, job_id: int) -> JobRecord | None:
         with self.db.sessions() as session:
@@ -239,18 +270,22 @@ class JobStore:
         owner: str | None = None,
     ) -> bool:
         """running -> succeeded with the result, chained to the lane's previous result in the same
-        transaction (service.store.result_chain)."""
-        return self._transition(
+        transaction (service.store.result_chain); the new head is then checkpointed in the heads log."""
+        heads: list[Head] = []
+        done = self._transition(
             job_id,
             (JobStatus.RUNNING,),
             owner,
-            then=append_link,
+            then=lambda session, job: heads.append(append_link(session, job)),
             status=JobStatus.SUCCEEDED.value,
             result=result,
             artefacts=artefacts,
             progress=progress,
             finished_at=utcnow(),
         )
+        if done and self.heads is not None:  # after the commit: a head rolled back is never logged
+            self.heads.record(heads[0])
+        return done
 
     def fail(
         self, job_id: int, reason: str, progress: dict[str, Any] | None = None, owner: str | None = None

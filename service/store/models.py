@@ -1,4 +1,5 @@
-"""The tables: jobs (identification and diagnosis), sweeps, scheduled tests, and the result chain.
+"""The tables: jobs (identification and diagnosis), sweeps, scheduled tests, the result chain and its
+checkpoints.
 
 SQLAlchemy 2.x declarative models with portable column types only (strings, integers, floats, booleans,
 JSON, timestamps), so the same models work on SQLite and PostgreSQL. Statuses are stored as their string
@@ -115,6 +116,10 @@ class SweepRow(Base):
     """Sweep settings as submitted (frequencies, amplitude, duration ...)."""
     vehicle_file: Mapped[str | None] = mapped_column(Text, default=None)
     recording_path: Mapped[str | None] = mapped_column(Text, default=None)
+    recording_sha256: Mapped[str | None] = mapped_column(String(64), default=None)
+    """sha256 (hex) of the recording file's bytes when the sweep ended (SweepStore.finish); None when it
+    left no file, or it ended otherwise (a restart) or before revision 0006. A result's chain link covers
+    it (service.store.result_chain)."""
     complete: Mapped[bool] = mapped_column(Boolean, default=False)
     """True when the recording holds the whole sweep without gaps."""
     reason: Mapped[str | None] = mapped_column(Text, default=None)
@@ -153,6 +158,9 @@ class JobRow(Base):
     input_source: Mapped[str] = mapped_column(String(16), default="upload")
     """'upload' (files in the job folder) or 'sweep' (the recording of sweep_id)."""
     recording_path: Mapped[str] = mapped_column(Text)
+    recording_sha256: Mapped[str | None] = mapped_column(String(64), default=None)
+    """sha256 (hex) of the bytes of the recording file at `recording_path` when the job was submitted; None
+    when there was no such file, or for jobs from before revision 0006. Its chain link covers it."""
     vehicle_path: Mapped[str] = mapped_column(Text)
     sweep_id: Mapped[int | None] = mapped_column(ForeignKey("sweeps.id"), default=None)
     output_dir: Mapped[str] = mapped_column(Text)
@@ -209,13 +217,15 @@ class ScheduleRow(Base):
 
 class ResultChainRow(Base):
     """One link of a lane's result chain (service.store.result_chain): the content hash of a succeeded job's
-    result, chained to the lane's previous link, appended in the transaction that stores the result."""
+    result with what it means (its vehicle, sweep, recording, thresholds), chained to the lane's previous
+    link, appended in the transaction that stores the result."""
 
     __tablename__ = "result_chain"
     __table_args__ = (
         UniqueConstraint("job_id", name="uq_result_chain_job"),
         UniqueConstraint("lane", "previous_hash", name="uq_result_chain_lane_previous"),  # no forks
         Index("ix_result_chain_lane_id", "lane", "id"),
+        Index("uq_result_chain_lane_sequence", "lane", "sequence", unique=True),
         {"sqlite_autoincrement": True},
     )
 
@@ -226,8 +236,35 @@ class ResultChainRow(Base):
     previous_hash: Mapped[str] = mapped_column(String(64))
     """The lane's previous link's hash; 64 zeros for its first."""
     hash: Mapped[str] = mapped_column(String(64))
-    """sha256 (hex) of the canonical record (service.store.result_chain.link_hash)."""
+    """sha256 (hex) of the canonical record (service.store.result_chain), by the formula of link_version."""
+    link_version: Mapped[int] = mapped_column(Integer, server_default="1")
+    """The link's format: 1 for links written before revision 0006, 2 since (service.store.result_chain)."""
+    covered: Mapped[dict[str, Any] | None] = mapped_column(JSON, default=None)
+    """Version 2: covered field -> sha256 (hex) of its canonical JSON, which the hash covers; None in 1."""
+    sequence: Mapped[int | None] = mapped_column(Integer, default=None)
+    """The link's place in its lane's chain, 1 for the first: what a checkpoint names (chain_anchor)."""
     created_at: Mapped[datetime] = mapped_column(default=utcnow)
+
+
+class ChainCheckpointRow(Base):
+    """A lane's chain head as the lane checkpointed it on the central database when it pushed the link
+    (service.store.sync, service.store.chain_anchor): `verify` fails when the chain of that lane ends
+    before it. Rows are only ever inserted."""
+
+    __tablename__ = "chain_checkpoints"
+    __table_args__ = (
+        Index("uq_chain_checkpoints_lane_sequence", "lane", "sequence", unique=True),
+        {"sqlite_autoincrement": True},
+    )
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=True)
+    lane: Mapped[str] = mapped_column(String(100))
+    sequence: Mapped[int] = mapped_column(Integer)
+    """The head link's place in the lane's chain (1 for the first)."""
+    job_id: Mapped[int] = mapped_column(Integer)
+    """The head's job, by the id it has where it ran (the one its link hashes), not a reference here."""
+    hash: Mapped[str] = mapped_column(String(64))
+    checkpointed_at: Mapped[datetime] = mapped_column(default=utcnow)
 
 
 class SyncOutboxRow(Base):

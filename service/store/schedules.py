@@ -19,6 +19,7 @@ from sqlalchemy import func, select, update
 
 from service.store.database import Database
 from service.store.models import ScheduleRow, ScheduleStatus, utcnow
+from service.store.quota import KeyQuota, enforce
 
 FINISHED = (ScheduleStatus.DONE, ScheduleStatus.FAILED, ScheduleStatus.CANCELLED)
 
@@ -83,9 +84,11 @@ class ScheduleStore:
         place: Callable[[int], Path],
         *,
         created_by: str | None = None,
+        quota: KeyQuota | None = None,
     ) -> ScheduleRecord:
         """Insert a waiting test. `place(test_id)` saves the vehicle file and returns its path; if it
-        raises, no test is created."""
+        raises, no test is created. With `quota`, QuotaExceededError (and no test) when its key would
+        have more waiting or running tests than it allows (service.store.quota)."""
         with self.db.transaction() as session:
             row = ScheduleRow(
                 lane=self.lane,
@@ -99,6 +102,11 @@ class ScheduleStore:
             )
             session.add(row)
             session.flush()
+            if quota is not None:
+                unfinished = (ScheduleStatus.WAITING.value, ScheduleStatus.RUNNING.value)
+                count = select(func.count()).select_from(ScheduleRow)
+                mine = count.where(ScheduleRow.created_by == quota.key_id, ScheduleRow.status.in_(unfinished))
+                enforce(session, quota, mine, "scheduled tests waiting or running")
             row.vehicle_file = str(place(row.id))
             session.flush()
             return ScheduleRecord.of(row)

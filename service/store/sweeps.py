@@ -18,6 +18,7 @@ from sqlalchemy import ColumnElement, func, select, update
 from service.store.database import Database
 from service.store.models import SweepRow, SweepStatus, utcnow
 from service.store.outbox import SWEEP, queue_finished
+from service.store.result_chain import recording_sha256
 
 RESTART_REASON = "service restarted while the sweep ran"
 UNFINISHED = (SweepStatus.REQUESTED, SweepStatus.RUNNING)
@@ -153,9 +154,12 @@ class SweepStore:
         )
 
     def finish(self, sweep_id: int, status: SweepStatus, *, complete: bool, reason: str | None) -> bool:
-        """requested/running -> complete, failed or aborted (once: a later call changes nothing)."""
+        """requested/running -> complete, failed or aborted (once: a later call changes nothing), with the
+        sha256 of its recording file as it is now (the chain links of the results on it cover it)."""
         if not finished(status):
             raise ValueError(f"{status.value} is not a final sweep status")
+        with self.db.sessions() as session:
+            path = session.scalar(select(SweepRow.recording_path).where(SweepRow.id == sweep_id))
         return self._transition(
             sweep_id,
             UNFINISHED,
@@ -163,6 +167,7 @@ class SweepStore:
             complete=complete,
             reason=reason,
             finished_at=utcnow(),
+            recording_sha256=recording_sha256(path),
         )
 
     def recover_interrupted(self, reason: str = RESTART_REASON) -> list[int]:

@@ -24,7 +24,9 @@ Design (README "A lane keeps testing when the central database is away"):
   job keeps its local id as `origin_id`, which its link hashes, and its link is appended there with the
   lane's hashes unchanged, after checking that it follows the central chain's newest link of its lane (one
   lane, one store: a lane whose links also reach the central database another way would fork its chain;
-  the push stops with that error in the sync status instead).
+  the push stops with that error in the sync status instead). In the same transaction the lane checkpoints
+  its chain's new head there (`chain_checkpoints`, service.store.chain_anchor), so that removing the
+  lane's newest results, locally or centrally, fails `verify`.
 - Files stay on the lane: the central rows carry the paths of recordings, vehicle files and job artefacts
   as they are on the lane's machine, under its data root (readable from elsewhere when the data root is a
   shared mount, as item 4 asks); nothing is copied.
@@ -42,10 +44,11 @@ from sqlalchemy.exc import SQLAlchemyError
 from sqlalchemy.orm import Session
 
 from estimator.errors import one_line
+from service.store.chain_anchor import Head, checkpoint_central
 from service.store.database import Database
 from service.store.models import JobRow, ResultChainRow, SweepRow, SyncOutboxRow
 from service.store.outbox import JOB, SWEEP
-from service.store.result_chain import locked_head
+from service.store.result_chain import chained_job_id, locked_head
 
 
 class SyncError(RuntimeError):
@@ -120,7 +123,9 @@ class CentralSync:
                 return Pushed(SWEEP, found.sweep.id, _push_sweep(central, found.sweep))
             central_id = _push_job(central, found.job, found.sweep)
             if found.link is not None:
-                _push_link(central, found.link, central_id)
+                head = _push_link(central, found.link, central_id, chained_job_id(found.job))
+                if head is not None:
+                    checkpoint_central(central, head)
             return Pushed(JOB, found.job.id, central_id)
 
 
@@ -170,14 +175,15 @@ def _push_job(central: Session, job: JobRow, sweep: SweepRow | None) -> int:
     return _upsert(central, JobRow, values)
 
 
-def _push_link(central: Session, link: ResultChainRow, central_job_id: int) -> None:
-    """Append the lane's link to the central chain, unless it is there (a repeated push)."""
+def _push_link(central: Session, link: ResultChainRow, central_job_id: int, chained_id: int) -> Head | None:
+    """Append the lane's link to the central chain, unless it is there (a repeated push: None); the lane's
+    new head there (`chained_id`: the job id the link hashes)."""
     if central.scalar(select(ResultChainRow.id).where(ResultChainRow.job_id == central_job_id)):
-        return
-    head = locked_head(central, link.lane)
-    if head != link.previous_hash:
+        return None
+    tip = locked_head(central, link.lane)
+    if tip.hash != link.previous_hash:
         raise SyncError(
-            f"lane {link.lane!r}: the central chain ends at {head[:12]}, but this lane's next link "
+            f"lane {link.lane!r}: the central chain ends at {tip.hash[:12]}, but this lane's next link "
             f"(job {link.job_id}) follows {link.previous_hash[:12]}: another store wrote this lane's "
             "results there; sync stopped"
         )
@@ -187,7 +193,11 @@ def _push_link(central: Session, link: ResultChainRow, central_job_id: int) -> N
             job_id=central_job_id,
             previous_hash=link.previous_hash,
             hash=link.hash,
+            link_version=link.link_version,
+            covered=link.covered,
+            sequence=tip.sequence + 1,  # the lane's numbering: the same chain, link for link
             created_at=link.created_at,
         )
     )
     central.flush()
+    return Head(link.lane, tip.sequence + 1, chained_id, link.hash)

@@ -150,7 +150,7 @@ def test_the_lane_keeps_testing_while_the_central_database_is_stopped(
     assert len(sweeps) == 1 and sweeps[0].status == "complete" and jobs[2].sweep_id == sweeps[0].id
     checked = verify(url)
     assert checked.returncode == 0, checked.stderr
-    assert checked.stdout.strip() == "4 results in 1 lane verified"
+    assert checked.stdout.strip() == "4 results in 1 lane verified, their heads against 4 checkpoints"
 
 
 def test_a_lane_started_without_its_central_database(

@@ -12,11 +12,14 @@ import httpx
 import pytest
 from live_server import LiveServer
 from live_server import wait_for_status as wait_for
+from sqlalchemy import select
 
 from daq.formats.vehicle_file import format_vehicle
 from service.access import KeyRing, Role
 from service.api import ServiceSettings, create_app
+from service.store.chain_anchor import HeadLog
 from service.store.database import Database
+from service.store.models import JobRow, SweepRow
 from service.store.result_chain import verify_chain
 from simulators.vehicle_sim import default_quarter_car
 
@@ -94,8 +97,13 @@ def test_a_vehicles_tests_newest_first_with_curves_figures_verdict_and_trend(
             assert (later["force_N"][i] > 0) == (velocities[i] > 0)
 
     database = Database(settings.resolved_database_url)
+    heads, _ = HeadLog.in_data_dir(settings.data_dir).checkpoints()  # the service logged each new head
     try:
-        report = verify_chain(database)
+        report = verify_chain(database, checkpoints=heads)
+        with database.sessions() as session:  # each link covers its sweep's recording, as hashed at its end
+            recordings = session.scalars(select(SweepRow.recording_sha256).order_by(SweepRow.id)).all()
+            jobs = session.scalars(select(JobRow.recording_sha256).order_by(JobRow.id)).all()
     finally:
         database.dispose()
-    assert (report.problem, report.results, report.lanes) == (None, 2, 1)
+    assert (report.problem, report.results, report.lanes, report.checkpoints) == (None, 2, 1, 2)
+    assert [h.head.sequence for h in heads] == [1, 2] and all(recordings) and jobs == recordings

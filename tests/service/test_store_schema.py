@@ -5,6 +5,7 @@ a newer shockbench is refused in one line."""
 from __future__ import annotations
 
 from datetime import UTC, datetime
+from pathlib import Path
 
 import pytest
 import sqlalchemy as sa
@@ -12,6 +13,7 @@ from alembic.autogenerate import compare_metadata
 from alembic.migration import MigrationContext
 
 from service.store.database import Database
+from service.store.jobs import JobFiles, JobStore
 from service.store.models import Base
 from service.store.result_chain import verify_chain
 from service.store.schema import BASELINE, SchemaError, head_revision, upgrade
@@ -156,5 +158,67 @@ def test_a_lanes_database_gains_the_result_chain_with_every_row_kept_and_its_res
         assert [(link.lane, link.job_id) for link in links] == [("north", 3), ("north", 1), ("south", 2)]
         report = verify_chain(database)
         assert (report.problem, report.results, report.lanes) == (None, 3, 2)
+    finally:
+        database.dispose()
+
+
+def test_links_of_the_first_format_keep_verifying_and_the_chain_goes_on_in_the_second(
+    database_url: str, tmp_path: Path
+) -> None:
+    """0005 -> 0006 (a chain that covers what a result means): the links there are keep format 1 and are
+    numbered in their lane's order; the lane's next result is linked in format 2 after them, and an old
+    result altered is still named by its format 1 hash."""
+    database = Database(database_url)
+    finished = datetime(2026, 11, 2, 9, 30, tzinfo=UTC)
+    try:
+        upgrade(database.engine, to="0002")
+        with database.engine.begin() as c:
+            for lane, gap in (("north", "1e-05"), ("south", "2e-05"), ("north", "3e-05")):
+                c.execute(
+                    sa.text(
+                        "INSERT INTO jobs (lane, kind, status, options, input_source, recording_path, "
+                        "vehicle_path, output_dir, result, artefacts, created_at, finished_at) VALUES "
+                        "(:lane, 'identify', 'succeeded', '{}', 'upload', 'r.csv', 'v.toml', 'out', :result, "
+                        "'{}', :t, :t)"
+                    ),
+                    {"lane": lane, "result": f'{{"gap_m": {gap}}}', "t": finished},
+                )
+        upgrade(database.engine, to="0005")  # 0003 chained them, in format 1
+        with database.engine.connect() as c:
+            before = c.execute(sa.text("SELECT id, hash FROM result_chain ORDER BY id")).all()
+        assert database.upgrade_schema() == ("0005", head_revision())
+        with database.engine.connect() as c:
+            links = c.execute(
+                sa.text("SELECT id, lane, hash, link_version, sequence FROM result_chain ORDER BY id")
+            )
+            old = links.all()
+        assert [(link.id, link.hash) for link in old] == [tuple(link) for link in before]  # untouched
+        assert [(link.lane, link.link_version, link.sequence) for link in old] == [
+            ("north", 1, 1),
+            ("north", 1, 2),
+            ("south", 1, 1),
+        ]
+        assert verify_chain(database).problem is None
+
+        store = JobStore(database, lane="north")
+        job = store.create(
+            "identify", {}, lambda _i: JobFiles(tmp_path / "r.csv", tmp_path / "v.toml", tmp_path)
+        )
+        assert store.mark_running(job.id) and store.succeed(job.id, {"gap_m": 4e-5}, {}, None)
+        with database.engine.connect() as c:
+            new = c.execute(
+                sa.text("SELECT previous_hash, link_version, sequence FROM result_chain WHERE job_id = :id"),
+                {"id": job.id},
+            ).one()
+        assert tuple(new) == (old[1].hash, 2, 3)
+        report = verify_chain(database)
+        assert (report.problem, report.results, report.lanes) == (None, 4, 2)
+
+        with database.engine.begin() as c:
+            c.execute(sa.text("UPDATE jobs SET result = '{\"gap_m\": 9e-05}' WHERE id = 3"))
+        assert verify_chain(database).problem == (
+            f"lane 'north': job 3's stored result was altered (it no longer matches its hash, chain link "
+            f"{old[1].id})"
+        )
     finally:
         database.dispose()

@@ -1,0 +1,245 @@
+"""Retention: what clients leave on disk is deleted once it is old, so that the data directory does not
+grow for ever (`serve --retain-days`, at start-up and every few hours; `shockbench retention`).
+
+What goes, each file logged with its size and why (one line per file):
+
+- the uploaded inputs (recording CSV, vehicle or model file) of a finished job (succeeded, failed,
+  cancelled) that finished more than `retain_days` ago; the job's artefacts (plots, report) stay, they are
+  small and the API serves them;
+- the recording (HDF5) of a sweep that ended more than `retain_days` ago; its vehicle file (a few kB) stays;
+- anything in data_dir/uploads older than `stale_upload_s`: uploads being checked live there for seconds,
+  so what is older was left by a crash.
+
+What never goes: a file a queued or running job reads (its recording or vehicle file), the recording of a
+sweep that a queued or running job analyses or a waiting or running scheduled test waits on, anything of a
+sweep that has not ended, anything outside the data directory. Old is judged by the times stored in the
+database (a job's or sweep's end), uploads by their files' modification time; both against `now`, which
+tests inject.
+
+The database is not touched: every result, and its chain link (service.store.result_chain, which covers
+the results and the recordings' hashes as stored in the database, not the files), stays, so `shockbench
+verify` passes after retention as before. What a deleted recording no longer allows: downloading it,
+running a new job on it, re-analysing it (`shockbench reanalyse --database` reports it failed).
+
+One residual race, accepted: a job submitted on a sweep older than `retain_days` in the moment between
+retention's look at the queue and its deletion fails at its start for want of its recording.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+from datetime import datetime, timedelta
+from pathlib import Path
+
+from sqlalchemy import and_, or_, select
+from sqlalchemy.orm import Session
+
+from service.store.database import Database
+from service.store.models import JobRow, JobStatus, ScheduleRow, ScheduleStatus, SweepRow, SweepStatus, utcnow
+
+log = logging.getLogger("shockbench.retention")
+
+DEFAULT_RETAIN_DAYS = 90.0
+"""A quarter: long enough to look at, download or re-run a test's recording after a complaint or a
+re-inspection, short enough to bound the disk (a busy lane's ~50 tests a day of ~1 MB recordings is ~5 GB
+a quarter; uploads are bounded by the per-key job quota and the upload size limit)."""
+STALE_UPLOAD_S = 24 * 3600.0
+"""An upload is copied and checked in seconds (a minute at the most): what is a day old in uploads/ was left
+by a crash, and no upload in progress is ever that old."""
+UNFINISHED_JOBS = (JobStatus.QUEUED.value, JobStatus.RUNNING.value)
+FINISHED_JOBS = (JobStatus.SUCCEEDED.value, JobStatus.FAILED.value, JobStatus.CANCELLED.value)
+ENDED_SWEEPS = (SweepStatus.COMPLETE.value, SweepStatus.FAILED.value, SweepStatus.ABORTED.value)
+UNFINISHED_TESTS = (ScheduleStatus.WAITING.value, ScheduleStatus.RUNNING.value)
+
+
+@dataclass(frozen=True)
+class RetentionPolicy:
+    retain_days: float = DEFAULT_RETAIN_DAYS
+    stale_upload_s: float = STALE_UPLOAD_S
+    lanes: tuple[str, ...] | None = None
+    """Only jobs and sweeps of these lanes (a database shared by lanes: this instance's and "" for rows from
+    before lanes); None: every row (a database of this data directory alone)."""
+
+    def __post_init__(self) -> None:
+        if not self.retain_days > 0 or not self.stale_upload_s > 0:
+            raise ValueError("retain_days and stale_upload_s must be > 0")
+
+
+@dataclass(frozen=True)
+class Removal:
+    """A file retention deleted (or, in a dry run, would delete)."""
+
+    path: Path
+    size_bytes: int
+    reason: str
+
+
+@dataclass(frozen=True)
+class _Candidate:
+    path: Path
+    reason: str
+
+
+def _in_lanes(column: object, lanes: tuple[str, ...] | None) -> list[object]:
+    return [] if lanes is None else [column.in_(lanes)]  # type: ignore[attr-defined]
+
+
+def _protected(session: Session) -> tuple[set[str], set[int]]:
+    """(files a queued or running job reads, sweeps a queued or running job or an unfinished scheduled test
+    needs), on every lane."""
+    active = session.execute(
+        select(JobRow.recording_path, JobRow.vehicle_path, JobRow.sweep_id).where(
+            JobRow.status.in_(UNFINISHED_JOBS)
+        )
+    ).all()
+    paths = {p for recording, vehicle, _ in active for p in (recording, vehicle) if p}
+    sweeps = {sweep for _, _, sweep in active if sweep is not None}
+    tests = select(ScheduleRow.sweep_id).where(
+        ScheduleRow.status.in_(UNFINISHED_TESTS), ScheduleRow.sweep_id.is_not(None)
+    )
+    sweeps |= {int(s) for s in session.scalars(tests).all()}
+    return paths, sweeps
+
+
+def _older(policy: RetentionPolicy) -> str:
+    return f"older than {policy.retain_days:g} days"
+
+
+def _old_job_inputs(session: Session, cutoff: datetime, policy: RetentionPolicy) -> Iterator[_Candidate]:
+    query = select(JobRow.id, JobRow.finished_at, JobRow.recording_path, JobRow.vehicle_path).where(
+        JobRow.input_source == "upload",
+        JobRow.status.in_(FINISHED_JOBS),
+        JobRow.finished_at < cutoff,
+        *_in_lanes(JobRow.lane, policy.lanes),
+    )
+    for job_id, finished_at, *files in session.execute(query.order_by(JobRow.id)):
+        why = f"uploaded input of job {job_id}, finished {finished_at:%Y-%m-%d}, {_older(policy)}"
+        yield from (_Candidate(Path(f), why) for f in files if f)
+
+
+def _old_recordings(
+    session: Session, cutoff: datetime, policy: RetentionPolicy, needed: set[int]
+) -> Iterator[_Candidate]:
+    ended = or_(
+        SweepRow.finished_at < cutoff, and_(SweepRow.finished_at.is_(None), SweepRow.created_at < cutoff)
+    )
+    query = select(SweepRow.id, SweepRow.finished_at, SweepRow.created_at, SweepRow.recording_path).where(
+        SweepRow.status.in_(ENDED_SWEEPS),
+        SweepRow.recording_path.is_not(None),
+        ended,
+        *_in_lanes(SweepRow.lane, policy.lanes),
+    )
+    for sweep_id, finished_at, created_at, recording in session.execute(query.order_by(SweepRow.id)):
+        if sweep_id not in needed:
+            when = finished_at or created_at
+            why = f"recording of sweep {sweep_id}, ended {when:%Y-%m-%d}, {_older(policy)}"
+            yield _Candidate(Path(recording), why)
+
+
+def _stale_uploads(uploads: Path, policy: RetentionPolicy, older_than: float) -> list[_Candidate]:
+    """Files under `uploads` last modified before `older_than` (a POSIX time)."""
+    why = f"partial upload left by an interrupted request, older than {policy.stale_upload_s / 3600:g} h"
+    found = []
+    for folder, _, names in os.walk(uploads):
+        for name in sorted(names):
+            path = Path(folder) / name
+            try:
+                if path.lstat().st_mtime < older_than:
+                    found.append(_Candidate(path, why))
+            except FileNotFoundError:
+                continue
+    return found
+
+
+def _stale_folders(uploads: Path, older_than: float) -> set[Path]:
+    """The staging folders under `uploads` unchanged since before `older_than` (read before their files
+    are deleted, which makes them look new)."""
+    folders = set()
+    for folder, _, _ in os.walk(uploads):
+        path = Path(folder)
+        try:
+            if path != uploads and path.stat().st_mtime < older_than:
+                folders.add(path)
+        except FileNotFoundError:
+            continue
+    return folders
+
+
+def _remove_if_empty(folders: set[Path]) -> None:
+    """Each of `folders` that is empty, deepest first (never a folder with anything in it)."""
+    for folder in sorted(folders, key=lambda path: -len(path.parts)):
+        try:
+            folder.rmdir()  # only an empty folder goes
+        except OSError:
+            continue
+
+
+def _inside(path: Path, folder: Path) -> bool:
+    try:
+        return path.resolve().is_relative_to(folder)
+    except OSError:
+        return False
+
+
+def run_retention(
+    database: Database,
+    data_dir: Path,
+    policy: RetentionPolicy,
+    *,
+    now: Callable[[], datetime] = utcnow,
+    dry_run: bool = False,
+) -> list[Removal]:
+    """Delete what `policy` says is old (module docstring); each file logged. Returns what was deleted (in
+    a dry run: what would be, nothing deleted). Blocking (database, files): call it in a thread."""
+    data_dir = data_dir.resolve()
+    moment = now()
+    cutoff = moment - timedelta(days=policy.retain_days)
+    uploads = data_dir / "uploads"
+    stale_before = moment.timestamp() - policy.stale_upload_s
+    with database.sessions() as session:
+        in_use, needed = _protected(session)
+        candidates = [
+            *_old_job_inputs(session, cutoff, policy),
+            *_old_recordings(session, cutoff, policy, needed),
+        ]
+    candidates += _stale_uploads(uploads, policy, stale_before)
+    stale_folders = _stale_folders(uploads, stale_before)
+    in_use_resolved = {Path(p).resolve() for p in in_use}
+    removals = []
+    for candidate in candidates:
+        removal = _remove(candidate, data_dir, in_use_resolved, dry_run)
+        if removal is not None:
+            removals.append(removal)
+    if not dry_run:  # the folders of the stale uploads too: an upload in progress is never a day old
+        stale_folders |= {r.path.parent for r in removals if r.path.is_relative_to(uploads)}
+        _remove_if_empty({folder for folder in stale_folders if folder != uploads})
+    if removals:
+        freed = sum(r.size_bytes for r in removals)
+        verb = "would free" if dry_run else "freed"
+        log.info("retention: %d file(s), %s %.1f MiB", len(removals), verb, freed / 2**20)
+    return removals
+
+
+def _remove(candidate: _Candidate, data_dir: Path, in_use: set[Path], dry_run: bool) -> Removal | None:
+    """Delete the candidate's file (in a dry run, only look at it) unless it is outside the data directory
+    or in use; logged."""
+    path = candidate.path
+    if not _inside(path, data_dir) or path.resolve() in in_use:
+        return None
+    try:
+        if not path.is_file():
+            return None  # deleted by an earlier run, or never written
+        size = path.stat().st_size
+        if not dry_run:
+            path.unlink()
+    except FileNotFoundError:
+        return None
+    except OSError as exc:
+        log.warning("retention: could not delete %s: %s", path, exc)
+        return None
+    verb = "would delete" if dry_run else "deleted"
+    log.info("retention: %s %s (%d bytes): %s", verb, path, size, candidate.reason)
+    return Removal(path, size, candidate.reason)
