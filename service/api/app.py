@@ -19,23 +19,28 @@ from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
 from fastapi import APIRouter, FastAPI
+from starlette.types import ASGIApp
 
 from service.access import KeyRing
 from service.api.central_sync import SyncAgent
 from service.api.contract import install_contract
 from service.api.errors import install_error_handlers
 from service.api.input_check import CHECKER
-from service.api.limits import BodyTimeout, UploadSizeLimit
+from service.api.key_gate import KeyGate
+from service.api.limits import BodyDeadline, BodyDeadlines, BodySizeLimit
 from service.api.methods import AllowedMethods
+from service.api.quotas import install_quotas, retention_task
 from service.api.results import verdict_of
 from service.api.routes import bench, events, jobs, live, schedules, status, sweeps, vehicles
 from service.api.scheduler import InspectionScheduler
 from service.api.schemas import API_PREFIX
+from service.api.security_headers import SecurityHeaders, install_docs
 from service.api.settings import ServiceSettings
 from service.api.stream_limit import StreamLimit
 from service.api.web import install_page
 from service.bench_control import BenchController
 from service.jobs.manager import JobManager
+from service.store.chain_anchor import HeadLog
 from service.store.database import Database
 from service.store.jobs import JobStore
 from service.store.schedules import ScheduleStore
@@ -144,7 +149,7 @@ def lifespan_factory(settings: ServiceSettings) -> Lifespan:
             if bench is not None:
                 await asyncio.to_thread(bench.close)
             raise
-        store = JobStore(database, lane=settings.lane)
+        store = JobStore(database, lane=settings.lane, heads=HeadLog.in_data_dir(settings.data_dir))
         sweep_store = SweepStore(database, lane=settings.lane)
         failed_sweeps = await asyncio.to_thread(sweep_store.recover_interrupted)
         if failed_sweeps:
@@ -170,6 +175,7 @@ def lifespan_factory(settings: ServiceSettings) -> Lifespan:
             scheduler=scheduler,
             sync=sync,
         )
+        retention = retention_task(settings, database)
         try:
             await asyncio.to_thread(CHECKER.start)
             await manager.start()
@@ -177,9 +183,13 @@ def lifespan_factory(settings: ServiceSettings) -> Lifespan:
                 await sync.start()
             if scheduler is not None:
                 await scheduler.start()
+            if retention is not None:
+                await retention.start()  # a first pass now, then every few hours (service.api.quotas)
             log.info("shockbench service up; database %s, data in %s", database.safe_url, settings.data_dir)
             yield
         finally:
+            if retention is not None:
+                await retention.stop()
             if scheduler is not None:
                 await scheduler.stop()  # no new test starts while the bench closes
             if bench is not None:
@@ -207,21 +217,44 @@ def api_router() -> APIRouter:
     return router
 
 
+class ServiceApp(FastAPI):
+    """The FastAPI app with the security headers outside everything, FastAPI's error middleware included
+    (the 500 of an unexpected error carries them too)."""
+
+    def build_middleware_stack(self) -> ASGIApp:
+        return SecurityHeaders(super().build_middleware_stack())
+
+
 def create_app(settings: ServiceSettings) -> FastAPI:
-    app = FastAPI(
+    """The app. Before a route reads a body (outermost first): the allowed methods (OPTIONS), the key
+    gate (401 before the body), the body deadlines and the body size caps (service.api.key_gate,
+    service.api.limits); the connection-level guards are in the server (service.api.server)."""
+    app = ServiceApp(
         title="shockbench bench service",
         summary="On-vehicle shock absorber test bench: identification jobs, progress, results and plots.",
         version=service_version(),
         lifespan=lifespan_factory(settings),
-        docs_url="/docs",
+        docs_url=None,  # install_docs: the same page, with its own security policy
         redoc_url=None,
         openapi_url=f"{API_PREFIX}/openapi.json",
     )
+    app.state.settings = settings  # for the server: the connection limits
     install_error_handlers(app)
-    app.add_middleware(UploadSizeLimit, max_bytes=settings.max_upload_bytes)
-    app.add_middleware(BodyTimeout, timeout_s=settings.body_timeout_s)
+    install_quotas(app, settings)  # innermost of the body guards: an oversized body is a 413 first
+    app.add_middleware(
+        BodySizeLimit, max_upload_bytes=settings.max_upload_bytes, max_json_bytes=settings.max_json_bytes
+    )
+    deadlines = BodyDeadlines(
+        pause_s=settings.body_timeout_s,
+        min_rate_bytes_s=settings.body_min_rate_bytes_s,
+        grace_s=settings.body_rate_grace_s,
+        total_s=settings.body_total_timeout_s,
+    )
+    app.add_middleware(BodyDeadline, deadlines=deadlines)
+    app.add_middleware(KeyGate, routes=app.router.routes, keys=settings.keys)
     app.include_router(api_router())
     install_page(app)
+    install_docs(app)
     install_contract(app)
     app.add_middleware(AllowedMethods, routes=app.router.routes)
     return app

@@ -18,6 +18,11 @@ bearer = HTTPBearer(
 )
 
 CHALLENGE = {"WWW-Authenticate": "Bearer"}
+NO_KEY = "this needs a key: send 'Authorization: Bearer KEY'"
+UNKNOWN_KEY = "unknown key"
+KEY_CHECKS: dict[Callable[..., Awaitable[Principal]], Role] = {}
+"""Every dependency `require` made, with its role: service.api.key_gate finds the routes that need a key
+by them, to refuse anonymous callers before their body is read."""
 
 
 def require(role: Role) -> Callable[..., Awaitable[Principal]]:
@@ -28,11 +33,11 @@ def require(role: Role) -> Callable[..., Awaitable[Principal]]:
         request: Request, credentials: Annotated[HTTPAuthorizationCredentials | None, Depends(bearer)]
     ) -> Principal:
         if credentials is None:
-            raise ApiError(401, "this needs a key: send 'Authorization: Bearer KEY'", headers=CHALLENGE)
+            raise ApiError(401, NO_KEY, headers=CHALLENGE)
         keys: KeyRing = request.app.state.services.keys
         principal = keys.lookup(credentials.credentials)
         if principal is None:
-            raise ApiError(401, "unknown key", headers=CHALLENGE)
+            raise ApiError(401, UNKNOWN_KEY, headers=CHALLENGE)
         if principal.role < role:
             raise ApiError(
                 403, f"this needs the {role.label} role; the key has the {principal.role.label} role"
@@ -40,6 +45,7 @@ def require(role: Role) -> Callable[..., Awaitable[Principal]]:
         return principal
 
     admitted.__name__ = f"require_{role.label}"
+    KEY_CHECKS[admitted] = role
     return admitted
 
 

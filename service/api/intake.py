@@ -30,6 +30,7 @@ from service.api.settings import ServiceSettings
 from service.jobs.context import InputError
 from service.jobs.kinds import JobKindSpec
 from service.store.jobs import JobFiles, JobRecord, JobStore
+from service.store.quota import KeyQuota
 
 RECORDING_FILE = "recording.csv"
 
@@ -101,8 +102,13 @@ def accept_upload(
     recording: tuple[str | None, BinaryIO],
     vehicle: tuple[str | None, BinaryIO],
     principal: Principal,
+    quota: KeyQuota | None = None,
 ) -> JobRecord:
-    """Check the uploaded files (file name, content), then create the queued job, its folder holding them."""
+    """Check the uploaded files (file name, content), then create the queued job, its folder holding them.
+    With `quota`, a key at its limit is refused (QuotaExceededError) before the files are copied, and again
+    in the transaction that inserts the job (service.store.quota)."""
+    if quota is not None:
+        store.check_quota(quota)
     settings.uploads_dir.mkdir(parents=True, exist_ok=True)
     staging = Path(tempfile.mkdtemp(prefix="upload-", dir=settings.uploads_dir))
     try:
@@ -125,6 +131,7 @@ def accept_upload(
             place,
             input_source="upload",
             submitted_by=principal.key_id,
+            quota=quota,
         )
     finally:
         shutil.rmtree(staging, ignore_errors=True)  # gone already when the job took it
@@ -140,9 +147,13 @@ def accept_recording(
     submitted_by: str | None,
     *,
     sweep_id: int | None = None,
+    quota: KeyQuota | None = None,
 ) -> JobRecord:
     """A job on a recording already on disk (a sweep's): checked alike, the files stay where they are.
-    `submitted_by` is the key id of whoever asked (an operator, or the author of a scheduled test)."""
+    `submitted_by` is the key id of whoever asked (an operator, or the author of a scheduled test); with
+    `quota` (an operator's request, not the scheduler's job) its key's limit is kept as in accept_upload."""
+    if quota is not None:
+        store.check_quota(quota)
     _check_elsewhere(spec, options, (recording_path, recording_path.name), (vehicle_path, vehicle_path.name))
 
     def place(job_id: int) -> JobFiles:
@@ -157,4 +168,5 @@ def accept_recording(
         input_source="sweep" if sweep_id is not None else "recording",
         sweep_id=sweep_id,
         submitted_by=submitted_by,
+        quota=quota,
     )

@@ -12,10 +12,12 @@ from datetime import datetime
 from typing import Annotated, Any, Literal
 
 from fastapi import Query
-from pydantic import BaseModel, Field, create_model
+from pydantic import AfterValidator, BaseModel, Field, create_model
+from pydantic_core import PydanticCustomError
 
 from daq.sweep.model import SweepProgress
 from estimator.sweep import SweepLaw
+from service import free_text
 from service.api.results import DiagnoseResult, IdentifyResult, ValidateResult
 from service.jobs.diagnose_job import DiagnoseJobOptions
 from service.jobs.identify_job import IdentifyJobOptions
@@ -30,6 +32,18 @@ PageLimit = Annotated[int, Query(ge=1, le=500)]
 """The `limit` query parameter of every list endpoint (jobs, sweeps, scheduled tests)."""
 PageOffset = Annotated[int, Query(ge=0, le=2**31)]
 """The `offset` query parameter of every list endpoint."""
+
+
+def _plain_text(text: str) -> str:
+    problem = free_text.problem(text)
+    if problem is not None:
+        raise PydanticCustomError("control_character", problem)
+    return text
+
+
+FreeText = Annotated[str, AfterValidator(_plain_text)]
+"""Every free-text field a client sends (an operator's name): no control characters, bidirectional
+overrides or line separators (service.free_text), refused with 422 naming the field."""
 
 
 class ProgressOut(BaseModel):

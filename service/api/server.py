@@ -1,6 +1,8 @@
 """Serving the app: the listening socket, and uvicorn's server told to end the job event streams as soon
 as a stop begins (uvicorn waits for open connections before the lifespan shutdown, and an event stream
-of a running job stays open for as long as the job runs)."""
+of a running job stays open for as long as the job runs). Its HTTP protocol is uvicorn's h11 one with
+the header deadline and the per-address connection cap (service.api.connection_limits) of the app's
+settings."""
 
 from __future__ import annotations
 
@@ -9,6 +11,9 @@ from types import FrameType
 
 import uvicorn
 from fastapi import FastAPI
+
+from service.api.connection_limits import ConnectionLimits, guarded_protocol
+from service.api.settings import DEFAULT_HEADER_TIMEOUT_S, DEFAULT_MAX_CONNECTIONS_PER_ADDRESS
 
 SHUTDOWN_GRACE_S = 5.0
 """On a stop, open requests get this long before they are cancelled."""
@@ -48,11 +53,21 @@ def begin_shutdown(app: FastAPI) -> None:
             services.bench.service_stopping()
 
 
+def connection_limits(app: FastAPI) -> ConnectionLimits:
+    """The limits of the settings the app was made with (service.api.create_app), else the defaults."""
+    settings = getattr(app.state, "settings", None)
+    return ConnectionLimits(
+        header_timeout_s=getattr(settings, "header_timeout_s", DEFAULT_HEADER_TIMEOUT_S),
+        max_per_address=getattr(settings, "max_connections_per_address", DEFAULT_MAX_CONNECTIONS_PER_ADDRESS),
+    )
+
+
 class ServiceServer(uvicorn.Server):
     def __init__(self, app: FastAPI, log_level: str = "info") -> None:
         super().__init__(
             uvicorn.Config(
                 app,
+                http=guarded_protocol(connection_limits(app)),
                 lifespan="on",
                 log_level=log_level,
                 access_log=False,

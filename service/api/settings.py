@@ -3,7 +3,9 @@
 
 from __future__ import annotations
 
+import shutil
 import socket
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -11,6 +13,7 @@ from estimator.verdict import VerdictThresholds
 from service.access import KeyRing
 from service.jobs.manager import WorkerSettings
 from service.store.database import default_database_url
+from service.store.retention import DEFAULT_RETAIN_DAYS
 
 DEFAULT_MAX_STREAMS_PER_KEY = 8
 DEFAULT_BODY_TIMEOUT_S = 30.0
@@ -18,6 +21,34 @@ DEFAULT_BODY_TIMEOUT_S = 30.0
 declare more than they send cannot hold connections for ever."""
 DEFAULT_MAX_UPLOAD_BYTES = 64 * 1024 * 1024
 """64 MiB: a 20 s quarter-car recording at 1 kHz is about 1 MB of CSV, a 10-minute axle recording ~40 MB."""
+DEFAULT_MAX_JSON_BYTES = 2**20 + 2**16
+"""1 MiB + 64 KiB for the JSON bodies (every route but the uploads): the largest field, the vehicle text, is
+at most 1,000,000 characters; the rest covers its escaping and the other fields."""
+DEFAULT_HEADER_TIMEOUT_S = 10.0
+"""Longest time for a request's headers (a few hundred bytes: a fraction of a second on any link)."""
+DEFAULT_BODY_MIN_RATE_BYTES_S = 1024.0
+DEFAULT_BODY_RATE_GRACE_S = 5.0
+"""After 5 s a body must have arrived at 1 KiB/s on average: any real link (a 2G modem gives 5 KiB/s) keeps
+to it; a trickle of a byte every few seconds is cut after ~6 s."""
+DEFAULT_BODY_TOTAL_TIMEOUT_S = 300.0
+"""A whole body within 5 minutes: a 64 MiB upload (the upload limit) needs 1.8 Mbit/s on average, which a
+poor workshop Wi-Fi still gives."""
+DEFAULT_MAX_CONNECTIONS_PER_ADDRESS = 64
+"""Open connections per client address: ten times what a browser opens to one site (6) and room for a
+script's pool, small enough that one address cannot hold the service's sockets."""
+DEFAULT_MAX_QUEUED_JOBS_PER_KEY = 20
+"""A key's queued and running jobs at once: an operator re-running a day's few tests, or a script
+re-analysing a batch, stays well below; a runaway client (931 jobs in five minutes) is stopped at 20."""
+DEFAULT_MAX_SCHEDULED_TESTS_PER_KEY = 100
+"""A key's waiting and running scheduled tests: about two days of a busy inspection line."""
+DEFAULT_MIN_FREE_BYTES = 1 << 30
+"""1 GiB kept free on the data directory's file system: room for the recordings of the sweeps under way
+and for the database and logs to grow, whatever uploads arrive."""
+
+
+def disk_free_bytes(path: Path) -> int:
+    """Free bytes on the file system of `path` for the service's user."""
+    return shutil.disk_usage(path).free
 
 
 @dataclass(frozen=True)
@@ -39,8 +70,33 @@ class ServiceSettings:
     max_upload_bytes: int = DEFAULT_MAX_UPLOAD_BYTES
     body_timeout_s: float = DEFAULT_BODY_TIMEOUT_S
     """A request body that brings nothing for this long before it is complete is answered 408."""
+    max_json_bytes: int = DEFAULT_MAX_JSON_BYTES
+    """Size cap of a request body on every route but the multipart uploads (max_upload_bytes); over: 413."""
+    header_timeout_s: float = DEFAULT_HEADER_TIMEOUT_S
+    """A connection whose request headers are not complete this long after it began waiting for them is
+    closed (service.api.connection_limits)."""
+    body_min_rate_bytes_s: float = DEFAULT_BODY_MIN_RATE_BYTES_S
+    """After body_rate_grace_s, a request body slower than this on average is answered 408 (0: no
+    minimum)."""
+    body_rate_grace_s: float = DEFAULT_BODY_RATE_GRACE_S
+    body_total_timeout_s: float = DEFAULT_BODY_TOTAL_TIMEOUT_S
+    """A request body not complete within this long is answered 408."""
+    max_connections_per_address: int = DEFAULT_MAX_CONNECTIONS_PER_ADDRESS
+    """Open connections one client address may hold; a connection beyond is closed at once."""
     max_streams_per_key: int = DEFAULT_MAX_STREAMS_PER_KEY
     """Event streams one key may hold open at once; one more is answered 429."""
+    max_queued_jobs_per_key: int = DEFAULT_MAX_QUEUED_JOBS_PER_KEY
+    """Jobs one key may have queued or running at once; one more submit is answered 429
+    (service.api.quotas)."""
+    max_scheduled_tests_per_key: int = DEFAULT_MAX_SCHEDULED_TESTS_PER_KEY
+    """Scheduled tests one key may have waiting or running at once; one more is answered 429."""
+    min_free_bytes: int = DEFAULT_MIN_FREE_BYTES
+    """An upload that would leave less free on the data directory's file system is answered 507."""
+    retain_days: float | None = DEFAULT_RETAIN_DAYS
+    """Uploaded inputs of finished jobs and sweep recordings older than this are deleted
+    (service.store.retention); None: kept for ever."""
+    disk_free_bytes: Callable[[Path], int] = field(default=disk_free_bytes, repr=False, compare=False)
+    """How free space is measured (tests simulate a full disk with their own)."""
     worker: WorkerSettings = field(default_factory=WorkerSettings)
     lane: str = field(default_factory=socket.gethostname)
     """This instance's lane (`serve --lane`, default the host name): stamped on its sweeps, jobs and

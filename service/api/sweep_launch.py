@@ -22,6 +22,7 @@ from daq.sweep.model import DEFAULT_SETTLE_S, StopKind, SweepError, SweepOutcome
 from daq.sweep.plan import SweepPlan
 from estimator.sweep import SweepLaw, SweepSettings
 from service.api.intake import parse_vehicle_field
+from service.api.schemas import FreeText
 from service.bench_control import BenchBusyError, BenchController, SweepDone
 from service.jobs.bounds import check_vehicle_bounds
 from service.jobs.context import InputError
@@ -90,7 +91,7 @@ class SweepIn(SweepSettingsIn):
         description="the vehicle's VIN or registration: letters, digits, spaces, dots and dashes",
     )
     tyre_pressure_bar: float | None = Field(None, ge=0.5, le=10, description="tyre pressure measured (bar)")
-    operator_name: str | None = Field(
+    operator_name: FreeText | None = Field(
         None, min_length=1, max_length=80, description="who ran the test (free text, for the record)"
     )
 

@@ -21,6 +21,7 @@ from service.jobs.identify_job import IdentifyJobOptions
 from service.jobs.kinds import KINDS
 from service.store.jobs import JobRecord, JobStore
 from service.store.models import JobKind
+from service.store.quota import KeyQuota
 from service.store.sweeps import SweepRecord
 
 
@@ -59,10 +60,11 @@ def accept_sweep_job(
     options: IdentifyJobOptions | DiagnoseJobOptions,
     submitted_by: str | None,
     kind: JobKind = JobKind.IDENTIFY,
+    quota: KeyQuota | None = None,
 ) -> JobRecord:
     """A queued job of `kind` (identification, diagnosis) on the sweep's recording (ConflictError until
     the sweep has ended, a UserError when its recording cannot be read as one). The caller enqueues it
-    with the job manager."""
+    with the job manager. `quota`: an operator's request keeps its key's limit (service.store.quota)."""
     h5 = recording_path(record)
     assert record.vehicle_file is not None
     return accept_recording(
@@ -74,4 +76,5 @@ def accept_sweep_job(
         FilePath(record.vehicle_file),
         submitted_by,
         sweep_id=record.id,
+        quota=quota,
     )

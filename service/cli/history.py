@@ -1,6 +1,10 @@
 """`shockbench history VEHICLE_ID`: every test of a vehicle in the service's database (all lanes, newest
 first) with its lane figures and verdict, and how its damping has changed since the first test. `--json`
-prints what `GET /api/v1/vehicles/{id}/results` answers (service.api.history builds both)."""
+prints what `GET /api/v1/vehicles/{id}/results` answers (service.api.history builds both).
+
+Stored text (an operator's name, a lane) is printed with its control characters and bidirectional
+overrides escaped (service.free_text): the API refuses them now, but an older database may hold some, and
+printed raw they would reach the terminal as escape sequences."""
 
 from __future__ import annotations
 
@@ -9,6 +13,7 @@ from typing import TYPE_CHECKING
 
 from service.cli.db import add_database_arguments, open_database
 from service.cli.errors import CliError
+from service.free_text import escaped, json_escaped
 
 if TYPE_CHECKING:
     from service.api.history import TrendOut, VehicleHistoryOut, VehicleTestOut
@@ -36,14 +41,14 @@ def _figures(test: VehicleTestOut) -> str:
 
 def tests_table(history: VehicleHistoryOut) -> list[str]:
     lines = [
-        f"vehicle {history.vehicle_id}: {len(history.tests)} test(s), all lanes, newest first",
+        f"vehicle {escaped(history.vehicle_id)}: {len(history.tests)} test(s), all lanes, newest first",
         f"{'sweep':>6}  {'lane':<12} {'date (UTC)':<16} {'status':<9} {'tyre bar':>8}  {'operator':<16} "
         f"{'job':>6}  {'verdict':<7} EUSAMA, least phase",
     ]
     for t in history.tests:
         lines.append(
-            f"{t.sweep_id:>6}  {t.lane or '-':<12.12} {t.date:%Y-%m-%d %H:%M} {t.status.value:<9} "
-            f"{_number(t.tyre_pressure_bar, 2):>8}  {t.operator_name or '-':<16.16} "
+            f"{t.sweep_id:>6}  {escaped(t.lane) or '-':<12.12} {t.date:%Y-%m-%d %H:%M} {t.status.value:<9} "
+            f"{_number(t.tyre_pressure_bar, 2):>8}  {escaped(t.operator_name or '-'):<16.16} "
             f"{t.identification_job_id if t.identification_job_id is not None else '-':>6}  "
             f"{t.verdict.outcome if t.verdict is not None else '-':<7} {_figures(t)}"
         )
@@ -54,7 +59,7 @@ def trend_table(trend: TrendOut) -> list[str]:
     velocities = trend.reference_velocities_m_s
     lines = ["damper force (N) at reference velocities, change since the first test in brackets"]
     for corner in trend.corners:
-        lines.append(f"corner {corner.corner}:")
+        lines.append(f"corner {escaped(corner.corner)}:")
         lines.append(f"{'sweep':>6}  {'date':<10} " + " ".join(f"{f'{v:+.1f} m/s':>16}" for v in velocities))
         for t in corner.tests:
             cells = [
@@ -78,7 +83,7 @@ def run_history(args: argparse.Namespace) -> int:
     if not history.tests:
         raise CliError(f"no test of vehicle {args.vehicle_id!r} in database {database.safe_url}")
     if args.json:
-        print(history.model_dump_json(indent=2))
+        print(json_escaped(history.model_dump_json(indent=2)))
     else:
         print("\n".join([*tests_table(history), "", *trend_table(history.trend)]))
     return 0

@@ -33,6 +33,7 @@ COMMAND_MODULES: dict[str, str] = {
     "history": "history",
     "verify": "verify",
     "reanalyse": "reanalyse",
+    "retention": "retention",
 }
 """Each command and the module under service/cli that registers it, in `--help`'s order. A command line
 that names a command imports and registers only that module: all twelve parsers cost a whole `identify`

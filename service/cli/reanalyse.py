@@ -10,6 +10,7 @@ from pathlib import Path
 
 from estimator.vehicle import TyreModel
 from service.cli.errors import EXIT_FAILED, CliError
+from service.free_text import escaped
 
 DEFAULT_WORKERS = 2
 
@@ -36,7 +37,8 @@ def run_reanalyse(args: argparse.Namespace) -> int:
         scheduler=args.scheduler,
         workers=args.workers,
     )
-    report = reanalyse(items, settings, lambda line: print(line, file=sys.stderr, flush=True))
+    # a line names a recording and why it failed: a file name, or text stored in the database (escaped)
+    report = reanalyse(items, settings, lambda line: print(escaped(line), file=sys.stderr, flush=True))
     total = len(report.rows)
     print(f"summary: {report.summary} ({total - report.failed} ok, {report.failed} failed)")
     if report.failed:

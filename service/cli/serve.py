@@ -3,6 +3,10 @@
     shockbench serve [--config BENCH.toml] [--simulated] [--host H] [--port P] [--keys KEYS.toml]
                      [--data DIR] [--database URL [--shared-queue] [--require-database]]
                      [--max-upload-mb N] [--max-streams-per-key N] [--body-timeout-s S]
+                     [--max-json-kb N] [--header-timeout-s S] [--body-min-rate-bytes-s N]
+                     [--body-rate-grace-s S] [--body-total-timeout-s S] [--max-connections-per-address N]
+                     [--max-queued-jobs-per-key N] [--max-scheduled-tests-per-key N]
+                     [--min-free-mb N] [--retain-days DAYS]
 
 Listens on loopback by default; any other address needs a keys file. Without a keys file an operator key
 is generated and printed at start-up (as Jupyter prints its token). Port 0 takes a free port; the line
@@ -54,6 +58,17 @@ def run_serve(args: argparse.Namespace) -> int:
         raise CliError("--max-streams-per-key must be at least 1")
     if args.body_timeout_s is not None and not 0 < args.body_timeout_s <= 3600:
         raise CliError("--body-timeout-s must lie in (0, 3600]")
+    check_connection_limits(args)
+    for flag, count in (
+        ("--max-queued-jobs-per-key", args.max_queued_jobs_per_key),
+        ("--max-scheduled-tests-per-key", args.max_scheduled_tests_per_key),
+    ):
+        if count is not None and not count >= 1:
+            raise CliError(f"{flag} must be at least 1")
+    if args.min_free_mb is not None and not args.min_free_mb >= 0:
+        raise CliError("--min-free-mb must be >= 0")
+    if args.retain_days is not None and not args.retain_days >= 0:
+        raise CliError("--retain-days must be >= 0 (0: keep everything)")
     for flag, given in (("--shared-queue", args.shared_queue), ("--require-database", args.require_database)):
         if given and args.database is None:
             raise CliError(f"{flag} needs --database URL (the central database)")
@@ -78,9 +93,20 @@ def run_serve(args: argparse.Namespace) -> int:
         for name, value in (
             ("max_streams_per_key", args.max_streams_per_key),
             ("body_timeout_s", args.body_timeout_s),
+            ("max_json_bytes", None if args.max_json_kb is None else args.max_json_kb * 1024),
+            ("header_timeout_s", args.header_timeout_s),
+            ("body_min_rate_bytes_s", args.body_min_rate_bytes_s),
+            ("body_rate_grace_s", args.body_rate_grace_s),
+            ("body_total_timeout_s", args.body_total_timeout_s),
+            ("max_connections_per_address", args.max_connections_per_address),
+            ("max_queued_jobs_per_key", args.max_queued_jobs_per_key),
+            ("max_scheduled_tests_per_key", args.max_scheduled_tests_per_key),
+            ("min_free_bytes", None if args.min_free_mb is None else int(args.min_free_mb * 2**20)),
         )
         if value is not None
     }
+    if args.retain_days is not None:
+        limits["retain_days"] = args.retain_days or None  # 0: retention off
     settings = ServiceSettings(
         data_dir=Path(args.data).resolve(),
         keys=keys,
@@ -124,6 +150,21 @@ def run_serve(args: argparse.Namespace) -> int:
     with contextlib.suppress(KeyboardInterrupt):  # uvicorn stops gracefully on Ctrl-C, then re-raises it
         server.run(sockets=[sock])
     return 0 if server.started else EXIT_FAILED
+
+
+def check_connection_limits(args: argparse.Namespace) -> None:
+    """The request and connection limits given (None: the default), each in its range (CliError)."""
+    ranges = (
+        ("--max-json-kb", args.max_json_kb, 1, 2**20),
+        ("--header-timeout-s", args.header_timeout_s, 0.01, 3600),
+        ("--body-min-rate-bytes-s", args.body_min_rate_bytes_s, 0, 2**30),
+        ("--body-rate-grace-s", args.body_rate_grace_s, 0, 3600),
+        ("--body-total-timeout-s", args.body_total_timeout_s, 0.01, 86400),
+        ("--max-connections-per-address", args.max_connections_per_address, 1, 100_000),
+    )
+    for flag, value, low, high in ranges:
+        if value is not None and not low <= value <= high:
+            raise CliError(f"{flag} must lie in [{low:g}, {high:g}]")
 
 
 def reach_central(url: str | None, required: bool) -> str | None:
@@ -236,6 +277,72 @@ def register(sub: argparse._SubParsersAction) -> None:
         default=None,
         help="a request body that brings nothing for this long before it is complete is answered 408 "
         "(default 30)",
+    )
+    p.add_argument(
+        "--max-json-kb",
+        type=int,
+        default=None,
+        help="size limit (KiB) of a request body on every route but the uploads, all JSON (default 1088: "
+        "1 MiB + 64 KiB)",
+    )
+    p.add_argument(
+        "--header-timeout-s",
+        type=float,
+        default=None,
+        help="a connection whose request headers are not complete within this long is closed (default 10)",
+    )
+    p.add_argument(
+        "--body-min-rate-bytes-s",
+        type=float,
+        default=None,
+        help="after --body-rate-grace-s, a request body slower than this on average is answered 408 "
+        "(default 1024; 0: no minimum)",
+    )
+    p.add_argument(
+        "--body-rate-grace-s",
+        type=float,
+        default=None,
+        help="time a request body has before its minimum rate applies (default 5)",
+    )
+    p.add_argument(
+        "--body-total-timeout-s",
+        type=float,
+        default=None,
+        help="a request body not complete within this long is answered 408 (default 300)",
+    )
+    p.add_argument(
+        "--max-connections-per-address",
+        type=int,
+        default=None,
+        help="open connections one client address may hold; one more is closed at once (default 64; "
+        "behind a reverse proxy all clients share its address)",
+    )
+    p.add_argument(
+        "--max-queued-jobs-per-key",
+        type=int,
+        default=None,
+        help="jobs one key may have queued or running at once; one more submit is answered 429 (default 20)",
+    )
+    p.add_argument(
+        "--max-scheduled-tests-per-key",
+        type=int,
+        default=None,
+        help="scheduled tests one key may have waiting or running at once; one more is answered 429 "
+        "(default 100)",
+    )
+    p.add_argument(
+        "--min-free-mb",
+        type=float,
+        default=None,
+        help="free disk (MiB) kept on the data directory's file system: an upload that would leave less "
+        "is answered 507 (default 1024)",
+    )
+    p.add_argument(
+        "--retain-days",
+        type=float,
+        default=None,
+        help="uploaded inputs of finished jobs and sweep recordings older than this are deleted, at start "
+        "and every 6 h, each logged; 0 keeps everything (default 90)",
     )
     p.add_argument("--worker-nice", type=int, default=5, help="nice increment of the worker (default 5)")
     p.add_argument(

@@ -58,10 +58,26 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--law", choices=[law.value for law in SweepLaw], default=defaults.law.value)
     parser.add_argument("--settle-s", type=float, default=SETTLE_S, help="recorded after the sweep")
     parser.add_argument("--rest-s", type=float, default=REST_S, help="read at rest before (zeroing)")
-    parser.add_argument("--operator", default="", help="who runs the sweep (kept in the recording)")
+    parser.add_argument(
+        "--operator",
+        type=operator_name,
+        default="",
+        help="who runs the sweep (kept in the recording; no control characters)",
+    )
     parser.add_argument("--seed", type=int, default=0, help="--simulated: seed of the laser noise")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.set_defaults(handler=run_sweep_command)
+
+
+def operator_name(text: str) -> str:
+    """--operator as given, unless it holds a control character or a bidirectional override (which
+    would reach a terminal raw wherever the name is shown): argparse's one-line error, exit 2."""
+    from service.free_text import problem
+
+    found = problem(text)
+    if found is not None:
+        raise argparse.ArgumentTypeError(f"the operator's name {found}")
+    return text
 
 
 def _request(args: argparse.Namespace, vehicle: VehicleFile) -> SweepRequest:

@@ -17,6 +17,7 @@ from service.api.auth import Operator, Viewer
 from service.api.contract import created, download, upload_encoding, upload_model
 from service.api.errors import ApiError, responses
 from service.api.intake import accept_upload
+from service.api.quotas import QUOTA_RESPONSES, STORAGE_RESPONSES, job_quota
 from service.api.schemas import API_PREFIX, JOB_MODELS, JobList, JobOut, PageLimit, PageOffset, job_view
 from service.jobs.kinds import KINDS, JobKindSpec
 from service.store.jobs import JobRecord
@@ -83,6 +84,7 @@ def _submit_endpoint(spec: JobKindSpec, router: APIRouter) -> None:
             (recording.filename, recording.file),
             (vehicle.filename, vehicle.file),
             principal,
+            job_quota(services.settings, principal),
         )
         services.manager.enqueue(record)
         out = job_out(request, record)
@@ -93,7 +95,9 @@ def _submit_endpoint(spec: JobKindSpec, router: APIRouter) -> None:
         f"{spec.summary}. Multipart upload: the recording CSV, its {spec.companion.field} file and the "
         "options. The input "
         "is checked now (422 naming the field); the job is queued and runs in the worker process. "
-        "Answers 201 with Location: the job, to poll or to follow at its events link."
+        "Answers 201 with Location: the job, to poll or to follow at its events link. 429 (Retry-After) "
+        "when the key has as many jobs queued or running as allowed; 507 when the data directory is "
+        "short of free disk."
     )
     router.add_api_route(
         spec.submit_path,
@@ -104,7 +108,10 @@ def _submit_endpoint(spec: JobKindSpec, router: APIRouter) -> None:
         name=f"submit_{spec.name}",
         operation_id=f"submit_{spec.name}",
         summary=f"Submit a {spec.name} job",
-        responses=created(f"{spec.name} job") | responses(400, 401, 403, 413, 422),
+        responses=created(f"{spec.name} job")
+        | responses(400, 401, 403, 413, 422)
+        | QUOTA_RESPONSES
+        | STORAGE_RESPONSES,
         openapi_extra={
             "requestBody": {"content": {"multipart/form-data": {"encoding": upload_encoding(spec)}}}
         },

@@ -16,9 +16,11 @@ from typing import Annotated
 from fastapi import APIRouter, Path, Query, Request, Response
 from pydantic import AwareDatetime, BaseModel, ConfigDict, Field
 
+from service.access import Principal
 from service.api.auth import Admin, Viewer
 from service.api.contract import created
 from service.api.errors import ApiError, responses
+from service.api.quotas import QUOTA_RESPONSES, schedule_quota
 from service.api.routes.bench import require_bench
 from service.api.routes.sweeps import SweepTestOut
 from service.api.schemas import API_PREFIX, IdentifyOptionsOut, PageLimit, PageOffset, SweepSettingsOut
@@ -125,7 +127,11 @@ async def _load(request: Request, test_id: int) -> ScheduleRecord:
 
 
 def _create(
-    bench: BenchController, store: ScheduleStore, settings: ServiceSettings, body: ScheduleIn, key_id: str
+    bench: BenchController,
+    store: ScheduleStore,
+    settings: ServiceSettings,
+    body: ScheduleIn,
+    principal: Principal,
 ) -> ScheduleRecord:
     """Check as a sweep is checked (422 naming the field), then store the test. Blocking."""
     vehicle = plan_request(bench, body).request.vehicle
@@ -153,7 +159,8 @@ def _create(
         body.job.model_dump(mode="json"),
         body.run_at,
         place,
-        created_by=key_id,
+        created_by=principal.key_id,
+        quota=schedule_quota(settings, principal),
     )
 
 
@@ -162,19 +169,18 @@ def _create(
     status_code=201,
     response_model=ScheduleOut,
     operation_id="schedule_test",
-    responses=created("scheduled test") | responses(400, 401, 403, 422, 503),
+    responses=created("scheduled test") | responses(400, 401, 403, 422, 503) | QUOTA_RESPONSES,
 )
 async def schedule_test(
     request: Request, response: Response, body: ScheduleIn, principal: Admin
 ) -> ScheduleOut:
     """Schedule an inspection-line test (admin). Checked now as a sweep is (422 naming the field: the bench's
     safety envelope, the vehicle file); it then waits for its time, or for the bench to be free, and runs
-    one at a time with the bench's other tests. Answers 201 with Location: the test, to poll."""
+    one at a time with the bench's other tests. Answers 201 with Location: the test, to poll. 429
+    (Retry-After) when the key has as many tests waiting or running as allowed."""
     bench = require_bench(request)
     services = request.app.state.services
-    record = await asyncio.to_thread(
-        _create, bench, _store(request), services.settings, body, principal.key_id
-    )
+    record = await asyncio.to_thread(_create, bench, _store(request), services.settings, body, principal)
     services.wake_scheduler()
     out = ScheduleOut.of(record)
     response.headers["Location"] = out.links.self

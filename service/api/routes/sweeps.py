@@ -24,6 +24,7 @@ from service.access import Principal
 from service.api.auth import Operator, Viewer
 from service.api.contract import created, download
 from service.api.errors import ApiError, responses
+from service.api.quotas import QUOTA_RESPONSES, job_quota
 from service.api.routes.bench import require_bench
 from service.api.routes.jobs import job_out
 from service.api.schemas import (
@@ -298,7 +299,7 @@ async def sweep_recording_h5(request: Request, sweep_id: SweepId, _principal: Vi
     status_code=201,
     response_model=IdentifyJobOut,
     operation_id="submit_sweep_identify",
-    responses=created("identify job") | responses(400, 401, 403, 404, 409, 422),
+    responses=created("identify job") | responses(400, 401, 403, 404, 409, 422) | QUOTA_RESPONSES,
 )
 async def identify_sweep(
     request: Request,
@@ -319,7 +320,7 @@ async def identify_sweep(
     status_code=201,
     response_model=DiagnoseJobOut,
     operation_id="submit_sweep_diagnose",
-    responses=created("diagnose job") | responses(400, 401, 403, 404, 409, 422),
+    responses=created("diagnose job") | responses(400, 401, 403, 404, 409, 422) | QUOTA_RESPONSES,
 )
 async def diagnose_sweep(
     request: Request,
@@ -343,11 +344,19 @@ async def _job_on_sweep(
     options: IdentifyJobOptions | DiagnoseJobOptions,
     kind: JobKind,
 ) -> IdentifyJobOut | DiagnoseJobOut:
-    """Queue a job of `kind` on the sweep's recording; the 201's Location is the job."""
+    """Queue a job of `kind` on the sweep's recording; the 201's Location is the job. 429 (Retry-After)
+    when the key has as many jobs queued or running as allowed."""
     services = request.app.state.services
     record = await load_sweep(request, sweep_id)
     job = await asyncio.to_thread(
-        accept_sweep_job, services.settings, services.jobs, record, options, principal.key_id, kind
+        accept_sweep_job,
+        services.settings,
+        services.jobs,
+        record,
+        options,
+        principal.key_id,
+        kind,
+        job_quota(services.settings, principal),
     )
     services.manager.enqueue(job)
     out = job_out(request, job)
