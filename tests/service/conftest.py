@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -10,6 +11,7 @@ from live_server import SimulatedInputs, simulated_inputs
 from daq.formats.recording_csv import write_recording_csv
 from daq.formats.vehicle_file import write_vehicle
 from estimator.sweep import SweepSettings
+from service.store.database import Database
 from simulators.vehicle_sim import (
     SimulationSettings,
     default_axle,
@@ -44,3 +46,12 @@ def plate_offset_files(tmp_path_factory: pytest.TempPathFactory) -> Path:
 def inputs(tmp_path_factory: pytest.TempPathFactory) -> SimulatedInputs:
     """A 6 s quarter-car recording CSV and its vehicle file with the simulator's truth (read only)."""
     return simulated_inputs(tmp_path_factory.mktemp("inputs"), seconds=6.0, seed=1)
+
+
+@pytest.fixture
+def local(tmp_path: Path) -> Iterator[Database]:
+    """The lane's local store: SQLite in its data directory, keeping the outbox."""
+    database = Database(f"sqlite:///{tmp_path / 'local.sqlite3'}", outbox=True)
+    database.upgrade_schema()
+    yield database
+    database.dispose()

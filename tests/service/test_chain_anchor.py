@@ -200,15 +200,6 @@ def test_a_heads_log_that_cannot_be_written_leaves_the_result_stored(
     assert JobStore(database).get(job) is not None
 
 
-@pytest.fixture
-def local(tmp_path: Path) -> Iterator[Database]:
-    """The lane's local store: SQLite in its data directory, keeping the outbox."""
-    database = Database(f"sqlite:///{tmp_path / 'local.sqlite3'}", outbox=True)
-    database.upgrade_schema()
-    yield database
-    database.dispose()
-
-
 def test_the_central_checkpoints_name_results_deleted_locally_or_centrally(
     local: Database, database: Database, database_url: str, tmp_path: Path
 ) -> None:

@@ -27,15 +27,6 @@ from service.store.sync import CentralSync, LocalStoreError, SyncError
 LANE = "north"
 
 
-@pytest.fixture
-def local(tmp_path: Path) -> Iterator[Database]:
-    """The lane's local store: SQLite in its data directory, keeping the outbox."""
-    database = Database(f"sqlite:///{tmp_path / 'local.sqlite3'}", outbox=True)
-    database.upgrade_schema()
-    yield database
-    database.dispose()
-
-
 def finished_sweep(local: Database, tmp: Path) -> int:
     store = SweepStore(local, lane=LANE)
     sweep = store.create("bench", {"vehicle_id": "AB-1"}, lambda i: (tmp / f"{i}.h5", tmp / f"{i}.toml"))
