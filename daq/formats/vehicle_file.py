@@ -24,7 +24,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from daq.formats.atomic import atomic_write
-from estimator.errors import UserError
+from estimator.errors import UserError, one_line
 from estimator.vehicle import ModelKind, VehicleParameters
 
 REQUIRED = ("model", "mass_kg")
@@ -47,6 +47,10 @@ def parse_vehicle(text: str, source: str = "vehicle file") -> VehicleParameters:
         document = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise VehicleFileError(f"{source}: not valid TOML ({exc})") from None
+    except ValueError as exc:  # e.g. an integer of more digits than Python converts
+        raise VehicleFileError(f"{source}: not valid TOML ({one_line(exc).partition(':')[0]})") from None
+    except RecursionError:  # brackets nested deeper than the parser descends
+        raise VehicleFileError(f"{source}: not valid TOML (nested too deeply)") from None
     extra_tables = sorted(set(document) - {"vehicle"})
     if extra_tables:
         raise VehicleFileError(f"{source}: unknown table or key '{extra_tables[0]}' (expected [vehicle])")
@@ -78,7 +82,10 @@ def parse_vehicle(text: str, source: str = "vehicle file") -> VehicleParameters:
             continue
         if isinstance(value, bool) or not isinstance(value, int | float):
             raise VehicleFileError(f"{source}: '{key}' must be a number, got {value!r}")
-        numbers[key] = float(value)
+        try:
+            numbers[key] = float(value)
+        except OverflowError:  # a TOML integer has no size limit
+            raise VehicleFileError(f"{source}: '{key}' is too large for a number") from None
     relaxation_time_s = numbers.pop("tyre_relaxation_time_s", None)
     if relaxation_time_s is not None:
         if "tyre_viscoelastic_coefficient" in numbers:
@@ -89,9 +96,9 @@ def parse_vehicle(text: str, source: str = "vehicle file") -> VehicleParameters:
             raise VehicleFileError(f"{source}: tyre_relaxation_time_s must be > 0, got {relaxation_time_s}")
     try:
         vehicle = VehicleParameters(model=model, **numbers)
+        return vehicle.with_relaxation_time(relaxation_time_s) if relaxation_time_s is not None else vehicle
     except ValueError as exc:
         raise VehicleFileError(f"{source}: {exc}") from None
-    return vehicle.with_relaxation_time(relaxation_time_s) if relaxation_time_s is not None else vehicle
 
 
 @dataclass(frozen=True)
@@ -107,15 +114,14 @@ class VehicleFile:
 def parse_vehicle_file(text: str, source: str = "vehicle file") -> VehicleFile:
     """The text as a VehicleFile (VehicleFileError naming the key, or "nested too deeply" for a TOML the
     parser cannot descend)."""
-    try:
-        return VehicleFile(parse_vehicle(text, source), text, source)
-    except RecursionError:
-        raise VehicleFileError(f"{source}: not valid TOML (nested too deeply)") from None
+    return VehicleFile(parse_vehicle(text, source), text, source)
 
 
 def load_vehicle_file(path: Path | str) -> VehicleFile:
     """Read and parse the file at `path` (VehicleFileError when missing, not UTF-8 or invalid)."""
     path = Path(path)
+    if path.is_dir():
+        raise VehicleFileError(f"{path}: is a folder, not a vehicle file")
     if not path.is_file():
         raise VehicleFileError(f"{path}: no such file")
     try:

@@ -19,13 +19,12 @@ Layout (all on the common sample grid, 1 ms at the bench)::
     /flushed_samples     int64   [1]  rows known to be on disk (updated at every flush)
     root attributes                   metadata, see RecordingWriter
 
-Crash safety: the writer uses HDF5's SWMR mode (single writer, multiple readers; libver="latest"). In SWMR
-mode the library orders its metadata writes so that the file on disk is valid after every flush, and a
-reader opening it with ``swmr=True`` sees every flushed row while the writer is still appending, or after
-the writer died. (A plain HDF5 file in the latest format is flagged "open for write" in its superblock
-and cannot be opened after a crash without ``h5clear``; in the old format its on-disk metadata may be
-inconsistent between flushes. SWMR was checked to work with the installed h5py 3.16 / HDF5 2.0: a file
-whose writer process was killed opens with ``swmr=True`` and holds exactly the flushed rows.)
+Crash safety: the writer uses HDF5's SWMR mode (single writer, multiple readers; libver="latest"): the library
+orders its metadata writes so that the file on disk is valid after every flush, and a reader in SWMR mode
+(daq.formats.hdf5_file) sees every flushed row while the writer is appending, or after it died. (A plain HDF5
+file in the latest format is flagged "open for write" in its superblock and cannot be opened after a crash
+without ``h5clear``; in the old format its on-disk metadata may be inconsistent between flushes. Checked with
+h5py 3.16 / HDF5 2.0: a killed writer's file opens in SWMR mode with exactly the flushed rows.)
 
 The writer flushes whenever a second (``flush_interval_s``) of recorded time has accumulated since the last
 flush, so after every ``append`` less than one second of samples is not yet on disk: a crash loses at most
@@ -51,6 +50,7 @@ from typing import Any
 import h5py
 import numpy as np
 
+from daq.formats.hdf5_file import open_for_reading
 from daq.formats.recording_csv import write_recording_csv
 from daq.formats.vehicle_file import VehicleFile
 from estimator.errors import UserError, one_line
@@ -455,7 +455,7 @@ def load_recording(path: Path | str) -> StoredRecording:
     if not h5py.is_hdf5(path):
         raise RecordingFileError(f"{path}: not an HDF5 file")
     try:
-        with h5py.File(path, "r", swmr=True) as f:
+        with open_for_reading(path) as f:
             meta = {key: _python_value(f.attrs[key]) for key in f.attrs}
             for name in ("time", "flags", "channels", "flushed_samples"):
                 if name not in f:
@@ -475,7 +475,7 @@ def load_recording(path: Path | str) -> StoredRecording:
             channels = {c: np.asarray(f["channels"][c][:n], dtype=float) for c in names}
     except RecordingFileError:
         raise
-    except (OSError, KeyError, ValueError, TypeError) as exc:
+    except (OSError, KeyError, ValueError, TypeError, RuntimeError) as exc:  # h5py: HDF5 errors
         raise RecordingFileError(f"{path}: cannot read the recording ({one_line(exc)})") from None
     if not np.all(np.isfinite(time_s)):
         bad = int(np.argmin(np.isfinite(time_s)))

@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING
 
 from estimator.vehicle import TyreModel
 from service.cli.errors import CliError
+from service.cli.recording_input import RECORDING_HELP, VEHICLE_HELP, read_recording_and_vehicle
 
 if TYPE_CHECKING:
     from estimator.doctor.diagnose import DiagnoseProgress
@@ -53,8 +54,6 @@ def _progress(p: DiagnoseProgress) -> None:
 
 
 def run_diagnose(args: argparse.Namespace) -> int:
-    from daq.formats.recording_csv import read_recording_csv
-    from daq.formats.vehicle_file import read_vehicle
     from estimator.doctor.diagnose import DiagnoseOptions
     from estimator.identify import check_curve_points
     from service.analysis import diagnose_recording
@@ -62,8 +61,7 @@ def run_diagnose(args: argparse.Namespace) -> int:
     report = Path(args.report) if args.report else None
     if report is not None and report.exists() and not report.is_dir():
         raise CliError(f"--report {report}: exists and is not a folder")
-    recording = read_recording_csv(args.recording)
-    vehicle = read_vehicle(args.vehicle)
+    recording, vehicle = read_recording_and_vehicle("diagnose", args.recording, args.vehicle)
     check_curve_points(args.points, "--points")  # identify's limits, as the diagnose job's options
     options = DiagnoseOptions(tyre=TyreModel(args.tyre), points=args.points)
     # the job's submit check first (bad input: one line, exit 2)
@@ -90,8 +88,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         "explains the disagreement (information criterion, held-out data, signature), add it and repeat; "
         "say 'unexplained' when a clear disagreement remains that no candidate explains.",
     )
-    p.add_argument("recording", help="recording CSV")
-    p.add_argument("--vehicle", required=True, help="vehicle file (TOML)")
+    p.add_argument("recording", help=RECORDING_HELP)
+    p.add_argument("--vehicle", default=None, help=VEHICLE_HELP)
     p.add_argument(
         "--tyre",
         choices=[t.value for t in TyreModel],

@@ -1,4 +1,5 @@
-"""`shockbench export`: write the recording CSV of an HDF5 recording (daq/storage/hdf5_recording)."""
+"""`shockbench export`: write the recording CSV of a recording, an HDF5 sweep (daq/storage/hdf5_recording)
+or a recording CSV, told apart by content (daq.formats.recording_file)."""
 
 from __future__ import annotations
 
@@ -6,9 +7,9 @@ import argparse
 
 
 def run_export(args: argparse.Namespace) -> int:
-    from daq.storage.hdf5_recording import export_csv
+    from daq.formats.recording_file import export_recording_csv
 
-    recording = export_csv(args.path, args.out, allow_gaps=args.allow_gaps)
+    recording = export_recording_csv(args.path, args.out, allow_gaps=args.allow_gaps)
     n = recording.time_s.size
     print(
         f"wrote {args.out}: {n} samples at {recording.sample_time_s * 1e3:g} ms "
@@ -16,7 +17,7 @@ def run_export(args: argparse.Namespace) -> int:
     )
     if "gap_free_stretch" in recording.metadata:
         print(f"note: gaps left out, exported {recording.metadata['gap_free_stretch']}")
-    if recording.metadata.get("status") != "complete":
+    if recording.metadata.get("status", "complete") != "complete":  # a CSV may not say (a simulation's)
         print(f"note: the recording is incomplete ({recording.metadata.get('reason') or 'no reason given'})")
     return 0
 
@@ -26,9 +27,10 @@ def register(sub: argparse._SubParsersAction) -> None:
         "export",
         help="export an HDF5 recording to the recording CSV",
         description="Write the recording CSV (t and displacements in m, metadata as '# key: value' lines) "
-        "of an HDF5 recording. A recording with gaps is refused unless --allow-gaps is given.",
+        "of an HDF5 recording (or rewrite a recording CSV as read; the content tells which, not the name). "
+        "A recording with gaps is refused unless --allow-gaps is given.",
     )
-    p.add_argument("path", help="HDF5 recording (.h5)")
+    p.add_argument("path", help="HDF5 recording (shockbench sweep), or a recording CSV")
     p.add_argument("--out", required=True, help="recording CSV to write")
     p.add_argument(
         "--allow-gaps",

@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING
 
 from estimator.vehicle import TyreModel, VehicleConstant, VehicleParameters
 from service.cli.errors import CliError
+from service.cli.recording_input import RECORDING_HELP, VEHICLE_HELP, read_recording_and_vehicle
 
 SOLVERS = ("exact", "de")
 """estimator.identify.Solver's values, named here so that `shockbench --help` does not import the estimator
@@ -182,13 +183,10 @@ def options_from_args(args: argparse.Namespace, vehicle: VehicleParameters) -> I
 
 
 def run_identify(args: argparse.Namespace) -> int:
-    from daq.formats.recording_csv import read_recording_csv
-    from daq.formats.vehicle_file import read_vehicle
     from estimator.identify import Solver
     from service.analysis import identify_recording
 
-    recording = read_recording_csv(args.recording)
-    vehicle = read_vehicle(args.vehicle)
+    recording, vehicle = read_recording_and_vehicle("identify", args.recording, args.vehicle)
     options = options_from_args(args, vehicle)
     progress = _ProgressLine() if options.solver is Solver.DE and not args.json else None
     result = identify_recording(recording, vehicle, options, progress=progress)  # the service's checks first
@@ -267,8 +265,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         description="Identify the damper force-velocity curve, masses and tyre damping, and the "
         "stiffnesses and tyre ϑ the vehicle file does not state.",
     )
-    p.add_argument("recording", help="recording CSV")
-    p.add_argument("--vehicle", required=True, help="vehicle file (TOML)")
+    p.add_argument("recording", help=RECORDING_HELP)
+    p.add_argument("--vehicle", default=None, help=VEHICLE_HELP)
     p.add_argument("--tyre", choices=[t.value for t in TyreModel], default="maxwell")
     p.add_argument("--points", type=int, default=None, help="curve points (default 20, axle 10 per side)")
     p.add_argument("--solver", choices=SOLVERS, default="exact")

@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from service.cli.errors import CliError
+from service.cli.recording_input import RECORDING_HELP, load_recording
 
 if TYPE_CHECKING:
     from estimator.validation import ValidationResult
@@ -44,14 +45,13 @@ def summary(result: ValidationResult) -> str:
 
 
 def run_validate(args: argparse.Namespace) -> int:
-    from daq.formats.recording_csv import read_recording_csv
     from estimator.model_io import model_from_json
     from estimator.validation import validate
 
     if args.track_m is not None and not args.track_m > 0:
         raise CliError("--track-m must be > 0")
     model = model_from_json(read_model_json(Path(args.model)), track_m=args.track_m)
-    recording = read_recording_csv(args.recording)
+    recording = load_recording("validate", args.recording).recording
     result = validate(model, recording)
     print(json.dumps(result.to_json()) if args.json else summary(result))
     return 0
@@ -66,7 +66,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "compare with its measured body and wheel motion: gap_m, response_rms_m and gap_ratio = gap / "
         "response.",
     )
-    p.add_argument("recording", help="recording CSV (any sample rate and length)")
+    p.add_argument("recording", help=f"{RECORDING_HELP} (any sample rate and length)")
     p.add_argument("--model", required=True, help="JSON from identify --json or diagnose --json")
     p.add_argument(
         "--track-m",

@@ -198,12 +198,12 @@ def test_cli_user_error_is_one_line_and_exit_2(
 def test_cli_bug_is_exit_1_naming_a_log_file_with_the_traceback(
     tmp_path: Path, log_dir: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    import daq.formats.recording_csv
+    import daq.formats.recording_file
 
-    def broken(_path: object) -> None:
+    def broken(_path: object, **_options: object) -> None:
         raise KeyError("a programming error")  # was taken for bad input (exit 2) before issue 16
 
-    monkeypatch.setattr(daq.formats.recording_csv, "read_recording_csv", broken)
+    monkeypatch.setattr(daq.formats.recording_file, "load_recording_file", broken)
     code = cli_main(["identify", str(tmp_path / "any.csv"), "--vehicle", str(tmp_path / "any.toml")])
     err = capsys.readouterr().err
     assert code == 1
