@@ -18,14 +18,13 @@ from sqlalchemy.orm import Session
 
 from service.store.chain_anchor import Head, HeadLog
 from service.store.database import Database
-from service.store.models import JobRow, JobStatus, utcnow
+from service.store.models import UNFINISHED_JOBS, JobRow, JobStatus, utcnow
 from service.store.outbox import JOB, queue_finished
 from service.store.quota import KeyQuota, QuotaExceededError, enforce
 from service.store.result_chain import append_link, recording_sha256
 
 RESTART_REASON = "its service stopped each time it ran"
 """Why a job whose instance died while running it, attempt after attempt, is failed (job_queue)."""
-UNFINISHED = (JobStatus.QUEUED.value, JobStatus.RUNNING.value)
 QUOTA_WHAT = "jobs queued or running"
 
 
@@ -142,7 +141,7 @@ class JobStore:
     @staticmethod
     def _unfinished_of(key_id: str) -> Select[tuple[int]]:
         """The count of `key_id`'s queued and running jobs (on every lane: the quota is the key's)."""
-        where = (JobRow.submitted_by == key_id, JobRow.status.in_(UNFINISHED))
+        where = (JobRow.submitted_by == key_id, JobRow.status.in_(UNFINISHED_JOBS))
         return select(func.count()).select_from(JobRow).where(*where)
 
     def unfinished_count(self, key_id: str) -> int:

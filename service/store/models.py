@@ -91,6 +91,13 @@ class ScheduleStatus(StrEnum):
     CANCELLED = "cancelled"
 
 
+UNFINISHED_JOBS = (JobStatus.QUEUED.value, JobStatus.RUNNING.value)
+"""Stored statuses of jobs not yet ended: what a key's quota counts and what retention keeps."""
+FINISHED_JOBS = tuple(status.value for status in JobStatus if status.finished)
+UNFINISHED_TESTS = (ScheduleStatus.WAITING.value, ScheduleStatus.RUNNING.value)
+"""Stored statuses of scheduled tests not yet ended."""
+
+
 class Base(DeclarativeBase):
     type_annotation_map = {datetime: UTCDateTime, dict[str, Any]: JSON}  # noqa: RUF012 - SQLAlchemy API
 

@@ -38,7 +38,17 @@ from sqlalchemy import and_, or_, select
 from sqlalchemy.orm import Session
 
 from service.store.database import Database
-from service.store.models import JobRow, JobStatus, ScheduleRow, ScheduleStatus, SweepRow, SweepStatus, utcnow
+from service.store.models import (
+    FINISHED_JOBS,
+    UNFINISHED_JOBS,
+    UNFINISHED_TESTS,
+    JobRow,
+    ScheduleRow,
+    SweepRow,
+    SweepStatus,
+    utcnow,
+)
+from service.store.sweeps import finished
 
 log = logging.getLogger("shockbench.retention")
 
@@ -49,10 +59,7 @@ a quarter; uploads are bounded by the per-key job quota and the upload size limi
 STALE_UPLOAD_S = 24 * 3600.0
 """An upload is copied and checked in seconds (a minute at the most): what is a day old in uploads/ was left
 by a crash, and no upload in progress is ever that old."""
-UNFINISHED_JOBS = (JobStatus.QUEUED.value, JobStatus.RUNNING.value)
-FINISHED_JOBS = (JobStatus.SUCCEEDED.value, JobStatus.FAILED.value, JobStatus.CANCELLED.value)
-ENDED_SWEEPS = (SweepStatus.COMPLETE.value, SweepStatus.FAILED.value, SweepStatus.ABORTED.value)
-UNFINISHED_TESTS = (ScheduleStatus.WAITING.value, ScheduleStatus.RUNNING.value)
+ENDED_SWEEPS = tuple(status.value for status in SweepStatus if finished(status))
 
 
 @dataclass(frozen=True)
@@ -139,33 +146,29 @@ def _old_recordings(
             yield _Candidate(Path(recording), why)
 
 
-def _stale_uploads(uploads: Path, policy: RetentionPolicy, older_than: float) -> list[_Candidate]:
-    """Files under `uploads` last modified before `older_than` (a POSIX time)."""
+def _stale_uploads(
+    uploads: Path, policy: RetentionPolicy, older_than: float
+) -> tuple[list[_Candidate], set[Path]]:
+    """In one walk of `uploads`: the files last modified before `older_than` (a POSIX time), and the staging
+    folders unchanged since then (read before their files are deleted, which makes them look new)."""
     why = f"partial upload left by an interrupted request, older than {policy.stale_upload_s / 3600:g} h"
-    found = []
+    found: list[_Candidate] = []
+    folders: set[Path] = set()
     for folder, _, names in os.walk(uploads):
+        here = Path(folder)
+        try:
+            if here != uploads and here.stat().st_mtime < older_than:
+                folders.add(here)
+        except FileNotFoundError:
+            continue
         for name in sorted(names):
-            path = Path(folder) / name
+            path = here / name
             try:
                 if path.lstat().st_mtime < older_than:
                     found.append(_Candidate(path, why))
             except FileNotFoundError:
                 continue
-    return found
-
-
-def _stale_folders(uploads: Path, older_than: float) -> set[Path]:
-    """The staging folders under `uploads` unchanged since before `older_than` (read before their files
-    are deleted, which makes them look new)."""
-    folders = set()
-    for folder, _, _ in os.walk(uploads):
-        path = Path(folder)
-        try:
-            if path != uploads and path.stat().st_mtime < older_than:
-                folders.add(path)
-        except FileNotFoundError:
-            continue
-    return folders
+    return found, folders
 
 
 def _remove_if_empty(folders: set[Path]) -> None:
@@ -205,8 +208,8 @@ def run_retention(
             *_old_job_inputs(session, cutoff, policy),
             *_old_recordings(session, cutoff, policy, needed),
         ]
-    candidates += _stale_uploads(uploads, policy, stale_before)
-    stale_folders = _stale_folders(uploads, stale_before)
+    stale_files, stale_folders = _stale_uploads(uploads, policy, stale_before)
+    candidates += stale_files
     in_use_resolved = {Path(p).resolve() for p in in_use}
     removals = []
     for candidate in candidates:

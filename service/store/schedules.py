@@ -18,7 +18,7 @@ from typing import Any
 from sqlalchemy import func, select, update
 
 from service.store.database import Database
-from service.store.models import ScheduleRow, ScheduleStatus, utcnow
+from service.store.models import UNFINISHED_TESTS, ScheduleRow, ScheduleStatus, utcnow
 from service.store.quota import KeyQuota, enforce
 
 FINISHED = (ScheduleStatus.DONE, ScheduleStatus.FAILED, ScheduleStatus.CANCELLED)
@@ -103,9 +103,10 @@ class ScheduleStore:
             session.add(row)
             session.flush()
             if quota is not None:
-                unfinished = (ScheduleStatus.WAITING.value, ScheduleStatus.RUNNING.value)
                 count = select(func.count()).select_from(ScheduleRow)
-                mine = count.where(ScheduleRow.created_by == quota.key_id, ScheduleRow.status.in_(unfinished))
+                mine = count.where(
+                    ScheduleRow.created_by == quota.key_id, ScheduleRow.status.in_(UNFINISHED_TESTS)
+                )
                 enforce(session, quota, mine, "scheduled tests waiting or running")
             row.vehicle_file = str(place(row.id))
             session.flush()
