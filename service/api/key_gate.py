@@ -61,6 +61,18 @@ def announces_body(scope: Scope) -> bool:
     return False
 
 
+def declared_length(scope: Scope) -> int | None:
+    """The request's Content-Length in bytes: None when it declares none, -1 when it is not a whole number
+    of bytes (malformed or negative)."""
+    declared = dict(scope.get("headers") or []).get(b"content-length")
+    if declared is None:
+        return None
+    try:
+        return max(int(declared), -1)
+    except ValueError:
+        return -1
+
+
 def _calls(dependant: Dependant) -> Iterator[object]:
     for dependency in dependant.dependencies:
         yield dependency.call

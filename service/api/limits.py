@@ -43,7 +43,7 @@ from fastapi import HTTPException
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from service.api.errors import error_response
-from service.api.key_gate import OPEN, POLICY_SCOPE_KEY, RoutePolicy, announces_body
+from service.api.key_gate import OPEN, POLICY_SCOPE_KEY, RoutePolicy, announces_body, declared_length
 
 CLOSE = {"Connection": "close"}
 
@@ -74,12 +74,8 @@ class BodySizeLimit:
         limit, what = (
             (self.max_upload_bytes, "upload") if policy.upload else (self.max_json_bytes, "JSON body")
         )
-        declared = dict(scope.get("headers") or []).get(b"content-length")
-        if declared is not None:
-            try:
-                length = int(declared)
-            except ValueError:
-                length = -1
+        length = declared_length(scope)
+        if length is not None:
             if length < 0:
                 await error_response(400, "bad_request", "invalid Content-Length header", headers=CLOSE)(
                     scope, receive, send

@@ -28,6 +28,7 @@ from starlette.types import ASGIApp, Receive, Scope, Send
 
 from service.access import Principal
 from service.api.errors import ErrorBody, error_response
+from service.api.key_gate import declared_length
 from service.api.settings import ServiceSettings
 from service.store.database import Database
 from service.store.quota import KeyQuota, QuotaExceededError
@@ -86,17 +87,15 @@ class StorageGuard:
         if scope["type"] == "http" and scope["method"] == "POST":
             headers = dict(scope.get("headers") or [])
             if headers.get(b"content-type", b"").lower().startswith(b"multipart/"):
-                refusal = await self._refusal(headers.get(b"content-length"))
+                refusal = await self._refusal(max(declared_length(scope) or 0, 0))
                 if refusal is not None:
                     await error_response(507, "insufficient_storage", refusal)(scope, receive, send)
                     return
         await self.app(scope, receive, send)
 
-    async def _refusal(self, declared: bytes | None) -> str | None:
-        try:
-            length = max(int(declared), 0) if declared is not None else 0
-        except ValueError:
-            length = 0  # the upload size limit answers a malformed Content-Length
+    async def _refusal(self, length: int) -> str | None:
+        """Why an upload of `length` bytes is refused (0: none declared, or a malformed Content-Length,
+        which the upload size limit answers), or None."""
         free = await asyncio.to_thread(self.free, self.data_dir)
         if free - length >= self.min_free_bytes:
             return None
