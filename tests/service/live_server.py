@@ -58,6 +58,19 @@ def wait_for_status(
     return wait_until(reached, timeout_s, f"{path} {' or '.join(statuses)}")
 
 
+BROKEN_PATH = "/api/v1/broken"
+
+
+def add_broken_route(app: FastAPI) -> None:
+    """GET BROKEN_PATH raises a RuntimeError with a secret in its message: it stands for any bug a request
+    may hit (a 500 that must carry an error id and never the message or a traceback)."""
+
+    def broken() -> None:
+        raise RuntimeError("a bug with a secret in its message")
+
+    app.add_api_route(BROKEN_PATH, broken)
+
+
 def bearer_client(url: str, key: str) -> httpx.Client:
     """An httpx client of the service at `url` sending `key` as its Bearer key."""
     return httpx.Client(base_url=url, headers={"Authorization": f"Bearer {key}"}, timeout=60)

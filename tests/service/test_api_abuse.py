@@ -19,7 +19,7 @@ from typing import Any
 import h5py
 import httpx
 import pytest
-from live_server import LiveServer, SimulatedInputs, wait_until
+from live_server import LiveServer, SimulatedInputs, add_broken_route, wait_until
 from live_server import wait_for_status as wait_for
 
 from daq.bench_config import write_bench_config
@@ -52,10 +52,7 @@ def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[LiveServer]:
     )
     app = create_app(settings)
 
-    def broken() -> None:
-        raise RuntimeError("a bug with a secret in its message")
-
-    app.add_api_route("/api/v1/broken", broken)  # stands for any bug a request may hit
+    add_broken_route(app)
     with LiveServer(app) as live:
         yield live
 

@@ -7,7 +7,7 @@ from collections.abc import Iterator
 
 import httpx
 import pytest
-from live_server import LiveServer, SimulatedInputs
+from live_server import LiveServer, SimulatedInputs, add_broken_route
 
 from service.access import KeyRing, Role
 from service.api import ServiceSettings, create_app
@@ -34,10 +34,7 @@ def client(tmp_path_factory: pytest.TempPathFactory) -> Iterator[httpx.Client]:
     )
     app = create_app(settings)
 
-    def broken() -> None:
-        raise RuntimeError("a bug with a secret in its message")
-
-    app.add_api_route("/api/v1/broken", broken)  # stands for any bug a request may hit
+    add_broken_route(app)
     with LiveServer(app) as server, httpx.Client(base_url=server.url, headers=AUTH) as c:
         yield c
 

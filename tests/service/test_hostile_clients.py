@@ -22,7 +22,7 @@ from pathlib import Path
 
 import httpx
 import pytest
-from live_server import LiveServer
+from live_server import LiveServer, add_broken_route
 
 from service.access import KeyRing, Role
 from service.api import ServiceSettings, create_app
@@ -54,10 +54,7 @@ def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[LiveServer]:
     )
     app = create_app(settings)
 
-    def broken() -> None:
-        raise RuntimeError("a bug")
-
-    app.add_api_route("/api/v1/broken", broken)  # stands for any bug a request may hit
+    add_broken_route(app)
     with LiveServer(app) as live:
         yield live
 
