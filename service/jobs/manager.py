@@ -81,6 +81,8 @@ class _Current:
     progress: Progress | None = None
     cancel_requested: bool = False
     persisted_at: float = -math.inf
+    dispatched_at: float = field(default_factory=time.monotonic)
+    """When it left the queue (time.monotonic()): its run time, for the metrics, is counted from here."""
 
 
 @dataclass(frozen=True)
@@ -108,13 +110,16 @@ class JobManager:
         store: JobStore,
         settings: WorkerSettings = WorkerSettings(),
         completing: Callable[[str, dict], dict] | None = None,
+        on_finished: Callable[[str, str, float], None] | None = None,
     ) -> None:
         """completing(kind, result): what to store as a succeeded job's result (the service adds the
-        verdict an identification's figures earn under its configured thresholds). In the shared queue
-        this service is named by its store's lane (one instance per lane)."""
+        verdict an identification's figures earn under its configured thresholds). on_finished(kind,
+        status, run time in s): told of every job that ran here once it ended (the service's metrics). In
+        the shared queue this service is named by its store's lane (one instance per lane)."""
         self.store = store
         self.settings = settings
         self.completing = completing
+        self.on_finished = on_finished
         self.queue = JobQueue(store.db, store.lane or "default", settings.lease_s)
         self._queued = 0  # the queue's length as last counted (status answers from memory)
         self.broker = EventBroker()
@@ -435,16 +440,21 @@ class JobManager:
                     progress=progress,
                     owner=self.queue.instance,
                 )
-            if not written:
+            ran_s = time.monotonic() - current.dispatched_at
+            if not written:  # its end is the new owner's to write and to log (once, there)
                 log.warning(
                     "job %d %s here, but its claim was taken over meanwhile: not written",
                     job_id,
                     status.value,
                 )
+            else:
+                why = f": {reason}" if reason else ""
+                log.info("job %d (%s) %s after %.1f s%s", job_id, current.kind, status.value, ran_s, why)
+                if self.on_finished is not None:
+                    self.on_finished(current.kind, status.value, ran_s)
             record = await asyncio.to_thread(self.store.get, job_id)
             if record is not None:
                 self.broker.publish(JobEvent("finished", job_id, record=record))
-            log.info("job %d %s%s", job_id, status.value, f": {reason}" if reason else "")
         finally:
             self._current = None
             if not current.done.done():
