@@ -37,6 +37,8 @@ content_type_overrides:
   image/svg+xml: application/octet-stream
   text/csv: application/octet-stream
   text/markdown: application/octet-stream
+  application/pdf: application/octet-stream
+  text/html: application/octet-stream
 """
 """As README's "Generated clients" says: no formatter hooks (offline), downloads read as bytes."""
 
