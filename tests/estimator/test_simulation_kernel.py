@@ -204,16 +204,21 @@ def test_quarter_car_population_with_every_effect(seed: int) -> None:
     assert lifted.any()
 
 
+def _axle_drive(seed: int, columns: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Left and right plates stacked (2, samples, columns), their rates, and a small random initial state."""
+    rng = np.random.default_rng(seed)
+    left, left_rate = _plate(rng, columns)
+    right, right_rate = _plate(rng, columns)
+    state0 = np.vstack([rng.normal(0, 1e-3, (8, columns)), np.zeros((2, columns))])
+    return np.stack([left, right]), np.stack([left_rate, right_rate]), state0
+
+
 def test_axle_population_with_anti_roll_bar_and_every_effect() -> None:
     """Five axle models: own curves left and right (different grids), anti-roll bar, roll inertia, and the
     effects per corner and column; the plate is stacked (left, right) per column."""
     columns = 5
     physics = _axle(21, columns)
-    rng = np.random.default_rng(121)
-    left, left_rate = _plate(rng, columns)
-    right, right_rate = _plate(rng, columns)
-    plate, rate = np.stack([left, right]), np.stack([left_rate, right_rate])
-    state0 = np.vstack([rng.normal(0, 1e-3, (8, columns)), np.zeros((2, columns))])
+    plate, rate, state0 = _axle_drive(121, columns)
     reference, compiled = _both(physics, state0, plate, rate)
     assert np.all(np.isfinite(reference))
     assert_same_trajectories(reference, compiled)
@@ -374,11 +379,7 @@ def test_axle_population_with_spring_hinges_and_stribeck_friction() -> None:
         left=_with_shapes(base.left, 522, columns),
         right=_with_shapes(base.right, 523, columns, shared_hinges=True),
     )
-    rng = np.random.default_rng(122)
-    left, left_rate = _plate(rng, columns)
-    right, right_rate = _plate(rng, columns)
-    plate, rate = np.stack([left, right]), np.stack([left_rate, right_rate])
-    state0 = np.vstack([rng.normal(0, 1e-3, (8, columns)), np.zeros((2, columns))])
+    plate, rate, state0 = _axle_drive(122, columns)
     reference, compiled = _both(physics, state0, plate, rate)
     assert np.all(np.isfinite(reference))
     assert_same_trajectories(reference, compiled)
