@@ -16,7 +16,13 @@ from typing import TYPE_CHECKING, Any, Literal
 from pydantic import ValidationError
 
 from estimator.errors import UserError
-from estimator.verdict import ThresholdsError, VerdictThresholds, judge, relative_difference_percent
+from estimator.verdict import (
+    ThresholdsError,
+    VerdictThresholds,
+    imbalance_outcome,
+    judge,
+    relative_difference_percent,
+)
 from service.api.results import AxleInspectionOut, CurveOut, DiagnoseResult, IdentifyResult, InspectionOut
 
 if TYPE_CHECKING:
@@ -198,10 +204,7 @@ def _imbalance_row(inspection: AxleInspectionOut, limits: VerdictThresholds) -> 
         points = abs(left.eusama_percent - right.eusama_percent)
         relative = relative_difference_percent(left.eusama_percent, right.eusama_percent)
         eusama = f"Δ {number(points, 'points', 2)} ({number(relative, '%', 2)} of the larger)"
-        if relative > limits.imbalance_fail_above_percent:
-            outcome = "FAIL"
-        else:
-            outcome = "CHECK" if relative > limits.imbalance_check_above_percent else "PASS"
+        outcome = imbalance_outcome(relative, limits).value.upper()
     damping = stored.damping_difference_percent if stored is not None else None
     return ("left/right", eusama, "—", "—", f"Δ {number(damping, '%', 2)}", outcome)
 
