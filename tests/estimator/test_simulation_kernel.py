@@ -189,9 +189,7 @@ def test_quarter_car_population_with_every_effect(seed: int) -> None:
     tyre dashpot present in some columns and absent in others."""
     columns = 6
     physics = _quarter_car(seed, columns, TyreModel.MAXWELL, effects=True)
-    rng = np.random.default_rng(seed + 100)
-    plate, rate = _plate(rng, columns)
-    state0 = np.vstack([rng.normal(0, 1e-3, (4, columns)), np.zeros((1, columns))])
+    plate, rate, state0 = _quarter_car_drive(seed + 100, columns)
     reference, compiled = _both(physics, state0, plate, rate)
     assert np.all(np.isfinite(reference))
     assert_same_trajectories(reference, compiled)
@@ -202,6 +200,14 @@ def test_quarter_car_population_with_every_effect(seed: int) -> None:
     lifted = _lifted_off(physics, reference, plate.T, rate.T)
     print(f"seed {seed}: lift-off in {lifted.sum()} of {int(np.sum(corner.tyre_liftoff))} lift-off columns")
     assert lifted.any()
+
+
+def _quarter_car_drive(seed: int, columns: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A plate per column (samples, columns), its rate, and a small random initial state."""
+    rng = np.random.default_rng(seed)
+    plate, rate = _plate(rng, columns)
+    state0 = np.vstack([rng.normal(0, 1e-3, (4, columns)), np.zeros((1, columns))])
+    return plate, rate, state0
 
 
 def _axle_drive(seed: int, columns: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -357,9 +363,7 @@ def test_quarter_car_population_with_spring_hinges_and_stribeck_friction(seed: i
     columns = 6
     base = _quarter_car(seed, columns, TyreModel.MAXWELL, effects=True)
     physics = replace(base, corner=_with_shapes(base.corner, seed + 500, columns))
-    rng = np.random.default_rng(seed + 100)
-    plate, rate = _plate(rng, columns)
-    state0 = np.vstack([rng.normal(0, 1e-3, (4, columns)), np.zeros((1, columns))])
+    plate, rate, state0 = _quarter_car_drive(seed + 100, columns)
     reference, compiled = _both(physics, state0, plate, rate)
     assert np.all(np.isfinite(reference))
     assert_same_trajectories(reference, compiled)
