@@ -26,7 +26,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-from service.jobs.broker import EventBroker, JobEvent
+from service.jobs.broker import EventBroker, JobFinishedEvent, JobProgressEvent, JobStateEvent
 from service.jobs.messages import (
     CancelJob,
     FromWorker,
@@ -35,6 +35,7 @@ from service.jobs.messages import (
     JobProgress,
     JobStarted,
     JobSucceeded,
+    JsonObject,
     Progress,
     RunJob,
     WorkerExited,
@@ -109,7 +110,7 @@ class JobManager:
         self,
         store: JobStore,
         settings: WorkerSettings = WorkerSettings(),
-        completing: Callable[[str, dict], dict] | None = None,
+        completing: Callable[[str, JsonObject], JsonObject] | None = None,
         on_finished: Callable[[str, str, float], None] | None = None,
     ) -> None:
         """completing(kind, result): what to store as a succeeded job's result (the service adds the
@@ -220,7 +221,7 @@ class JobManager:
             self._queued = max(0, self._queued - 1)
             record = await asyncio.to_thread(self.store.get, job_id)
             if record is not None:
-                self.broker.publish(JobEvent("finished", job_id, record=record))
+                self.broker.publish(JobFinishedEvent(job_id, record))
             return record
         # running: here (it went from queued to running meanwhile; the dispatcher passes the request on),
         # or on another instance, which sees the request at its next lease renewal
@@ -276,7 +277,7 @@ class JobManager:
             # from here to the send no job is invisible: it is `current` as soon as it left the queue
             current = _Current(job_id, record.kind, 0, self._loop.create_future())
             self._current = current
-            self.broker.publish(JobEvent("state", job_id, record=record))
+            self.broker.publish(JobStateEvent(job_id, record))
             await self._worker_up.wait()
             assert self._worker is not None
             process = self._worker.process
@@ -388,7 +389,7 @@ class JobManager:
             current.started = True
         elif isinstance(message, JobProgress):
             current.progress = message.progress
-            self.broker.publish(JobEvent("progress", current.job_id, progress=message.progress))
+            self.broker.publish(JobProgressEvent(current.job_id, message.progress))
             now = time.monotonic()
             if now - current.persisted_at >= self.settings.persist_interval_s:
                 current.persisted_at = now
@@ -409,8 +410,8 @@ class JobManager:
         current: _Current,
         status: JobStatus,
         *,
-        result: dict | None = None,
-        artefacts: dict | None = None,
+        result: JsonObject | None = None,
+        artefacts: dict[str, str] | None = None,
         reason: str | None = None,
     ) -> None:
         """Write the outcome, then tell the listeners (so that whoever hears it reads it back). Whatever
@@ -440,6 +441,7 @@ class JobManager:
                     progress=progress,
                     owner=self.queue.instance,
                 )
+            self._current = None  # written: /status no longer shows it while it is read back
             ran_s = time.monotonic() - current.dispatched_at
             if not written:  # its end is the new owner's to write and to log (once, there)
                 log.warning(
@@ -454,7 +456,7 @@ class JobManager:
                     self.on_finished(current.kind, status.value, ran_s)
             record = await asyncio.to_thread(self.store.get, job_id)
             if record is not None:
-                self.broker.publish(JobEvent("finished", job_id, record=record))
+                self.broker.publish(JobFinishedEvent(job_id, record))
         finally:
             self._current = None
             if not current.done.done():

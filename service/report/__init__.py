@@ -22,7 +22,10 @@ Its cost is a small layout engine of our own (service.report.pdf: text, tables a
 
 Where the input comes from (service.report.source): the service's database for
 `GET /api/v1/sweeps/{id}/report.pdf` and `.html`, or a result JSON file for `shockbench report`.
-"""
+
+
+Must not import service.cli nor simulators: the report is made from a stored result, by the API and
+the command alike."""
 
 from __future__ import annotations
 
