@@ -36,29 +36,8 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-
-
-def make_archive(folder: Path, recordings: int, distinct: int, seconds: float) -> None:
-    """The archive of the module docstring (made once; reused when it is complete)."""
-    from daq.formats.recording_csv import write_recording_csv
-    from daq.formats.vehicle_file import write_vehicle
-    from estimator.sweep import SweepSettings
-    from simulators.vehicle_sim import SimulationSettings, default_quarter_car, simulate
-
-    names = [folder / f"rec-{index:03d}.csv" for index in range(recordings)]
-    if all(path.is_file() for path in names) and (folder / "vehicle.toml").is_file():
-        return
-    folder.mkdir(parents=True, exist_ok=True)
-    vehicle = default_quarter_car()
-    write_vehicle(folder / "vehicle.toml", vehicle.known)
-    start = time.perf_counter()
-    for seed in range(distinct):
-        settings = SimulationSettings(sweep=SweepSettings(duration_s=seconds), seed=seed)
-        write_recording_csv(names[seed], simulate(vehicle, settings).recording)
-    for index in range(distinct, recordings):
-        text = names[index % distinct].read_text()
-        names[index].write_text(f"# copy: {index}\n{text}")
-    print(f"simulated {distinct} sweeps of {seconds:g} s in {time.perf_counter() - start:.0f} s", flush=True)
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_reanalyse import make_archive  # noqa: E402  (the archive bench_reanalyse.py makes, unique copies)
 
 
 def timed_run(url: str, workers: int) -> tuple[float, float, float, int, float]:
@@ -111,7 +90,7 @@ def main() -> None:
     from service.store.database import Database
 
     archive = args.workdir / "archive"
-    make_archive(archive, args.recordings, args.distinct, args.seconds)
+    make_archive(archive, args.recordings, args.distinct, args.seconds, unique_copies=True)
     print(
         f"machine: {platform.machine()}, {os.cpu_count()} cores, python {platform.python_version()}; "
         f"{args.recordings} recordings of {args.seconds:g} s ({args.distinct} simulated); "
