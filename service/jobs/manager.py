@@ -42,6 +42,7 @@ from service.jobs.messages import (
     WorkerReady,
 )
 from service.jobs.process import WorkerProcess, describe_exit
+from service.service_limits import WorkerLimits
 from service.store.job_queue import DEFAULT_LEASE_S, JobQueue
 from service.store.jobs import RESTART_REASON, JobRecord, JobStore
 from service.store.models import JobStatus
@@ -55,8 +56,9 @@ MAX_BACKOFF_S = 30.0
 
 @dataclass(frozen=True)
 class WorkerSettings:
-    nice: int = 5
-    """Added to the worker's nice value: the event loop keeps priority over the estimator."""
+    nice: int = WorkerLimits.worker_nice
+    """Added to the worker's nice value: the event loop keeps priority over the estimator (declared in
+    service.service_limits)."""
     progress_interval_s: float = 0.2
     """The worker sends DE progress at most this often."""
     persist_interval_s: float = 2.0
