@@ -28,6 +28,11 @@ COULOMB_SMOOTHING_M_S = 0.005
 """Coulomb friction is F_c·tanh(v / this): a smooth sign function, so the ODE stays integrable."""
 
 
+HINGES = 4
+"""Most hinges a corner's spring correction has (CornerPhysics.spring_hinge_knots_m): the compiled kernel
+carries this many per corner (estimator.simulation_kernel)."""
+
+
 def coulomb_sign(velocity_m_s: np.ndarray) -> np.ndarray:
     """The smooth sign the Coulomb friction force is F_c times: tanh(v / COULOMB_SMOOTHING_M_S) (the
     compiled kernel, estimator.simulation_kernel_numba, spells the same law out)."""
@@ -48,11 +53,14 @@ def decay_rate_per_s(
     wheel_dashpot_Ns_per_m: float,
     sprung_kg: float,
     unsprung_kg: float,
+    stribeck_peak_N: float = 0.0,
 ) -> float:
     """The fastest decay (1/s) a corner's dashpot-like forces give: the damper's steepest segment and the
-    smoothed friction (F_c / COULOMB_SMOOTHING_M_S near zero velocity) act between the body's share
-    `sprung_kg` and the wheel, a tyre dashpot on the wheel alone."""
-    between = damper_slope_Ns_per_m + abs(coulomb_friction_N) / COULOMB_SMOOTHING_M_S
+    smoothed friction ((|F_c| + |Stribeck peak|) / COULOMB_SMOOTHING_M_S near zero velocity, where both
+    step with the same smoothed sign) act between the body's share `sprung_kg` and the wheel, a tyre
+    dashpot on the wheel alone."""
+    friction_N = abs(coulomb_friction_N) + abs(stribeck_peak_N)
+    between = damper_slope_Ns_per_m + friction_N / COULOMB_SMOOTHING_M_S
     return max(between * (1.0 / sprung_kg + 1.0 / unsprung_kg), wheel_dashpot_Ns_per_m / unsprung_kg)
 
 
@@ -84,12 +92,19 @@ def model_substeps(
     sample_time_s: float,
     coulomb_friction_N: float = 0.0,
     wheel_dashpot_Ns_per_m: float = 0.0,
+    stribeck_peak_N: float = 0.0,
 ) -> int:
     """Runge-Kutta steps per sample for a model's fastest decay: the steepest segment of its curves (of
-    every column of a population), its friction and its tyre dashpot, the body shared among `corners`."""
+    every column of a population), its friction (Coulomb and Stribeck peak), its tyre dashpot, the body
+    shared among `corners`."""
     slope = max(steepest_slope_Ns_per_m(c.velocity_m_s, c.force_N) for c in curves)
     rate = decay_rate_per_s(
-        slope, coulomb_friction_N, wheel_dashpot_Ns_per_m, sprung_mass_kg / corners, unsprung_mass_kg
+        slope,
+        coulomb_friction_N,
+        wheel_dashpot_Ns_per_m,
+        sprung_mass_kg / corners,
+        unsprung_mass_kg,
+        stribeck_peak_N,
     )
     return runge_kutta_substeps(rate, sample_time_s)
 
@@ -120,6 +135,18 @@ class CornerPhysics:
     static_wheel_load_N), tyre_dashpot_Ns_per_m (a Kelvin-Voigt dashpot in parallel with whatever
     tyre_model says, e.g. beside a Maxwell element).
 
+    Spring hinges (a piecewise-linear correction of the linear spring: a bump or rebound stop with or
+    without clearance, a spring stiffer or softer past some deflection): spring_hinge_knots_m and
+    spring_hinge_rates_N_per_m, (H,) or (H, columns), H <= HINGES (fewer: pad with rate 0). Hinge k adds
+    rate_k·(ζ − knot_k) beyond its knot on the knot's side (ζ > knot_k for knot_k >= 0, ζ < knot_k for
+    knot_k < 0) and nothing elsewhere (spring_hinge_force_N). ζ > 0 is extension, so a stop that the
+    suspension touches when it is compressed by more than a clearance c (a bump stop) is knot −c, one that
+    it touches when extended by more than c (a rebound stop) is knot +c; rate k > 0 stiffens either.
+
+    Stribeck friction: stribeck_peak_N·s(v)·exp(−(v/stribeck_velocity_m_s)²) with s the Coulomb friction's
+    smoothed sign (coulomb_sign), so that the friction at low speed is (F_c + peak)·s(v), a static peak
+    above the sliding level F_c; a zero peak or velocity (per column) is no Stribeck term.
+
     Every number (and tyre_liftoff) may also be an array of the state's trailing shape, one value per
     column, so that a population of different models is integrated at once (the model doctor does).
     """
@@ -135,11 +162,19 @@ class CornerPhysics:
     tyre_liftoff: bool | np.ndarray = False
     static_wheel_load_N: float = 0.0
     tyre_dashpot_Ns_per_m: float | np.ndarray = 0.0
+    spring_hinge_knots_m: np.ndarray | None = None
+    spring_hinge_rates_N_per_m: np.ndarray | None = None
+    stribeck_peak_N: float | np.ndarray = 0.0
+    stribeck_velocity_m_s: float | np.ndarray = 0.0
     _friction: bool = field(init=False, repr=False, compare=False, default=False)
     _cubic: bool = field(init=False, repr=False, compare=False, default=False)
     _dashpot: bool = field(init=False, repr=False, compare=False, default=False)
     _liftoff_all: bool = field(init=False, repr=False, compare=False, default=False)
     _liftoff_any: bool = field(init=False, repr=False, compare=False, default=False)
+    _hinges: tuple[np.ndarray, np.ndarray] | None = field(init=False, repr=False, compare=False, default=None)
+    _stribeck: tuple[np.ndarray, np.ndarray] | None = field(
+        init=False, repr=False, compare=False, default=None
+    )
 
     def __post_init__(self) -> None:
         # which optional terms are present, decided once (the derivatives are evaluated millions of times)
@@ -149,17 +184,72 @@ class CornerPhysics:
             "_dashpot": bool(np.any(self.tyre_dashpot_Ns_per_m)),
             "_liftoff_all": bool(np.all(self.tyre_liftoff)),
             "_liftoff_any": bool(np.any(self.tyre_liftoff)),
+            "_hinges": self._hinge_terms(),
+            "_stribeck": self._stribeck_terms(),
         }
         for name, value in flags.items():
             object.__setattr__(self, name, value)
 
+    def hinge_table(self) -> tuple[np.ndarray, np.ndarray]:
+        """(knots, rates), each (HINGES,) or (HINGES, columns): the hinges padded with rate 0 (ValueError,
+        one line, for hinges this corner cannot take)."""
+        if self.spring_hinge_knots_m is None and self.spring_hinge_rates_N_per_m is None:
+            return np.zeros(HINGES), np.zeros(HINGES)
+        knots = np.asarray(self.spring_hinge_knots_m, dtype=float)
+        rates = np.asarray(self.spring_hinge_rates_N_per_m, dtype=float)
+        if knots.shape != rates.shape or knots.ndim not in (1, 2):
+            raise ValueError(
+                f"spring hinges: knots {knots.shape} and rates {rates.shape} must both be (H,) or (H, cols)"
+            )
+        if knots.shape[0] > HINGES:
+            raise ValueError(f"spring hinges: {knots.shape[0]} given, at most {HINGES}")
+        padding = ((0, HINGES - knots.shape[0]),) + ((0, 0),) * (knots.ndim - 1)
+        return np.pad(knots, padding), np.pad(rates, padding)
+
+    def _hinge_terms(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """(knots, rates) of the hinges that act in some column, or None without any."""
+        knots, rates = self.hinge_table()
+        acting = np.any(rates != 0.0, axis=tuple(range(1, rates.ndim)))
+        return (knots[acting], rates[acting]) if acting.any() else None
+
+    def _stribeck_terms(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """(peak, velocity) with the peak 0 where the velocity is (no term there, no division by 0), or None
+        where no column has a Stribeck term."""
+        velocity = np.asarray(self.stribeck_velocity_m_s, dtype=float)
+        absent = velocity == 0.0
+        peak = np.where(absent, 0.0, self.stribeck_peak_N)
+        return (peak, np.where(absent, 1.0, velocity)) if np.any(peak) else None
+
+    def spring_hinge_force_N(self, deflection_m: np.ndarray) -> np.ndarray | float:
+        """The hinges' force at deflection ζ: Σ_k rate_k·(ζ − knot_k) over the hinges whose knot ζ is
+        beyond (class docstring); 0.0 without hinges."""
+        if self._hinges is None:
+            return 0.0
+        knots, rates = self._hinges
+        zeta = np.asarray(deflection_m)
+        # hinge axis first, then the deflection's axes, the columns (if per column) last
+        shape = (knots.shape[0], *(1,) * max(0, zeta.ndim - knots.ndim + 1), *knots.shape[1:])
+        knots, rates = knots.reshape(shape), rates.reshape(shape)
+        excess = zeta - knots
+        beyond = np.where(knots >= 0.0, excess > 0.0, excess < 0.0)
+        return np.sum(np.where(beyond, rates * excess, 0.0), axis=0)
+
     def suspension_force_N(self, deflection_m: np.ndarray, velocity_m_s: np.ndarray) -> np.ndarray:
-        """Q: force pushing the wheel up and the body down (damper + spring + friction + progression)."""
+        """Q: force pushing the wheel up and the body down (damper + spring + friction + progression +
+        hinges + Stribeck peak)."""
         force = self.damper.force(velocity_m_s) + self.spring_stiffness_N_per_m * deflection_m
+        # the Stribeck peak steps with the same smoothed sign as the Coulomb friction
+        sign = coulomb_sign(velocity_m_s) if self._friction or self._stribeck is not None else 0.0
         if self._friction:
-            force = force + self.coulomb_friction_N * coulomb_sign(velocity_m_s)
+            force = force + self.coulomb_friction_N * sign
         if self._cubic:
             force = force + self.cubic_spring_N_per_m3 * deflection_m**3
+        if self._hinges is not None:
+            force = force + self.spring_hinge_force_N(deflection_m)
+        if self._stribeck is not None:
+            peak, velocity = self._stribeck
+            ratio = velocity_m_s / velocity
+            force = force + peak * sign * np.exp(-(ratio * ratio))
         return force
 
     def tyre_force_N(

@@ -15,24 +15,31 @@ doctor, which may hold effects identify's form has no key for. They are carried 
 empty: none) and simulated by estimator.validation, nothing left out:
 
     "effects": {"coulomb_friction_N": F_c, "cubic_spring_N_per_m3": k3, "tyre_dashpot_Ns_per_m": c,
-                "tyre_liftoff": true, "channel_delay_s": {"x_t": 0.002}, "sensor_offset_m": {"x_r": 1e-4}}
+                "stribeck_peak_N": F_s, "stribeck_velocity_m_s": v_s,
+                "spring_hinges": [{"knot_m": 0.02, "rate_N_per_m": 1e5}], "tyre_liftoff": true,
+                "channel_delay_s": {"x_t": 0.002}, "sensor_offset_m": {"x_r": 1e-4},
+                "sensor_lag_s": {"x_s": 0.004}, "sensor_average_s": {"x_s": 0.01},
+                "sensor_gain_error": {"x_t": 0.03}}
 
-(the forces act at every corner, as the doctor fits them; a delayed channel reads the true motion
-`delay` later, an offset channel reads it plus the offset). An effect name this module does not know is
-refused, never ignored, so a model is never simulated without part of itself.
+(the forces act at every corner, as the doctor fits them, with estimator.dynamics.CornerPhysics's meaning:
+the Stribeck peak and its velocity come together; at most HINGES spring hinges. A delayed channel reads
+the true motion `delay` later, an offset channel reads it plus the offset, a lagging one through a
+first-order lag of that time constant, an averaging one its mean over that window, one with a gain error
+ε reads (1 + ε) times it: estimator.doctor.model.ChannelCorrections). An effect name this module does not
+know is refused, never ignored, so a model is never simulated without part of itself.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, field, replace
-from typing import Any
+from dataclasses import asdict, dataclass, field, replace
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from estimator.damper import PiecewiseLinearCurve
-from estimator.dynamics import AxlePhysics, CornerPhysics, QuarterCarPhysics
+from estimator.dynamics import HINGES, AxlePhysics, CornerPhysics, QuarterCarPhysics
 from estimator.errors import UserError
 from estimator.output_error import IdentifiedModel
 from estimator.recording import AXLE_CHANNELS, QUARTER_CAR_CHANNELS
@@ -44,15 +51,42 @@ from estimator.vehicle import (
     relaxation_time_from_coefficient,
 )
 
+if TYPE_CHECKING:
+    from estimator.doctor.model import ChannelCorrections
+
 
 class ModelFormatError(UserError, ValueError):
     """The model dict lacks a key or holds a value the model cannot be built from (one line, names it)."""
 
 
-FORCE_EFFECTS = ("coulomb_friction_N", "cubic_spring_N_per_m3", "tyre_dashpot_Ns_per_m")
+STRIBECK_EFFECTS = ("stribeck_peak_N", "stribeck_velocity_m_s")
+"""The Stribeck friction's two numbers: given together or not at all."""
+FORCE_EFFECTS = ("coulomb_friction_N", "cubic_spring_N_per_m3", "tyre_dashpot_Ns_per_m", *STRIBECK_EFFECTS)
 """The `effects` keys that are forces at every corner, as estimator.dynamics.CornerPhysics names them."""
-CHANNEL_EFFECTS = ("channel_delay_s", "sensor_offset_m")
-EFFECT_KEYS = (*FORCE_EFFECTS, "tyre_liftoff", *CHANNEL_EFFECTS)
+CHANNEL_EFFECTS = (
+    "channel_delay_s",
+    "sensor_offset_m",
+    "sensor_lag_s",
+    "sensor_average_s",
+    "sensor_gain_error",
+)
+CHANNEL_BOUNDS = {
+    "channel_delay_s": (0.0, True, "must be >= 0 (a channel lags)"),
+    "sensor_lag_s": (0.0, True, "must be >= 0 (a lag's time constant)"),
+    "sensor_average_s": (0.0, True, "must be >= 0 (an averaging window)"),
+    "sensor_gain_error": (-1.0, False, "must be > -1 (the channel reads (1 + ε)·x)"),
+}
+"""Per channel effect: the least value, whether it may equal it, and the error's words."""
+EFFECT_KEYS = (*FORCE_EFFECTS, "spring_hinges", "tyre_liftoff", *CHANNEL_EFFECTS)
+
+
+@dataclass(frozen=True)
+class SpringHinge:
+    """One hinge of the spring's correction (estimator.dynamics.CornerPhysics): rate·(ζ − knot) beyond the
+    knot on its side (ζ > knot >= 0 or ζ < knot < 0)."""
+
+    knot_m: float
+    rate_N_per_m: float
 
 
 @dataclass(frozen=True)
@@ -62,14 +96,25 @@ class ModelEffects:
     coulomb_friction_N: float = 0.0
     cubic_spring_N_per_m3: float = 0.0
     tyre_dashpot_Ns_per_m: float = 0.0
+    stribeck_peak_N: float = 0.0
+    stribeck_velocity_m_s: float = 0.0
+    spring_hinges: tuple[SpringHinge, ...] = ()
     tyre_liftoff: bool = False
     channel_delay_s: Mapping[str, float] = field(default_factory=dict)
     sensor_offset_m: Mapping[str, float] = field(default_factory=dict)
+    sensor_lag_s: Mapping[str, float] = field(default_factory=dict)
+    sensor_average_s: Mapping[str, float] = field(default_factory=dict)
+    sensor_gain_error: Mapping[str, float] = field(default_factory=dict)
+
+    def _present(self, key: str) -> bool:
+        if key in STRIBECK_EFFECTS:  # a peak without its velocity (or the reverse) is no Stribeck term
+            return bool(self.stribeck_peak_N and self.stribeck_velocity_m_s)
+        return bool(getattr(self, key))
 
     @property
     def names(self) -> list[str]:
         """The keys of the effects present, in EFFECT_KEYS order."""
-        return [key for key in EFFECT_KEYS if getattr(self, key)]
+        return [key for key in EFFECT_KEYS if self._present(key)]
 
     def to_json(self) -> dict[str, object]:
         """The `effects` object: only the effects present."""
@@ -77,19 +122,42 @@ class ModelEffects:
 
     def corner(self, corner: CornerPhysics, static_wheel_load_N: float) -> CornerPhysics:
         """The corner with these force effects added."""
-        if not any(getattr(self, key) for key in (*FORCE_EFFECTS, "tyre_liftoff")):
+        if not any(self._present(key) for key in (*FORCE_EFFECTS, "spring_hinges", "tyre_liftoff")):
             return corner
+        hinged = bool(self.spring_hinges)
+        stribeck = self._present("stribeck_peak_N")
         return replace(
             corner,
             coulomb_friction_N=self.coulomb_friction_N,
             cubic_spring_N_per_m3=self.cubic_spring_N_per_m3,
             tyre_dashpot_Ns_per_m=self.tyre_dashpot_Ns_per_m,
+            spring_hinge_knots_m=np.array([h.knot_m for h in self.spring_hinges]) if hinged else None,
+            spring_hinge_rates_N_per_m=np.array([h.rate_N_per_m for h in self.spring_hinges])
+            if hinged
+            else None,
+            stribeck_peak_N=self.stribeck_peak_N if stribeck else 0.0,
+            stribeck_velocity_m_s=self.stribeck_velocity_m_s if stribeck else 0.0,
             tyre_liftoff=self.tyre_liftoff,
             static_wheel_load_N=static_wheel_load_N,
         )
 
+    def channel_corrections(self) -> ChannelCorrections:
+        """The channel effects as the doctor's ChannelCorrections, which validate applies around the
+        simulation (estimator.validation)."""
+        from estimator.doctor.model import ChannelCorrections  # the doctor only where a model is validated
+
+        return ChannelCorrections(
+            dict(self.channel_delay_s),
+            dict(self.sensor_offset_m),
+            lag_s=dict(self.sensor_lag_s),
+            average_s=dict(self.sensor_average_s),
+            gain_error=dict(self.sensor_gain_error),
+        )
+
 
 def _plain(value: object) -> object:
+    if isinstance(value, tuple):  # the spring hinges
+        return [asdict(item) for item in value]
     return dict(value) if isinstance(value, Mapping) else value
 
 
@@ -212,6 +280,14 @@ def _effects(data: Any, axle: bool) -> ModelEffects:
             f"model: unknown effect 'effects.{unknown[0]}' (validate simulates {', '.join(EFFECT_KEYS)})"
         )
     values: dict[str, Any] = {key: _number(data, key, "effects.") for key in FORCE_EFFECTS if key in data}
+    if (STRIBECK_EFFECTS[0] in data) != (STRIBECK_EFFECTS[1] in data):
+        raise ModelFormatError(
+            "model: 'effects.stribeck_peak_N' and 'effects.stribeck_velocity_m_s' go together (both or none)"
+        )
+    if values.get("stribeck_velocity_m_s", 1.0) <= 0:
+        raise ModelFormatError("model: 'effects.stribeck_velocity_m_s' must be > 0")
+    if "spring_hinges" in data:
+        values["spring_hinges"] = _spring_hinges(data["spring_hinges"])
     if "tyre_liftoff" in data:
         if not isinstance(data["tyre_liftoff"], bool):
             raise ModelFormatError("model: 'effects.tyre_liftoff' must be true or false")
@@ -229,9 +305,31 @@ def _effects(data: Any, axle: bool) -> ModelEffects:
                     f"model: 'effects.{key}' names channel {channel!r}; the model's are {', '.join(channels)}"
                 )
         values[key] = {channel: _number(table, channel, f"effects.{key}.") for channel in table}
-        if key == "channel_delay_s" and any(v < 0 for v in values[key].values()):
-            raise ModelFormatError("model: 'effects.channel_delay_s' must be >= 0 (a channel lags)")
+        if key in CHANNEL_BOUNDS:
+            least, inclusive, words = CHANNEL_BOUNDS[key]
+            if any(v < least or (v == least and not inclusive) for v in values[key].values()):
+                raise ModelFormatError(f"model: 'effects.{key}' {words}")
     return ModelEffects(**values)
+
+
+def _spring_hinges(data: Any) -> tuple[SpringHinge, ...]:
+    """The `spring_hinges` list: at most HINGES {knot_m, rate_N_per_m} objects."""
+    if not isinstance(data, list) or len(data) > HINGES:
+        raise ModelFormatError(
+            f"model: 'effects.spring_hinges' must be a list of at most {HINGES} {{knot_m, rate_N_per_m}}"
+        )
+    hinges = []
+    for index, hinge in enumerate(data):
+        where = f"effects.spring_hinges[{index}]."
+        if not isinstance(hinge, Mapping):
+            raise ModelFormatError(f"model: '{where[:-1]}' must be an object {{knot_m, rate_N_per_m}}")
+        unknown = sorted(set(hinge) - {"knot_m", "rate_N_per_m"})
+        if unknown:
+            raise ModelFormatError(
+                f"model: unknown key '{where}{unknown[0]}' (a hinge has knot_m, rate_N_per_m)"
+            )
+        hinges.append(SpringHinge(_number(hinge, "knot_m", where), _number(hinge, "rate_N_per_m", where)))
+    return tuple(hinges)
 
 
 def _relaxation_time_s(result: Mapping[str, Any]) -> float:

@@ -154,6 +154,11 @@ def _substeps(
     corners = [physics.corner] if isinstance(physics, QuarterCarPhysics) else [physics.left, physics.right]
     friction = max(float(np.max(np.abs(c.coulomb_friction_N))) for c in corners)
     dashpot = max(dashpot, *(float(np.max(np.abs(c.tyre_dashpot_Ns_per_m))) for c in corners))
+    # a Stribeck peak steps at zero velocity like the friction (absent where its velocity is zero)
+    stribeck = max(
+        float(np.max(np.abs(np.where(np.asarray(c.stribeck_velocity_m_s) != 0, c.stribeck_peak_N, 0.0))))
+        for c in corners
+    )
     return model_substeps(
         curves,  # type: ignore[arg-type]
         model.sprung_mass_kg,
@@ -162,6 +167,7 @@ def _substeps(
         sample_time_s,
         coulomb_friction_N=friction,
         wheel_dashpot_Ns_per_m=dashpot,
+        stribeck_peak_N=stribeck,
     )
 
 

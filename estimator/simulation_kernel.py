@@ -1,6 +1,6 @@
 """The output-error simulation compiled: the fixed-step Runge-Kutta of estimator.dynamics (quarter car or
-axle, piecewise-linear dampers, Maxwell / Kelvin-Voigt / spring tyre with a parallel dashpot, Coulomb
-friction, cubic spring, tyre lift-off) for a population of models, one column each.
+axle, piecewise-linear dampers, Maxwell / Kelvin-Voigt / spring tyre with a parallel dashpot, Coulomb and
+Stribeck friction, cubic spring, spring hinges, tyre lift-off) for a population of models, one column each.
 
 Why: the recursion is per sample (the Maxwell state, the damper's segment), so numpy cannot vectorise it
 over time; in a Python loop it was most of `shockbench identify` (about 2.5 s of 3.7 s on 12 s at 1 kHz) and
@@ -40,7 +40,7 @@ from types import ModuleType
 import numpy as np
 
 from estimator.damper import CurveBatch, PiecewiseLinearCurve
-from estimator.dynamics import AxlePhysics, CornerPhysics, QuarterCarPhysics
+from estimator.dynamics import HINGES, AxlePhysics, CornerPhysics, QuarterCarPhysics
 from estimator.vehicle import TyreModel
 
 # rows of the per-corner parameter table, shape (corners, CORNER_ROWS, columns)
@@ -53,7 +53,12 @@ CUBIC_SPRING_N_PER_M3 = 5
 TYRE_LIFTOFF = 6  # 1.0 where the contact force is clipped at lift-off, 0.0 where not
 STATIC_WHEEL_LOAD_N = 7
 TYRE_DASHPOT_NS_PER_M = 8
-CORNER_ROWS = 9
+STRIBECK_PEAK_N = 9
+STRIBECK_VELOCITY_M_S = 10  # the kernel adds no Stribeck term where this or the peak is 0
+HINGED = 11  # 1.0 where a hinge has a rate (the kernel skips the hinges where not), 0.0 where not
+HINGE_KNOT_M = 12  # HINGES rows: the knots of CornerPhysics.hinge_table
+HINGE_RATE_N_PER_M = HINGE_KNOT_M + HINGES  # HINGES rows: their rates
+CORNER_ROWS = HINGE_RATE_N_PER_M + HINGES
 
 # rows of the per-column body table, shape (BODY_ROWS, columns)
 SPRUNG_KG = 0
@@ -165,6 +170,11 @@ def _corner_rows(corner: CornerPhysics, columns: int) -> np.ndarray:
     rows[TYRE_LIFTOFF] = _per_column(np.asarray(corner.tyre_liftoff, dtype=bool), columns)
     rows[STATIC_WHEEL_LOAD_N] = _per_column(corner.static_wheel_load_N, columns)
     rows[TYRE_DASHPOT_NS_PER_M] = _per_column(corner.tyre_dashpot_Ns_per_m, columns)
+    rows[STRIBECK_PEAK_N] = _per_column(corner.stribeck_peak_N, columns)
+    rows[STRIBECK_VELOCITY_M_S] = _per_column(corner.stribeck_velocity_m_s, columns)
+    for first, values in zip((HINGE_KNOT_M, HINGE_RATE_N_PER_M), corner.hinge_table(), strict=True):
+        rows[first : first + HINGES] = values if values.ndim == 2 else values[:, None]
+    rows[HINGED] = np.any(rows[HINGE_RATE_N_PER_M : HINGE_RATE_N_PER_M + HINGES] != 0.0, axis=0)
     return rows
 
 

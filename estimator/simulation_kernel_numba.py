@@ -1,6 +1,7 @@
 """The output-error simulation's kernel for numba: the fixed-step Runge-Kutta of estimator.dynamics (quarter
 car or axle, piecewise-linear dampers, Maxwell / Kelvin-Voigt / spring tyre with a parallel dashpot, Coulomb
-friction, cubic spring, tyre lift-off) for a population of models, one column each.
+and Stribeck friction, cubic spring, spring hinges, tyre lift-off) for a population of models, one column
+each.
 
 Callers use estimator.simulation_kernel (integrate_compiled), which lays the models out in the tables this
 kernel reads and runs it either as built ahead of time into a Python extension (service/kernel_build.py,
@@ -14,17 +15,23 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from estimator.dynamics import COULOMB_SMOOTHING_M_S
+from estimator.dynamics import COULOMB_SMOOTHING_M_S, HINGES
 from estimator.simulation_kernel import (
     ANTI_ROLL_BAR_N_PER_M,
+    CORNER_ROWS,
     COULOMB_FRICTION_N,
     CUBIC_SPRING_N_PER_M3,
+    HINGE_KNOT_M,
+    HINGE_RATE_N_PER_M,
+    HINGED,
     MAXWELL_TIME_CONSTANT_S,
     ROLL_INERTIA_KG_M2,
     SPRING_N_PER_M,
     SPRUNG_KG,
     STATE_SLOTS,
     STATIC_WHEEL_LOAD_N,
+    STRIBECK_PEAK_N,
+    STRIBECK_VELOCITY_M_S,
     TRACK_M,
     TYRE_DAMPING_NS_PER_M,
     TYRE_DASHPOT_NS_PER_M,
@@ -34,6 +41,9 @@ from estimator.simulation_kernel import (
 )
 
 _MAXWELL, _KELVIN_VOIGT = 0, 1  # estimator.simulation_kernel.TYRE_CODES
+
+if HINGES != 4 or CORNER_ROWS != 20:  # _row and _hinges_N spell the rows out one by one
+    raise ImportError(f"the kernel is written for 4 hinges, 20 corner rows, not {HINGES}, {CORNER_ROWS}")
 
 # The per-step functions take and return tuples of floats and 1-D arrays only, and are inlined into the
 # loop: passing numba arrays between functions costs reference counting at every call (25x slower here).
@@ -56,16 +66,46 @@ def _damper_N(velocity_m_s: float, grid_m_s, force_N, slope_Ns_per_m, knots: int
     return force_N[low] + (velocity_m_s - grid_m_s[low]) * slope_Ns_per_m[low]
 
 
+@_scalar
+def _hinge_N(deflection_m: float, knot_m: float, rate_N_per_m: float) -> float:
+    """One spring hinge: rate·(ζ − knot) beyond the knot on its side, 0 elsewhere (side·max(side·(ζ − knot),
+    0) is ζ − knot exactly, or 0). Written without a branch on ζ: with one (or a branch per hinge on how
+    many a column has) every simulation ran a quarter slower, with hinges or without (measured on
+    benchmarks/bench_kernel.py's cases); so the kernel takes all HINGES where a column has one."""
+    side = 1.0 if knot_m >= 0.0 else -1.0
+    return rate_N_per_m * side * max(side * (deflection_m - knot_m), 0.0)
+
+
+@_inline
+def _hinges_N(deflection_m: float, corner) -> float:
+    """CornerPhysics.spring_hinge_force_N of one column: its HINGES hinges (padded with rate 0) in order."""
+    return (
+        _hinge_N(deflection_m, corner[HINGE_KNOT_M], corner[HINGE_RATE_N_PER_M])
+        + _hinge_N(deflection_m, corner[HINGE_KNOT_M + 1], corner[HINGE_RATE_N_PER_M + 1])
+        + _hinge_N(deflection_m, corner[HINGE_KNOT_M + 2], corner[HINGE_RATE_N_PER_M + 2])
+        + _hinge_N(deflection_m, corner[HINGE_KNOT_M + 3], corner[HINGE_RATE_N_PER_M + 3])
+    )
+
+
 @_inline
 def _suspension_N(deflection_m: float, velocity_m_s: float, corner, grid, force, slope, knots: int) -> float:
-    """CornerPhysics.suspension_force_N for one column; `corner` is its row of the corner table."""
+    """CornerPhysics.suspension_force_N for one column, its terms in the same order; `corner` is its row of
+    the corner table."""
     force_N = _damper_N(velocity_m_s, grid, force, slope, knots) + corner[SPRING_N_PER_M] * deflection_m
     friction = corner[COULOMB_FRICTION_N]
+    peak, stribeck_m_s = corner[STRIBECK_PEAK_N], corner[STRIBECK_VELOCITY_M_S]
+    stribeck = peak != 0.0 and stribeck_m_s != 0.0
+    sign = np.tanh(velocity_m_s / COULOMB_SMOOTHING_M_S) if friction != 0.0 or stribeck else 0.0
     if friction != 0.0:
-        force_N = force_N + friction * np.tanh(velocity_m_s / COULOMB_SMOOTHING_M_S)
+        force_N = force_N + friction * sign
     cubic = corner[CUBIC_SPRING_N_PER_M3]
     if cubic != 0.0:
         force_N = force_N + cubic * deflection_m**3.0
+    if corner[HINGED] != 0.0:  # no hinge with a rate: no hinge code per step
+        force_N = force_N + _hinges_N(deflection_m, corner)
+    if stribeck:
+        ratio = velocity_m_s / stribeck_m_s
+        force_N = force_N + peak * sign * np.exp(-(ratio * ratio))
     return force_N
 
 
@@ -196,6 +236,10 @@ def _row(table, corner: int, column: int):
         table[corner, 0, column], table[corner, 1, column], table[corner, 2, column],
         table[corner, 3, column], table[corner, 4, column], table[corner, 5, column],
         table[corner, 6, column], table[corner, 7, column], table[corner, 8, column],
+        table[corner, 9, column], table[corner, 10, column], table[corner, 11, column],
+        table[corner, 12, column], table[corner, 13, column], table[corner, 14, column],
+        table[corner, 15, column], table[corner, 16, column], table[corner, 17, column],
+        table[corner, 18, column], table[corner, 19, column],
     )  # fmt: skip
 
 

@@ -66,11 +66,7 @@ def validate(model: IdentifiedModel, recording: Recording) -> ValidationResult:
     """Simulate `model` from the recording's plate (its own sample time and length) and compare."""
     check_model_fits(model, recording)
     effects = model.effects if isinstance(model, ModelWithEffects) else None
-    corrections = (
-        ChannelCorrections(dict(effects.channel_delay_s), dict(effects.sensor_offset_m))
-        if effects is not None
-        else ChannelCorrections()
-    )
+    corrections = effects.channel_corrections() if effects is not None else ChannelCorrections()
     dt = recording.sample_time_s
     driven = corrections.apply(recording)  # the true motion as the model's channel effects say
     filters = choose_filters(recording.channels, dt)

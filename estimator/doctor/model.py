@@ -47,7 +47,7 @@ from estimator.doctor.catalog import (
     FitContext,
 )
 from estimator.doctor.columns import EquationSignals, restrict, with_columns
-from estimator.doctor.spline_shift import shift_signal
+from estimator.doctor.sensors import ChannelCorrections
 from estimator.equations import LinearResiduals, build
 from estimator.errors import InvalidValueError
 from estimator.recording import Recording
@@ -93,38 +93,6 @@ def starting_structure(tyre: TyreModel) -> ModelStructure:
     if tyre is TyreModel.MAXWELL:
         return ModelStructure((EffectInstance(EffectName.TYRE_VISCOELASTIC),))
     return ModelStructure()
-
-
-@dataclass(frozen=True)
-class ChannelCorrections:
-    """delay_s: channel -> how much the channel lags (s); offset_m: channel -> its zero error (m)."""
-
-    delay_s: dict[str, float] = field(default_factory=dict)
-    offset_m: dict[str, float] = field(default_factory=dict)
-
-    def correct(self, name: str, measured: np.ndarray, sample_time_s: float) -> np.ndarray:
-        """The true signal from the measured one: x(t) = x_measured(t + delay) − offset."""
-        x = measured
-        delay = self.delay_s.get(name, 0.0)
-        if delay:
-            x = shift_signal(x, -delay / sample_time_s)
-        return x - self.offset_m.get(name, 0.0)
-
-    def distort(self, name: str, true: np.ndarray, sample_time_s: float) -> np.ndarray:
-        """What the sensor reads from a true signal: x_measured(t) = x(t − delay) + offset (columns of a
-        2-D array are signals)."""
-        x = true
-        delay = self.delay_s.get(name, 0.0)
-        if delay:
-            x = shift_signal(x, delay / sample_time_s)
-        return x + self.offset_m.get(name, 0.0)
-
-    def apply(self, recording: Recording) -> Recording:
-        if not self.delay_s and not self.offset_m:
-            return recording
-        dt = recording.sample_time_s
-        channels = {name: self.correct(name, x, dt) for name, x in recording.channels.items()}
-        return Recording(recording.time_s, channels, dict(recording.metadata))
 
 
 @dataclass(frozen=True)
@@ -508,6 +476,9 @@ def _base_system(
     key = (
         tuple(sorted((name, value) for name, value in corrections.delay_s.items() if value)),
         tuple(sorted((name, value) for name, value in corrections.offset_m.items() if value)),
+        tuple(sorted((name, value) for name, value in corrections.lag_s.items() if value)),
+        tuple(sorted((name, value) for name, value in corrections.average_s.items() if value)),
+        tuple(sorted((name, value) for name, value in corrections.gain_error.items() if value)),
         kind,
     )
 

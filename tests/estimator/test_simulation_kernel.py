@@ -1,7 +1,7 @@
 """The compiled output-error simulation (estimator.simulation_kernel) against the Python reference integrator
 (estimator.dynamics.integrate_rk4): random models with fixed seeds, quarter car and axle, every effect the
-doctor simulates, populations of several columns, one diverging model; the trajectories agree to 1e-9
-relative (to each trajectory's amplitude up to that step).
+doctor simulates (spring hinges and Stribeck friction among them), populations of several columns, one
+diverging model; the trajectories agree to 1e-9 relative (to each trajectory's amplitude up to that step).
 
 Every test runs with both forms of the kernel: the extension built ahead of time (built here by
 compile_ahead when the tree has none for the present source) and numba's just-in-time compile (once per
@@ -11,12 +11,14 @@ cheap.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
 import estimator.simulation_kernel as simulation_kernel
 from estimator.damper import CurveBatch, PiecewiseLinearCurve
-from estimator.dynamics import AxlePhysics, CornerPhysics, QuarterCarPhysics, integrate_rk4
+from estimator.dynamics import HINGES, AxlePhysics, CornerPhysics, QuarterCarPhysics, integrate_rk4
 from estimator.simulation_kernel import integrate_compiled
 from estimator.vehicle import TyreModel
 from service.kernel_build import compile_ahead
@@ -308,3 +310,103 @@ def test_inputs_it_cannot_simulate_are_refused() -> None:
         integrate_compiled(physics, np.zeros((5, 2)), SAMPLE_TIME_S, plate, rate)
     with pytest.raises(ValueError, match="plate drive"):
         integrate_compiled(physics, np.zeros((5, 3)), SAMPLE_TIME_S, np.zeros((2, 3, plate.size)), rate)
+
+
+def _with_shapes(
+    corner: CornerPhysics, seed: int, columns: int, shared_hinges: bool = False
+) -> CornerPhysics:
+    """The corner with spring hinges (1 to HINGES, knots of either sign within the few millimetres the chirp
+    deflects the spring, rates up to 4x the spring's; in some columns none) and Stribeck friction (in some
+    columns; one column with a peak but no velocity, which is no Stribeck term). shared_hinges: one (H,)
+    set of hinges for every column, as a model's corner carries them."""
+    rng = np.random.default_rng(seed)
+    count = int(rng.integers(1, HINGES + 1))
+    shape = (count,) if shared_hinges else (count, columns)
+    knots = rng.uniform(0.0003, 0.003, shape) * rng.choice([-1.0, 1.0], shape)
+    rates = rng.uniform(0.3, 4.0, shape) * np.mean(corner.spring_stiffness_N_per_m)
+    if not shared_hinges:
+        rates[:, rng.random(columns) < 0.3] = 0.0  # no hinge in some columns
+        rates[rng.random(shape) < 0.2] = 0.0  # and some hinges of a column unused (padding)
+    peak = np.where(rng.random(columns) < 0.7, rng.uniform(10.0, 60.0, columns), 0.0)
+    velocity = rng.uniform(0.005, 0.05, columns)
+    velocity[0], peak[0] = 0.0, 80.0  # a peak without a velocity: absent, not a division by zero
+    return replace(
+        corner,
+        spring_hinge_knots_m=knots,
+        spring_hinge_rates_N_per_m=rates,
+        stribeck_peak_N=peak,
+        stribeck_velocity_m_s=velocity,
+    )
+
+
+def _hinges_engaged(corner: CornerPhysics, deflection_m: np.ndarray) -> bool:
+    """Whether the deflection (steps, columns) went beyond some hinge's knot on its side."""
+    force = corner.spring_hinge_force_N(deflection_m)
+    return bool(np.any(force != 0.0))
+
+
+@pytest.mark.parametrize("seed", [13, 15])
+def test_quarter_car_population_with_spring_hinges_and_stribeck_friction(seed: int) -> None:
+    """Six columns with hinges (own knots and rates per column, none in some) and Stribeck friction beside
+    the other effects; the hinges engage during the chirp."""
+    columns = 6
+    base = _quarter_car(seed, columns, TyreModel.MAXWELL, effects=True)
+    physics = replace(base, corner=_with_shapes(base.corner, seed + 500, columns))
+    rng = np.random.default_rng(seed + 100)
+    plate, rate = _plate(rng, columns)
+    state0 = np.vstack([rng.normal(0, 1e-3, (4, columns)), np.zeros((1, columns))])
+    reference, compiled = _both(physics, state0, plate, rate)
+    assert np.all(np.isfinite(reference))
+    assert_same_trajectories(reference, compiled)
+    assert _hinges_engaged(physics.corner, reference[:, 0] - reference[:, 2])
+    # the shapes change the motion: the same models without them move otherwise
+    plain, _ = _both(base, state0, plate, rate)
+    assert np.max(np.abs(plain - reference)) > 1e-5
+
+
+def test_axle_population_with_spring_hinges_and_stribeck_friction() -> None:
+    """Five axle models: the left corner with hinges per column, the right with one set for all (H,), both
+    with Stribeck friction, beside the bar and the other effects."""
+    columns = 5
+    base = _axle(22, columns)
+    physics = replace(
+        base,
+        left=_with_shapes(base.left, 522, columns),
+        right=_with_shapes(base.right, 523, columns, shared_hinges=True),
+    )
+    rng = np.random.default_rng(122)
+    left, left_rate = _plate(rng, columns)
+    right, right_rate = _plate(rng, columns)
+    plate, rate = np.stack([left, right]), np.stack([left_rate, right_rate])
+    state0 = np.vstack([rng.normal(0, 1e-3, (8, columns)), np.zeros((2, columns))])
+    reference, compiled = _both(physics, state0, plate, rate)
+    assert np.all(np.isfinite(reference))
+    assert_same_trajectories(reference, compiled)
+    half = 0.5 * physics.track_m
+    zeta_l = reference[:, 0] + half * reference[:, 2] - reference[:, 4]
+    zeta_r = reference[:, 0] - half * reference[:, 2] - reference[:, 6]
+    assert _hinges_engaged(physics.left, zeta_l) and _hinges_engaged(physics.right, zeta_r)
+
+
+def test_one_model_with_a_bump_stop_and_stribeck_friction() -> None:
+    """As validate drives a model with effects (estimator.model_io): one curve, scalar parameters, two hinges
+    (a stop each way with clearance) and a Stribeck peak, a 1-D state."""
+    rng = np.random.default_rng(32)
+    grid = _grid(rng)
+    corner = CornerPhysics(
+        damper=PiecewiseLinearCurve(grid, _curve_forces(rng, grid, 1)[:, 0]),
+        spring_stiffness_N_per_m=25e3,
+        tyre_stiffness_N_per_m=200e3,
+        tyre_damping_Ns_per_m=350.0,
+        maxwell_time_constant_s=0.03,
+        coulomb_friction_N=40.0,
+        spring_hinge_knots_m=np.array([0.001, -0.0015]),
+        spring_hinge_rates_N_per_m=np.array([80e3, 50e3]),
+        stribeck_peak_N=60.0,
+        stribeck_velocity_m_s=0.01,
+    )
+    physics = QuarterCarPhysics(corner, 320.0, 42.0)
+    plate, rate = _plate(rng, None)
+    reference, compiled = _both(physics, np.array([1e-3, 0.0, -5e-4, 0.01, 0.0]), plate, rate)
+    assert_same_trajectories(reference, compiled)
+    assert _hinges_engaged(corner, reference[:, 0] - reference[:, 2])
