@@ -33,6 +33,7 @@ from estimator.doctor.model import FitSettings, FittedModel, Reference, fit
 from estimator.doctor.noise import ChannelNoise
 from estimator.doctor.pchip import Pchip
 from estimator.recording import Recording
+from estimator.vehicle import VehicleConstant
 
 SMOOTH_POINTS = 240
 """Knots of the dense table that represents the smooth truth's damper curve."""
@@ -64,12 +65,19 @@ def smooth_truth(model: FittedModel) -> FittedModel:
     return replace(model, curve_override=tuple(smooth_curve(c) for c in model.curves))
 
 
-def plausible_truth(model: FittedModel, recording: Recording, settings: FitSettings) -> FittedModel:
+def plausible_truth(
+    model: FittedModel,
+    recording: Recording,
+    settings: FitSettings,
+    identified: frozenset[VehicleConstant] = frozenset(),
+) -> FittedModel:
     """A plausible truth for `model` (module docstring): its structure identified on the recording with
     TRUTH_POINTS_FACTOR times the points, the damper curves made smooth."""
     points = settings.points
     fine = replace(settings, points=None if points is None else TRUTH_POINTS_FACTOR * points)
-    return smooth_truth(fit(Reference.of(recording, model.vehicle, fine), model.structure, warm=model))
+    return smooth_truth(
+        fit(Reference.of(recording, model.vehicle, fine, identified), model.structure, warm=model)
+    )
 
 
 def synthetic_recording(
@@ -84,8 +92,9 @@ def synthetic_recording(
     return Recording(recording.time_s, channels, {"source": "model doctor: expected gap"})
 
 
-def refit_on(synthetic: Recording, model: FittedModel, settings: FitSettings) -> FittedModel:
-    """The model's structure identified on the synthetic recording, started from the model's own unknowns
-    and channel parameters (the synthetic recording is the model's response plus noise, so its optimum lies
-    near them: a few Newton steps instead of a solve from scratch, the same convex optimum)."""
-    return fit(Reference.of(synthetic, model.vehicle, settings), model.structure, warm=model)
+def refit_on(synthetic: Recording, model: FittedModel, reference: Reference) -> FittedModel:
+    """The model's structure identified on the synthetic recording (the reference's settings, hinge knots
+    and identified constants), started from the model's own unknowns and channel parameters (the synthetic
+    recording is the model's response plus noise, so its optimum lies near them)."""
+    on = Reference.of(synthetic, model.vehicle, reference.settings, reference.identified)
+    return fit(replace(on, knots_m=reference.knots_m), model.structure, warm=model)

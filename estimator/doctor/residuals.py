@@ -147,17 +147,22 @@ def ljung_box(residual: np.ndarray, sample_time_s: float, bandwidth_Hz: float) -
 
 
 def chi_square_survival(statistic: float, degrees: int) -> float:
-    """P(χ² > statistic) for an even number of degrees of freedom (scipy.special.chdtrc for those): the
-    Poisson sum e^(−s/2)·Σ_{k<degrees/2} (s/2)^k / k!, each term taken in logarithms so that large
+    """P(χ² > statistic) with `degrees` degrees of freedom (scipy.special.chdtrc): for even degrees the
+    Poisson sum e^(−s/2)·Σ_{k<degrees/2} (s/2)^k / k!, for odd ones erfc(√(s/2)) plus
+    e^(−s/2)·Σ_{k=1}^{(degrees−1)/2} (s/2)^(k−1/2) / Γ(k + 1/2); each term taken in logarithms so that large
     statistics underflow to 0 instead of overflowing. Why not scipy: importing scipy.special costs a
     diagnosis some 0.1 s for this one tail."""
-    if degrees <= 0 or degrees % 2:
-        raise ValueError(f"chi_square_survival takes an even, positive number of degrees, not {degrees}")
+    if degrees <= 0:
+        raise ValueError(f"chi_square_survival takes a positive number of degrees, not {degrees}")
     if statistic <= 0:
         return 1.0
     half = statistic / 2.0
     log_half = math.log(half)
-    return min(1.0, sum(math.exp(k * log_half - half - math.lgamma(k + 1)) for k in range(degrees // 2)))
+    if degrees % 2 == 0:
+        terms = [k * log_half - half - math.lgamma(k + 1) for k in range(degrees // 2)]
+        return min(1.0, sum(math.exp(t) for t in terms))
+    terms = [(k - 0.5) * log_half - half - math.lgamma(k + 0.5) for k in range(1, (degrees + 1) // 2)]
+    return min(1.0, math.erfc(math.sqrt(half)) + sum(math.exp(t) for t in terms))
 
 
 def effective_samples(residual: np.ndarray) -> float:

@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from estimator.doctor.catalog import EffectName
+from estimator.doctor.catalog import FRICTION_UNKNOWNS, STRIBECK_VELOCITY_M_S, EffectName
 from estimator.doctor.residuals import Localisation
 from estimator.vehicle import TyreModel
 
@@ -23,38 +23,39 @@ def _finite_or_none(value: float) -> float | None:
 
 @dataclass(frozen=True)
 class CandidateScore:
-    """How one candidate fared at one step.
+    """How one candidate fared in one round (estimator.doctor.criteria).
 
-    objective_ratio: the paper's objective with the candidate over without (all samples);
-    heldout_ratio: the same on the held-out blocks, each model fitted on the other blocks;
-    gap_m: output-error gap with the candidate (None if not simulated: screened out);
-    bic_change: change of the information criterion (negative favours the candidate);
-    correlation: of the residual with what the candidate explains; parameter_spread: how much the effect's
-    parameter differs when fitted on the first and on the second half of the sweep, relative to its value
-    (None when not checked); verdict: "named" or why not.
+    objective_ratio: the paper's objective with the candidate over without; gap_m, gap_ratio: its free
+    simulation's gap and that over the model's without it; equation_statistic, equation_p: the Wald test of
+    its unknowns; simulation_statistic, simulation_p: the likelihood ratio of the gap; p_value: the larger of
+    the two p-values; unknowns: how many it adds; verdict: "named" or why not.
     """
 
     effect: str
     objective_ratio: float
-    heldout_ratio: float | None
     gap_m: float | None
     gap_ratio: float | None
-    bic_change: float | None
-    correlation: float | None
+    equation_statistic: float
+    simulation_statistic: float
+    unknowns: int
+    equation_p: float
+    simulation_p: float
+    p_value: float
     parameters: dict[str, float | str]
     verdict: str
-    parameter_spread: float | None = None
 
     def to_json(self) -> dict[str, object]:
         return {
             "effect": self.effect,
-            "objective_ratio": self.objective_ratio,
-            "heldout_ratio": self.heldout_ratio,
+            "objective_ratio": _finite_or_none(self.objective_ratio),
             "gap_m": _finite_or_none(self.gap_m) if self.gap_m is not None else None,
             "gap_ratio": _finite_or_none(self.gap_ratio) if self.gap_ratio is not None else None,
-            "bic_change": _finite_or_none(self.bic_change) if self.bic_change is not None else None,
-            "correlation": self.correlation,
-            "parameter_spread": self.parameter_spread,
+            "equation_statistic": _finite_or_none(self.equation_statistic),
+            "simulation_statistic": _finite_or_none(self.simulation_statistic),
+            "unknowns": self.unknowns,
+            "equation_p": self.equation_p,
+            "simulation_p": self.simulation_p,
+            "p_value": self.p_value,
             "parameters": self.parameters,
             "verdict": self.verdict,
         }
@@ -70,8 +71,7 @@ class DiagnosisStep:
     gap_before_m: float
     gap_after_m: float
     evidence: str
-    bic_change: float
-    heldout_ratio: float
+    p_value: float
     located_after: Localisation
     predicted_after: dict[str, np.ndarray] = field(repr=False)
 
@@ -82,6 +82,7 @@ class DiagnosisStep:
             "gap_after_m": _finite_or_none(self.gap_after_m),
             "parameters": self.parameters,
             "evidence": self.evidence,
+            "p_value": self.p_value,
         }
 
 
@@ -90,11 +91,10 @@ class DiagnosisResult:
     """The whole diagnosis.
 
     starting_effects / final_effects: the model's effects beyond the vehicle file's constants before and
-    after (the tyre option counts: maxwell = tyre_viscoelastic); expected_gap_m: the gap a model without
-    missing effects reaches on this sweep and noise (the final model re-identified on its own simulated
-    response with the measured noise added); unexplained: a clear disagreement remains that no candidate
-    explains (see estimator.doctor.diagnose: residual_ratio or gap_after_m / expected_gap_m too large, or
-    a diverging model)."""
+    after (the tyre option counts: maxwell = tyre_viscoelastic); expected_gap_m: the mean gap of the final
+    structure re-identified on bootstrap draws of itself (estimator.doctor.criteria.GoodnessOfFit);
+    p_value: the goodness-of-fit test's (p_objective, p_gap its two parts); unexplained: p_value < alpha;
+    where: the localisation of what is left, when unexplained."""
 
     starting_effects: list[str]
     final_effects: list[str]
@@ -107,8 +107,13 @@ class DiagnosisResult:
     conclusion: str
     expected_gap_m: float
     residual_ratio: float
-    """The paper's objective of the final model over that of the same structure re-identified on its own
-    simulated response with the measured noise: about 1 when the equations hold as well as they can."""
+    """The paper's objective of the final model over the bootstrap draws' mean: about 1 when the equations
+    hold as well as noise and the curve's resolution allow."""
+    p_value: float
+    p_objective: float
+    p_gap: float
+    alpha: float
+    where: str | None
     noise_floor_m: float
     located_before: Localisation
     measured: dict[str, np.ndarray] = field(repr=False)
@@ -144,7 +149,12 @@ class DiagnosisResult:
             "starting_effects": self.starting_effects,
             "final_effects": self.final_effects,
             "expected_gap_m": _finite_or_none(self.expected_gap_m),
-            "residual_ratio": self.residual_ratio,
+            "residual_ratio": _finite_or_none(self.residual_ratio),
+            "p_value": self.p_value,
+            "p_objective": self.p_objective,
+            "p_gap": self.p_gap,
+            "alpha": self.alpha,
+            "where": self.where,
             "noise_floor_m": self.noise_floor_m,
             "candidates": [[c.to_json() for c in round_] for round_ in self.rounds],
             "model": model_json(self.final_model) if self.final_model is not None else None,
@@ -177,24 +187,42 @@ def model_json(model: FittedModel) -> dict[str, object]:
         tyre, damping = TyreModel.SPRING, 0.0
     effects: dict[str, object] = {}
     for key, value in (
-        ("coulomb_friction_N", model.value("coulomb_friction_N")),
-        ("cubic_spring_N_per_m3", model.value("cubic_spring_N_per_m3")),
+        ("coulomb_friction_N", model.value(FRICTION_UNKNOWNS[0])),
         ("tyre_dashpot_Ns_per_m", dashpot),
     ):
         if value:
             effects[key] = value
+    if model.value(FRICTION_UNKNOWNS[1]):
+        effects["stribeck_peak_N"] = model.value(FRICTION_UNKNOWNS[1])
+        effects["stribeck_velocity_m_s"] = STRIBECK_VELOCITY_M_S
+    hinges = [
+        {"knot_m": float(k), "rate_N_per_m": float(r)}
+        for k, r in zip(model.knots_m, model.hinge_rates_N_per_m, strict=True)
+        if r
+    ]
+    if hinges:
+        effects["spring_hinges"] = hinges
     if model.structure.has(EffectName.TYRE_LIFTOFF):
         effects["tyre_liftoff"] = True
     corrections = model.corrections
-    if corrections.delay_s:
-        effects["channel_delay_s"] = dict(corrections.delay_s)
-    if corrections.offset_m:
-        effects["sensor_offset_m"] = dict(corrections.offset_m)
+    for key, table in (
+        ("channel_delay_s", corrections.delay_s),
+        ("sensor_offset_m", corrections.offset_m),
+        ("sensor_lag_s", corrections.lag_s),
+        ("sensor_average_s", corrections.average_s),
+        ("sensor_gain_error", corrections.gain_error),
+    ):
+        if any(table.values()):
+            effects[key] = {channel: value for channel, value in table.items() if value}
     stiffness: dict[str, object] = {
         "spring": _rate_N_per_m(model, "spring_stiffness_N_per_m"),
         "tyre": _rate_N_per_m(model, "tyre_stiffness_N_per_m"),
-        # the rates the doctor found the stated ones contradict (effects spring_stiffness, tyre_stiffness)
-        "identified": [n for n in ("spring", "tyre") if f"{n}_stiffness" in model.structure.labels],
+        # the rates the doctor found the stated ones contradict (families spring_curve, tyre_stiffness)
+        "identified": [
+            n
+            for n, family in (("spring", "spring_curve"), ("tyre", "tyre_stiffness"))
+            if family in model.structure.labels
+        ],
     }
     out: dict[str, object] = {
         "curves": [

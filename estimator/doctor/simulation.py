@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from estimator.damper import CurveBatch
-from estimator.doctor.catalog import EffectName
+from estimator.doctor.catalog import FRICTION_UNKNOWNS, STRIBECK_VELOCITY_M_S, EffectName
 from estimator.doctor.model import FittedModel
 from estimator.dynamics import (
     AxlePhysics,
@@ -106,8 +106,11 @@ def _corner(models: list[FittedModel], side: int, sample_time_s: float) -> Corne
         tyre_model=TyreModel.MAXWELL,
         tyre_damping_Ns_per_m=np.array([m.maxwell_damping_Ns_per_m for m in models]),
         maxwell_time_constant_s=vehicle.maxwell_time_constant_s(sample_time_s),
-        coulomb_friction_N=each("coulomb_friction_N"),
-        cubic_spring_N_per_m3=each("cubic_spring_N_per_m3"),
+        coulomb_friction_N=each(FRICTION_UNKNOWNS[0]),
+        stribeck_peak_N=each(FRICTION_UNKNOWNS[1]),
+        stribeck_velocity_m_s=STRIBECK_VELOCITY_M_S,
+        spring_hinge_knots_m=np.stack([np.asarray(m.knots_m) for m in models], axis=1),
+        spring_hinge_rates_N_per_m=np.stack([m.hinge_rates_N_per_m for m in models], axis=1),
         tyre_liftoff=np.array([m.structure.has(EffectName.TYRE_LIFTOFF) for m in models]),
         static_wheel_load_N=vehicle.static_wheel_load_N,
         tyre_dashpot_Ns_per_m=each("tyre_dashpot_Ns_per_m"),
@@ -139,8 +142,9 @@ def substeps(model: FittedModel, sample_time_s: float) -> int:
         float(model.vehicle.unsprung_mass_kg(model.sprung_mass_kg)),
         2 if model.vehicle.is_axle else 1,
         sample_time_s,
-        coulomb_friction_N=model.value("coulomb_friction_N"),
+        coulomb_friction_N=model.value(FRICTION_UNKNOWNS[0]),
         wheel_dashpot_Ns_per_m=model.value("tyre_dashpot_Ns_per_m"),
+        stribeck_peak_N=model.value(FRICTION_UNKNOWNS[1]),
     )
 
 

@@ -1,0 +1,153 @@
+"""The doctor's statistical tests, each an object with one job and its own test
+(tests/estimator/test_doctor_criteria.py). The procedure that uses them is estimator.doctor.diagnose.
+
+- EquationTest: is a family's contribution to the equations of motion zero? A Wald test with the sandwich
+  covariance of the paper's objective (a block long-run variance of the score, estimator.uncertainty), so a
+  residual coloured by the laser's filters and by what the model still lacks is not counted as independent
+  samples.
+- SimulationTest: does the family shrink the free simulation's gap more than chance? A likelihood ratio on
+  the output-error residual, whose samples are counted as the residual's effective number of independent
+  samples (its autocorrelation: estimator.doctor.residuals.effective_samples).
+- A family is *significant* when both are (an intersection-union test: its size is at most the larger of
+  the two tests' sizes, so no correction is owed for asking both). The equations alone over-detect where the
+  model's own approximation (a piecewise-linear damper curve for a smooth one) correlates with a family's
+  columns; the simulation alone is blind to a family that the curve or the masses can stand in for.
+- Selection: of the m candidates of a round, the one with the smallest p-value is named when p ≤ α/m
+  (Bonferroni: the chance of naming anything in a round where nothing is missing is at most α).
+- GoodnessOfFit: does what the final model leaves look like what it would leave if it were the truth? A
+  parametric bootstrap: the final model's structure is re-identified on `draws` synthetic recordings of its
+  own (smooth) response with noise drawn as the recording's own (level, colour, reading resolution) and
+  simulated again; the observed equation objective and gap are compared with those draws (on a log scale,
+  normal prediction intervals), the two p-values combined by Bonferroni.
+
+The doctor's decision constants are ALPHA and the bases' sizes (estimator.doctor.catalog: HINGE_FRACTIONS,
+STRIBECK_VELOCITY_M_S) and the bootstrap's size (DiagnoseOptions.draws).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from estimator.doctor.residuals import chi_square_survival, effective_samples
+from estimator.uncertainty import confidence_intervals
+
+ALPHA = 0.05
+"""Family-wise error rate of a round (naming an effect where none is missing) and false-alarm rate of the
+goodness-of-fit test ("unexplained" where nothing is left unexplained)."""
+
+
+@dataclass(frozen=True)
+class TestResult:
+    """statistic (Wald W or likelihood ratio), unknowns q (degrees of freedom), p-value."""
+
+    statistic: float
+    unknowns: int
+    p_value: float
+
+
+@dataclass(frozen=True)
+class EquationTest:
+    """Wald test of some of θ's unknowns (and of appended parameter columns) against zero:
+    W = θ_fᵀ V_ff⁻¹ θ_f ~ χ²(q) when they are zero."""
+
+    def test(
+        self,
+        system,
+        theta: np.ndarray,
+        names: list[str],
+        sample_time_s: float,
+        extra_values: np.ndarray | None = None,
+    ) -> TestResult:
+        """system, theta: the fitted model with the family (estimator.equations.LinearResiduals); names: the
+        family's unknowns in θ; extra_values: values of parameters whose columns were appended to `system`
+        after θ's (channel parameters: their columns are the residual's derivatives, so that at the fitted
+        θ their own estimate is zero and the test is of `extra_values`)."""
+        index = [system.parameter_names.index(n) for n in names]
+        values = [float(theta[k]) for k in index]
+        full_theta = theta
+        if extra_values is not None and extra_values.size:
+            first = len(theta)
+            index += list(range(first, first + extra_values.size))
+            values += [float(v) for v in extra_values]
+            full_theta = np.concatenate([theta, np.zeros(extra_values.size)])
+        if not index:
+            return TestResult(0.0, 0, 1.0)
+        covariance = confidence_intervals(system, full_theta, sample_time_s).covariance
+        block = covariance[np.ix_(index, index)]
+        vector = np.array(values)
+        statistic = float(vector @ np.linalg.lstsq(block, vector, rcond=None)[0])
+        if not np.isfinite(statistic):
+            return TestResult(statistic, len(index), 1.0)
+        return TestResult(statistic, len(index), chi_square_survival(statistic, len(index)))
+
+
+@dataclass(frozen=True)
+class SimulationTest:
+    """Likelihood ratio of the free simulation with and without the family: n_eff·ln(gap_without² /
+    gap_with²) ~ χ²(q), n_eff the effective number of independent samples of the residual without."""
+
+    def test(
+        self, residual_without: dict[str, np.ndarray], gap_without_m: float, gap_with_m: float, unknowns: int
+    ) -> TestResult:
+        q = max(unknowns, 1)
+        if not np.isfinite(gap_with_m):
+            return TestResult(-np.inf, q, 1.0)
+        if not np.isfinite(gap_without_m):
+            return TestResult(np.inf, q, 0.0)  # the model without diverges, the model with does not
+        samples = sum(effective_samples(r) for r in residual_without.values())
+        statistic = float(samples * math.log(gap_without_m**2 / gap_with_m**2))
+        return TestResult(statistic, q, chi_square_survival(statistic, q) if statistic > 0 else 1.0)
+
+
+def intersection_union(*results: TestResult) -> float:
+    """The p-value of "every test rejects": the largest of theirs."""
+    return max(r.p_value for r in results)
+
+
+@dataclass(frozen=True)
+class Selection:
+    """Bonferroni over a round's candidates: the smallest p-value wins if it is at most α/m."""
+
+    alpha: float = ALPHA
+
+    def choose(self, p_values: dict) -> object | None:
+        if not p_values:
+            return None
+        best = min(p_values, key=lambda k: (p_values[k], str(k)))
+        return best if p_values[best] <= self.alpha / len(p_values) else None
+
+
+def normal_upper_tail(z: float) -> float:
+    return 0.5 * math.erfc(z / math.sqrt(2.0))
+
+
+@dataclass(frozen=True)
+class GoodnessOfFit:
+    """The final model's equation objective and gap against `draws` bootstrap draws of the same (module
+    docstring): p = 2·min(p_objective, p_gap), each from a normal prediction interval of the logarithm
+    (the draws' mean and standard deviation, widened by √(1 + 1/draws) for their own uncertainty)."""
+
+    alpha: float = ALPHA
+
+    def p_value(
+        self, objective: float, gap_m: float, draw_objectives: list[float], draw_gaps_m: list[float]
+    ) -> tuple[float, float, float]:
+        """(p, p of the objective, p of the gap); a model that diverges has p = 0."""
+        if not np.isfinite(gap_m):
+            return 0.0, 0.0, 0.0
+        tails = []
+        for value, draws in ((objective, draw_objectives), (gap_m, draw_gaps_m)):
+            finite = np.log([d for d in draws if np.isfinite(d) and d > 0])
+            if finite.size < 2:
+                tails.append(1.0)  # nothing to compare with: no evidence against the model
+                continue
+            spread = float(np.std(finite, ddof=1)) * math.sqrt(1.0 + 1.0 / finite.size)
+            z = (math.log(value) - float(np.mean(finite))) / max(spread, 1e-12)
+            tails.append(normal_upper_tail(z))
+        return min(1.0, 2.0 * min(tails)), tails[0], tails[1]
+
+    def unexplained(self, p: float) -> bool:
+        return p < self.alpha
