@@ -264,7 +264,7 @@ class _Doctor:
         """The goodness-of-fit test of the final model and the diagnosis in words."""
         objectives, gaps = self.bootstrap(final, simulated)
         gof = GoodnessOfFit(self.options.alpha)
-        p, p_objective, p_gap = gof.p_value(final.objective, simulated.gap_m, objectives, gaps)
+        p = gof.p_value(simulated.gap_m, gaps)
         unexplained = gof.unexplained(p)
         located = locate(final, simulated.residual, simulated.gap_m)
         finite = [g for g in gaps if np.isfinite(g)]
@@ -293,8 +293,6 @@ class _Doctor:
             expected_gap_m=expected,
             residual_ratio=final.objective / float(np.mean(objectives)) if objectives else float("nan"),
             p_value=p,
-            p_objective=p_objective,
-            p_gap=p_gap,
             alpha=self.options.alpha,
             where=located.describe() if unexplained else None,
             noise_floor_m=self.reference.filters.noise_floor_m,

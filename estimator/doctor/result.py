@@ -93,7 +93,7 @@ class DiagnosisResult:
     starting_effects / final_effects: the model's effects beyond the vehicle file's constants before and
     after (the tyre option counts: maxwell = tyre_viscoelastic); expected_gap_m: the mean gap of the final
     structure re-identified on bootstrap draws of itself (estimator.doctor.criteria.GoodnessOfFit);
-    p_value: the goodness-of-fit test's (p_objective, p_gap its two parts); unexplained: p_value < alpha;
+    p_value: the goodness-of-fit test's; unexplained: p_value < alpha;
     where: the localisation of what is left, when unexplained."""
 
     starting_effects: list[str]
@@ -110,8 +110,6 @@ class DiagnosisResult:
     """The paper's objective of the final model over the bootstrap draws' mean: about 1 when the equations
     hold as well as noise and the curve's resolution allow."""
     p_value: float
-    p_objective: float
-    p_gap: float
     alpha: float
     where: str | None
     noise_floor_m: float
@@ -151,8 +149,6 @@ class DiagnosisResult:
             "expected_gap_m": _finite_or_none(self.expected_gap_m),
             "residual_ratio": _finite_or_none(self.residual_ratio),
             "p_value": self.p_value,
-            "p_objective": self.p_objective,
-            "p_gap": self.p_gap,
             "alpha": self.alpha,
             "where": self.where,
             "noise_floor_m": self.noise_floor_m,
