@@ -36,17 +36,34 @@ MIN_BINS = 8
 
 @dataclass(frozen=True)
 class ChannelNoise:
-    """Noise of one channel: an AR(1) part e[n] = ρ·e[n−1] + w[n] of standard deviation coloured_m plus white
-    noise of standard deviation white_m; readings rounded to quantum_m (0: not quantised)."""
+    """Noise of one channel: an AR(1) part e[n] = ρ·e[n−1] + w[n] of standard deviation coloured_m, white
+    noise of standard deviation white_m and 1/f noise of one-sided density pink_m2·Hz⁻¹·(1 Hz / f) above
+    the record's lowest frequency (flat below it); readings rounded to quantum_m (0: not quantised).
+    sample_time_s: what the 1/f part is drawn at (0: no 1/f part)."""
 
     coloured_m: float
     lag1_correlation: float
     white_m: float
     quantum_m: float = 0.0
+    pink_m2: float = 0.0
+    sample_time_s: float = 0.0
 
     @property
     def rms_m(self) -> float:
         return float(np.hypot(self.coloured_m, self.white_m))
+
+    def pink(self, samples: int, rng: np.random.Generator) -> np.ndarray:
+        """The 1/f part: white noise shaped in the frequency domain to the density pink_m2/f (flat below the
+        record's lowest frequency, 1/(samples·Δt))."""
+        if self.pink_m2 <= 0.0 or self.sample_time_s <= 0.0:
+            return np.zeros(samples)
+        dt = self.sample_time_s
+        frequency = np.fft.rfftfreq(samples, dt)
+        lowest = 1.0 / (samples * dt)
+        density = self.pink_m2 / np.maximum(frequency, lowest)
+        # unit white noise has the one-sided density 2·Δt
+        spectrum = np.fft.rfft(rng.standard_normal(samples)) * np.sqrt(density / (2.0 * dt))
+        return np.fft.irfft(spectrum, samples)
 
     def draw(self, samples: int, rng: np.random.Generator) -> np.ndarray:
         """A stationary sequence of this noise (the AR(1) part started from its stationary law)."""
@@ -54,7 +71,7 @@ class ChannelNoise:
         innovation = rng.standard_normal(samples) * self.coloured_m * np.sqrt(1.0 - rho * rho)
         innovation[0] = innovation[0] / np.sqrt(1.0 - rho * rho)
         coloured = first_order_filter((1.0, 0.0), -rho, innovation)
-        return coloured + rng.standard_normal(samples) * self.white_m
+        return coloured + rng.standard_normal(samples) * self.white_m + self.pink(samples, rng)
 
     def read(self, true_m: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         """What a sensor with this noise and resolution reads of `true_m`."""
@@ -84,28 +101,30 @@ def _ar1_shape(frequency_Hz: np.ndarray, sample_time_s: float, rho: float) -> np
     return 1.0 / (1.0 - 2.0 * rho * np.cos(omega) + rho * rho)
 
 
-def two_column_nnls(design: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, float]:
-    """scipy.optimize.nnls for a design of two columns: x ≥ 0 minimising ||design·x − target||, and that
-    norm. The problem is convex, so its optimum is the unconstrained least squares when that is ≥ 0, else
-    the best of the one-column fits (each clipped at 0) and zero. Why not scipy's: importing scipy.optimize
-    costs a diagnosis about 0.12 s, a tenth of it on a 12 s recording, for this one 2-unknown fit."""
-    candidates = []
-    for column in range(2):
-        values = design[:, column]
-        if float(values @ values) > 0.0:
-            one = np.zeros(2)
-            one[column] = max(float(values @ target) / float(values @ values), 0.0)
-            candidates.append(one)
-    both = np.linalg.lstsq(design, target, rcond=None)[0]
-    if np.all(both >= 0.0):
-        candidates.append(both)
-    candidates.append(np.zeros(2))
-    misfits = [float(np.linalg.norm(design @ x - target)) for x in candidates]
-    # on a tie (collinear columns: ρ = 0 makes the AR(1) shape white) the first column alone, as scipy's
-    # active set takes it, rather than lstsq's even split
-    tie = 1e-12 * (min(misfits) + float(np.linalg.norm(target)))
-    best = next(i for i, m in enumerate(misfits) if m <= min(misfits) + tie)
-    return candidates[best], misfits[best]
+def small_nnls(design: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, float]:
+    """scipy.optimize.nnls for a design of a few columns: x ≥ 0 minimising ||design·x − target||, and that
+    norm, by trying every set of free columns (the optimum is the unconstrained least squares on one of
+    them with the rest at zero). Why not scipy's: importing scipy.optimize costs a diagnosis about 0.12 s
+    for this one small fit. On a tie the set with the fewest and earliest columns wins (collinear columns:
+    ρ = 0 makes the AR(1) shape white)."""
+    columns = design.shape[1]
+    best: tuple[float, np.ndarray] = (float(np.linalg.norm(target)), np.zeros(columns))
+    tie = 1e-12 * float(np.linalg.norm(target))
+    subsets = sorted(
+        (tuple(k for k in range(columns) if mask >> k & 1) for mask in range(1, 2**columns)),
+        key=lambda subset: (len(subset), subset),
+    )
+    for subset in subsets:
+        part = design[:, subset]
+        solution = np.linalg.lstsq(part, target, rcond=None)[0]
+        if np.any(solution < 0.0):
+            continue
+        x = np.zeros(columns)
+        x[list(subset)] = solution
+        misfit = float(np.linalg.norm(design @ x - target))
+        if misfit < best[0] - tie:
+            best = (misfit, x)
+    return best[1], best[0]
 
 
 def measure_channel_noise(
@@ -122,21 +141,23 @@ def measure_channel_noise(
     f, p = frequency[band], density[band]
     if f.size == 0:
         return ChannelNoise(0.0, 0.0, 0.0, quantum_m)
-    best: tuple[float, float, float, float] | None = None
+    best: tuple[float, float, float, float, float] | None = None
     for rho in LAG1_GRID:
         shape = _ar1_shape(f, sample_time_s, float(rho))
-        design = np.column_stack([shape / p, 1.0 / p])
-        (a, b), misfit = two_column_nnls(design, np.ones(f.size))
+        design = np.column_stack([shape / p, 1.0 / p, 1.0 / (f * p)])
+        (a, b, c), misfit = small_nnls(design, np.ones(f.size))
         if best is None or misfit < best[0]:
-            best = (float(misfit), float(rho), float(a), float(b))
+            best = (float(misfit), float(rho), float(a), float(b), float(c))
     assert best is not None
-    _, rho, a, b = best
+    _, rho, a, b, c = best
     # one-sided density of AR(1) with innovation variance s²: 2·s²·Δt / |1 − ρe^{−iω}|²; its variance
     # s²/(1 − ρ²); white noise of variance σ²: 2·σ²·Δt
     coloured_variance = a / (2.0 * sample_time_s) / (1.0 - rho * rho)
     # the rounding of the synthetic readings adds the quantisation's own q²/12 again
     white_variance = max(0.0, b / (2.0 * sample_time_s) - quantum_m * quantum_m / 12.0)
-    return ChannelNoise(float(np.sqrt(coloured_variance)), rho, float(np.sqrt(white_variance)), quantum_m)
+    return ChannelNoise(
+        float(np.sqrt(coloured_variance)), rho, float(np.sqrt(white_variance)), quantum_m, c, sample_time_s
+    )
 
 
 def measure_noise(
