@@ -23,6 +23,6 @@ def one(args):
 if __name__ == "__main__":
     labels = sys.argv[1].split(","); idx = [int(x) for x in sys.argv[2].split(",")]
     points = int(sys.argv[3]) if len(sys.argv) > 3 else None
-    with ProcessPoolExecutor(2) as p:
+    with ProcessPoolExecutor(int(__import__("os").environ.get("JOBS", "2"))) as p:
         for r in p.map(one, [(l, i, points) for l in labels for i in idx]):
             print(json.dumps(r), flush=True)

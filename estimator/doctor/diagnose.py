@@ -23,7 +23,7 @@ from __future__ import annotations
 import threading
 from collections.abc import Callable, Iterable
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TypeVar
 
 import numpy as np
@@ -51,7 +51,7 @@ from estimator.doctor.model import (
 )
 from estimator.doctor.noise import measure_noise
 from estimator.doctor.parameters import implausible, report
-from estimator.doctor.residuals import locate, sweep_frequency_Hz
+from estimator.doctor.residuals import chi_square_survival, locate, sweep_frequency_Hz
 from estimator.doctor.result import CandidateScore, DiagnosisResult, DiagnosisStep
 from estimator.doctor.simulation import diverged, simulate_models
 from estimator.identify import IdentifyOptions, identify
@@ -188,8 +188,18 @@ class _Doctor:
                 scores.append(score)
                 if score.verdict == "tested":
                     p_values[candidate] = score.p_value
-            chosen = Selection(options.alpha).choose(p_values)
             bound = options.alpha / max(len(p_values), 1)
+            # calibration can only raise a p-value (its scales are at least 1): only the candidates that
+            # are significant uncalibrated need the bootstrap
+            significant = [c for c in p_values if p_values[c] <= bound]
+            if significant:
+                self.report(step, "calibrating the significant candidates by a bootstrap of the model")
+                scales = self.calibrate(current, simulated, significant)
+                for candidate in significant:
+                    k = candidates.index(candidate)
+                    scores[k] = _calibrated(scores[k], *scales[candidate])
+                    p_values[candidate] = scores[k].p_value
+            chosen = Selection(options.alpha).choose(p_values)
             scores = [_verdict(s, chosen, bound) for s in scores]
             rounds.append(scores)
             if chosen is None:
@@ -220,13 +230,25 @@ class _Doctor:
         model: FittedModel,
         outcome: Simulated,
     ) -> CandidateScore:
-        """The candidate's tests (module docstring, step 3)."""
-        dt = self.recording.sample_time_s
+        """The candidate's tests on the recording (module docstring, step 3)."""
+        return self.score_on(self.reference, candidate, current, simulated, model, outcome)
+
+    def score_on(
+        self,
+        reference: Reference,
+        candidate: EffectInstance,
+        current: FittedModel,
+        simulated: Simulated,
+        model: FittedModel,
+        outcome: Simulated,
+    ) -> CandidateScore:
+        """The candidate's tests on the reference's recording."""
+        dt = reference.recording.sample_time_s
         added = [n for n in model.system.parameter_names if n not in current.system.parameter_names]
         own = [k for k, (e, _) in enumerate(model.structure.channel_parameters) if e == candidate]
         system = model.system
         if own:
-            jacobian = channel_jacobian(self.reference, model)
+            jacobian = channel_jacobian(reference, model)
             keys = list(jacobian)
             system = with_columns(system, {keys[k]: jacobian[keys[k]] for k in own}, system.offset)
         equations = EquationTest().test(system, model.theta, added, dt, model.channel_values[own])
@@ -304,33 +326,90 @@ class _Doctor:
             final_model=final,
         )
 
-    def bootstrap(self, final: FittedModel, simulated: Simulated) -> tuple[list[float], list[float]]:
-        """The equation objective and gap of the final structure re-identified on `draws` synthetic
-        recordings of its smooth response read with the recording's own noise (estimator.doctor.expected,
-        estimator.doctor.noise)."""
+    def synthetic(self, model: FittedModel, simulated: Simulated) -> list[Recording]:
+        """`draws` synthetic recordings of the model's smooth response (its plausible truth) read with the
+        recording's own noise, measured on the model's output residual (estimator.doctor.expected,
+        estimator.doctor.noise); none when the truth diverges."""
         recording, dt = self.recording, self.recording.sample_time_s
-        truth = plausible_truth(final, recording, self.reference.settings, self.reference.identified)
+        truth = plausible_truth(model, recording, self.reference.settings, self.reference.identified)
         (response,) = _simulate([truth], recording)
         if not np.isfinite(response.gap_m):
-            return [], []
+            return []
         measured = {name: recording.channels[name] for name in simulated.residual}
         residual = {
             name: measured[name] if diverged(r, measured[name]) else r
             for name, r in simulated.residual.items()
         }
         noise = measure_noise(residual, measured, dt, self.reference.filters.excitation_top_Hz)
-        synthetic = [
+        return [
             synthetic_recording(recording, response.predicted, noise, self.options.seed + k)
             for k in range(self.options.draws)
         ]
+
+    def calibrate(
+        self, current: FittedModel, simulated: Simulated, candidates: list[EffectInstance]
+    ) -> dict[EffectInstance, tuple[float, float]]:
+        """Per candidate, the scales of its Wald and likelihood-ratio statistics under the current model:
+        their mean over the bootstrap draws (the current structure and the candidate identified on each
+        synthetic recording, as on the measurement) over their degrees of freedom, at least 1 (a scaled χ²:
+        the model's own approximation and the noise's colour inflate both statistics alike on the
+        measurement and on the draws)."""
+        synthetic = self.synthetic(current, simulated)
+        if not synthetic:
+            return {c: (1.0, 1.0) for c in candidates}
+
+        def one(recording: Recording) -> list[tuple[float, float, int]]:
+            on = Reference.of(recording, current.vehicle, self.reference.settings, self.reference.identified)
+            on = replace(on, knots_m=self.reference.knots_m)
+            base = fit(on, current.structure, warm=current)
+            fits = [fit(on, current.structure.with_effect(c), warm=base) for c in candidates]
+            outcomes = _simulate([base, *fits], recording)
+            return [
+                (score.equation_statistic, score.simulation_statistic, score.unknowns)
+                for score in (
+                    self.score_on(on, c, base, outcomes[0], m, o)
+                    for c, m, o in zip(candidates, fits, outcomes[1:], strict=True)
+                )
+            ]
+
+        per_draw = self.map(one, synthetic)
+        scales = {}
+        for k, candidate in enumerate(candidates):
+            unknowns = max(per_draw[0][k][2], 1)
+            wald = [d[k][0] for d in per_draw if np.isfinite(d[k][0])]
+            ratio = [max(d[k][1], 0.0) for d in per_draw if np.isfinite(d[k][1])]
+            scales[candidate] = (
+                max(1.0, float(np.mean(wald)) / unknowns) if wald else 1.0,
+                max(1.0, float(np.mean(ratio)) / unknowns) if ratio else 1.0,
+            )
+        return scales
+
+    def bootstrap(self, final: FittedModel, simulated: Simulated) -> tuple[list[float], list[float]]:
+        """The equation objective and gap of the final structure re-identified on the synthetic recordings
+        of itself."""
+        recording = self.recording
+        synthetic = self.synthetic(final, simulated)
+        if not synthetic:
+            return [], []
         refits = self.map(lambda s: refit_on(s, final, self.reference), synthetic)
         batch = simulate_models(refits, recording, list(synthetic))
         return [m.objective for m in refits], [float(g) for g in batch.gap_m()]
 
 
-def _verdict(score: CandidateScore, chosen: EffectInstance | None, bound: float) -> CandidateScore:
-    from dataclasses import replace
+def _calibrated(score: CandidateScore, wald_scale: float, ratio_scale: float) -> CandidateScore:
+    """The score with its p-values from the statistics divided by their bootstrap scales."""
+    q = max(score.unknowns, 1)
+    equation_p = chi_square_survival(score.equation_statistic / wald_scale, q)
+    positive = score.simulation_statistic > 0
+    simulation_p = chi_square_survival(score.simulation_statistic / ratio_scale, q) if positive else 1.0
+    if score.effect.startswith(EffectName.TYRE_LIFTOFF.value):
+        equation_p = score.equation_p  # no unknown: its equation test is not a Wald test
+    return replace(
+        score, equation_p=equation_p, simulation_p=simulation_p, p_value=max(equation_p, simulation_p)
+    )
 
+
+def _verdict(score: CandidateScore, chosen: EffectInstance | None, bound: float) -> CandidateScore:
     if score.verdict != "tested":
         return score
     if chosen is not None and score.effect == chosen.label:
