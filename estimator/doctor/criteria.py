@@ -31,7 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from estimator.doctor.residuals import chi_square_survival, effective_samples
+from estimator.doctor.residuals import chi_square_survival
 from estimator.uncertainty import confidence_intervals
 
 ALPHA = 0.05
@@ -83,21 +83,33 @@ class EquationTest:
             return TestResult(statistic, len(index), 1.0)
         return TestResult(statistic, len(index), chi_square_survival(statistic, len(index)))
 
+    def test_at(self, system, solution: np.ndarray, index: list[int], sample_time_s: float) -> TestResult:
+        """Wald test of solution[index] against zero, the covariance at `solution` (every unknown of the
+        system, appended columns included)."""
+        if not index:
+            return TestResult(0.0, 0, 1.0)
+        covariance = confidence_intervals(system, solution, sample_time_s).covariance
+        block = covariance[np.ix_(index, index)]
+        vector = solution[index]
+        statistic = float(vector @ np.linalg.lstsq(block, vector, rcond=None)[0])
+        if not np.isfinite(statistic):
+            return TestResult(statistic, len(index), 1.0)
+        return TestResult(statistic, len(index), chi_square_survival(statistic, len(index)))
+
 
 @dataclass(frozen=True)
 class SimulationTest:
     """Likelihood ratio of the free simulation with and without the family: n_eff·ln(gap_without² /
     gap_with²) ~ χ²(q), n_eff the effective number of independent samples of the residual without."""
 
-    def test(
-        self, residual_without: dict[str, np.ndarray], gap_without_m: float, gap_with_m: float, unknowns: int
-    ) -> TestResult:
+    def test(self, samples: float, gap_without_m: float, gap_with_m: float, unknowns: int) -> TestResult:
+        """samples: the effective number of independent samples of the residual without the family
+        (estimator.doctor.residuals.effective_samples, summed over its channels)."""
         q = max(unknowns, 1)
         if not np.isfinite(gap_with_m):
             return TestResult(-np.inf, q, 1.0)
         if not np.isfinite(gap_without_m):
             return TestResult(np.inf, q, 0.0)  # the model without diverges, the model with does not
-        samples = sum(effective_samples(r) for r in residual_without.values())
         statistic = float(samples * math.log(gap_without_m**2 / gap_with_m**2))
         return TestResult(statistic, q, chi_square_survival(statistic, q) if statistic > 0 else 1.0)
 

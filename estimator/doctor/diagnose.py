@@ -24,15 +24,14 @@ import threading
 from collections.abc import Callable, Iterable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
+from functools import cached_property
 from typing import TypeVar
 
 import numpy as np
 
 from estimator.doctor.catalog import CATALOG, EffectInstance, EffectName
-from estimator.doctor.columns import with_columns
 from estimator.doctor.criteria import (
     ALPHA,
-    EquationTest,
     GoodnessOfFit,
     Selection,
     SimulationTest,
@@ -45,14 +44,14 @@ from estimator.doctor.model import (
     FittedModel,
     ModelStructure,
     Reference,
-    channel_jacobian,
     fit,
     starting_structure,
 )
 from estimator.doctor.noise import measure_noise
 from estimator.doctor.parameters import implausible, report
-from estimator.doctor.residuals import chi_square_survival, locate, sweep_frequency_Hz
+from estimator.doctor.residuals import chi_square_survival, effective_samples, locate, sweep_frequency_Hz
 from estimator.doctor.result import CandidateScore, DiagnosisResult, DiagnosisStep
+from estimator.doctor.screening import one_step
 from estimator.doctor.simulation import diverged, simulate_models
 from estimator.identify import IdentifyOptions, identify
 from estimator.recording import Recording
@@ -98,6 +97,11 @@ class Simulated:
     gap_m: float
     residual: dict[str, np.ndarray]
     predicted: dict[str, np.ndarray]
+
+    @cached_property
+    def effective_samples(self) -> float:
+        """The residual's effective number of independent samples, summed over its channels."""
+        return float(sum(effective_samples(r) for r in self.residual.values()))
 
 
 def _simulate(models: list[FittedModel], recording: Recording) -> list[Simulated]:
@@ -177,14 +181,11 @@ class _Doctor:
             candidates = self.candidates(structure) if step < options.max_steps else []
             if not candidates:
                 break
-            fits = self.map(
-                lambda c, base=structure, warm=current: fit(reference, base.with_effect(c), warm=warm),
-                candidates,
-            )
-            outcomes = _simulate(fits, self.recording)
+            stepped = self.map(lambda c, warm=current: one_step(reference, warm, c), candidates)
+            outcomes = _simulate([m for m, _ in stepped], self.recording)
             scores, p_values = [], {}
-            for candidate, model, outcome in zip(candidates, fits, outcomes, strict=True):
-                score = self.score(candidate, current, simulated, model, outcome)
+            for candidate, (model, equations), outcome in zip(candidates, stepped, outcomes, strict=True):
+                score = self.score(candidate, current, simulated, model, equations, outcome)
                 scores.append(score)
                 if score.verdict == "tested":
                     p_values[candidate] = score.p_value
@@ -205,7 +206,9 @@ class _Doctor:
             if chosen is None:
                 break
             index = candidates.index(chosen)
-            model, outcome = fits[index], outcomes[index]
+            self.report(step, f"fitting {chosen.label}")
+            model = fit(reference, structure.with_effect(chosen), warm=stepped[index][0])
+            (outcome,) = _simulate([model], self.recording)
             steps.append(
                 DiagnosisStep(
                     effect=chosen.label,
@@ -228,51 +231,11 @@ class _Doctor:
         current: FittedModel,
         simulated: Simulated,
         model: FittedModel,
+        equations: TestResult,
         outcome: Simulated,
     ) -> CandidateScore:
         """The candidate's tests on the recording (module docstring, step 3)."""
-        return self.score_on(self.reference, candidate, current, simulated, model, outcome)
-
-    def score_on(
-        self,
-        reference: Reference,
-        candidate: EffectInstance,
-        current: FittedModel,
-        simulated: Simulated,
-        model: FittedModel,
-        outcome: Simulated,
-    ) -> CandidateScore:
-        """The candidate's tests on the reference's recording."""
-        dt = reference.recording.sample_time_s
-        added = [n for n in model.system.parameter_names if n not in current.system.parameter_names]
-        own = [k for k, (e, _) in enumerate(model.structure.channel_parameters) if e == candidate]
-        system = model.system
-        if own:
-            jacobian = channel_jacobian(reference, model)
-            keys = list(jacobian)
-            system = with_columns(system, {keys[k]: jacobian[keys[k]] for k in own}, system.offset)
-        equations = EquationTest().test(system, model.theta, added, dt, model.channel_values[own])
-        unknowns = len(added) + len(own)
-        if candidate.name is EffectName.TYRE_LIFTOFF:  # no unknown: the equations must hold better with it
-            equations = TestResult(
-                current.objective - model.objective, 0, 0.0 if model.objective < current.objective else 1.0
-            )
-        simulation = SimulationTest().test(simulated.residual, simulated.gap_m, outcome.gap_m, unknowns)
-        reason = implausible(candidate, model)
-        return CandidateScore(
-            effect=candidate.label,
-            objective_ratio=model.objective / current.objective,
-            gap_m=outcome.gap_m,
-            gap_ratio=outcome.gap_m / simulated.gap_m if np.isfinite(simulated.gap_m) else None,
-            equation_statistic=equations.statistic,
-            simulation_statistic=simulation.statistic,
-            unknowns=unknowns,
-            equation_p=equations.p_value,
-            simulation_p=simulation.p_value,
-            p_value=intersection_union(equations, simulation),
-            parameters=report(candidate, model),
-            verdict=reason or "tested",
-        )
+        return score_candidate(candidate, current, simulated, model, equations, outcome)
 
     def conclude(
         self,
@@ -362,13 +325,13 @@ class _Doctor:
             on = Reference.of(recording, current.vehicle, self.reference.settings, self.reference.identified)
             on = replace(on, knots_m=self.reference.knots_m)
             base = fit(on, current.structure, warm=current)
-            fits = [fit(on, current.structure.with_effect(c), warm=base) for c in candidates]
-            outcomes = _simulate([base, *fits], recording)
+            stepped = [one_step(on, base, c) for c in candidates]
+            outcomes = _simulate([base, *(m for m, _ in stepped)], recording)
             return [
                 (score.equation_statistic, score.simulation_statistic, score.unknowns)
                 for score in (
-                    self.score_on(on, c, base, outcomes[0], m, o)
-                    for c, m, o in zip(candidates, fits, outcomes[1:], strict=True)
+                    score_candidate(c, base, outcomes[0], m, t, o)
+                    for c, (m, t), o in zip(candidates, stepped, outcomes[1:], strict=True)
                 )
             ]
 
@@ -394,6 +357,40 @@ class _Doctor:
         refits = self.map(lambda s: refit_on(s, final, self.reference), synthetic)
         batch = simulate_models(refits, recording, list(synthetic))
         return [m.objective for m in refits], [float(g) for g in batch.gap_m()]
+
+
+def score_candidate(
+    candidate: EffectInstance,
+    current: FittedModel,
+    simulated: Simulated,
+    model: FittedModel,
+    equations: TestResult,
+    outcome: Simulated,
+) -> CandidateScore:
+    """A candidate's tests (module docstring, step 3): the one-step Wald test of its unknowns
+    (estimator.doctor.screening) and the likelihood ratio of its free simulation against the current
+    model's."""
+    unknowns = equations.unknowns
+    if candidate.name is EffectName.TYRE_LIFTOFF:  # no unknown: the equations must hold better with it
+        better = model.objective < current.objective
+        equations = TestResult(current.objective - model.objective, 0, 0.0 if better else 1.0)
+    samples = simulated.effective_samples if np.isfinite(simulated.gap_m) else 0.0  # 0: diverged before
+    simulation = SimulationTest().test(samples, simulated.gap_m, outcome.gap_m, unknowns)
+    reason = implausible(candidate, model)
+    return CandidateScore(
+        effect=candidate.label,
+        objective_ratio=model.objective / current.objective,
+        gap_m=outcome.gap_m,
+        gap_ratio=outcome.gap_m / simulated.gap_m if np.isfinite(simulated.gap_m) else None,
+        equation_statistic=equations.statistic,
+        simulation_statistic=simulation.statistic,
+        unknowns=unknowns,
+        equation_p=equations.p_value,
+        simulation_p=simulation.p_value,
+        p_value=intersection_union(equations, simulation),
+        parameters=report(candidate, model),
+        verdict=reason or "tested",
+    )
 
 
 def _calibrated(score: CandidateScore, wald_scale: float, ratio_scale: float) -> CandidateScore:

@@ -409,15 +409,37 @@ def _tyre_coefficients(system: LinearResiduals, theta: np.ndarray) -> tuple[floa
     return value("tyre_dashpot_Ns_per_m"), value("maxwell_damping_Ns_per_m"), value(TYRE_RATE_UNKNOWN)
 
 
-def _initial(system: LinearResiduals, warm: FittedModel | None) -> np.ndarray | None:
+def feasible(kinds: list[str], values: np.ndarray) -> np.ndarray:
+    """Channel parameter values moved into what a sensor can be: delays, lags and averaging windows in
+    [0, MAX_DELAY_S], gain errors above −50%."""
+    values = np.array(values, dtype=float)
+    for j, kind in enumerate(kinds):
+        if kind in NONNEGATIVE:
+            values[j] = float(np.clip(values[j], 0.0, MAX_DELAY_S))
+        elif kind == "gain":
+            values[j] = max(values[j], -0.5)
+    return values
+
+
+def start_from(system: LinearResiduals, warm: FittedModel) -> np.ndarray:
     """θ of a similar model, matched by unknown name (new unknowns start at zero)."""
-    if warm is None:
-        return None
     known = dict(zip(warm.system.parameter_names, warm.theta, strict=True))
     return np.array([known.get(name, 0.0) for name in system.parameter_names])
 
 
-def _minimise(
+def build_at(
+    reference: Reference, current: FittedModel, structure: ModelStructure, values: np.ndarray
+) -> tuple[LinearResiduals, EquationSignals, list[np.ndarray]]:
+    """The extended system of `structure` with channel parameters `values`, its airborne samples (with
+    tyre_liftoff) decided by the current model's tyre; airborne is [] without tyre_liftoff."""
+    tyre = _tyre_coefficients(current.system, current.theta)
+    system, signals, airborne = _build(
+        reference, structure, corrections_of(structure.channel_parameters, values), None, tyre
+    )
+    return system, signals, airborne if structure.has(EffectName.TYRE_LIFTOFF) else []
+
+
+def minimise(
     system: LinearResiduals, initial: np.ndarray | None, tolerance: float = 1e-10
 ) -> tuple[np.ndarray, float]:
     """θ minimising the paper's objective, and the objective: estimator.solvers.exact's IRLS handing over to
@@ -430,10 +452,12 @@ def channel_jacobian(
     reference: Reference,
     model: FittedModel,
     rows: np.ndarray | None = None,
+    which: list[int] | None = None,
 ) -> dict[str, np.ndarray]:
-    """Per Gauss-Newton parameter of the model, the change of its equation residual per unit of the parameter
-    at the fitted θ (finite differences of GAUSS_NEWTON_STEP; the airborne samples held), restricted to
-    `rows` when given. Also what the Wald test of a channel family treats as the family's columns."""
+    """Per Gauss-Newton parameter of the model (those at the indices `which`, when given), the change of its
+    equation residual per unit of the parameter at the fitted θ (finite differences of GAUSS_NEWTON_STEP; the
+    airborne samples held), restricted to `rows` when given. Also what the Wald test of a channel family
+    treats as the family's columns."""
     parameters = model.structure.channel_parameters
     tyre = _tyre_coefficients(model.system, model.theta)
     airborne = model.airborne or None
@@ -441,6 +465,8 @@ def channel_jacobian(
     base_residual = base.residuals(model.theta)
     jacobian = {}
     for j, (effect, kind) in enumerate(parameters):
+        if which is not None and j not in which:
+            continue
         values = np.array(model.channel_values, dtype=float)
         values[j] += GAUSS_NEWTON_STEP[kind]
         moved, _, _ = _build(reference, model.structure, corrections_of(parameters, values), airborne, tyre)
@@ -475,7 +501,7 @@ def fit(
             reference, structure, corrections_of(parameters, values), None, tyre
         )
         used = restrict(system, rows) if rows is not None else system
-        theta, objective = _minimise(used, _initial(used, previous))
+        theta, objective = minimise(used, start_from(used, previous) if previous else None)
         tyre = _tyre_coefficients(system, theta)
         model = FittedModel(
             structure,
@@ -495,15 +521,10 @@ def fit(
             continue  # once more with the airborne samples of the fitted tyre force
         jacobian = channel_jacobian(reference, model, rows)
         augmented = with_columns(used, jacobian, used.offset)
-        increment = _minimise(augmented, np.concatenate([theta, np.zeros(len(jacobian))]), 1e-8)[0][
+        increment = minimise(augmented, np.concatenate([theta, np.zeros(len(jacobian))]), 1e-8)[0][
             used.n_params :
         ]
-        values = values + increment
-        for j, kind in enumerate(kinds):
-            if kind in NONNEGATIVE:
-                values[j] = float(np.clip(values[j], 0.0, MAX_DELAY_S))
-            elif kind == "gain":
-                values[j] = max(values[j], -0.5)
+        values = feasible(kinds, values + increment)
         small = all(abs(d) < GAUSS_NEWTON_TOLERANCE[k] for d, k in zip(increment, kinds, strict=True))
         affine = all(k == "offset" for k in kinds) and not liftoff
         final_pass = small or affine or iteration == iterations - 1
