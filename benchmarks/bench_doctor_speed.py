@@ -83,7 +83,9 @@ def write_project_recording(folder: Path) -> tuple[Path, Path]:
     toml_path, csv_path = folder / "quarter_car.toml", folder / "quarter_car.csv"
     toml_path.write_text(QUARTER_CAR)
     command = [str(SHOCKBENCH), "simulate", "--vehicle", str(toml_path), "--out", str(csv_path)]
-    subprocess.run([*command, "--seconds", "11", "--settle", "1"], check=True, capture_output=True, cwd=REPO)
+    subprocess.run(
+        [*command, "--duration-s", "11", "--settle-s", "1"], check=True, capture_output=True, cwd=REPO
+    )
     return csv_path, toml_path
 
 

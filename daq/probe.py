@@ -21,6 +21,7 @@ from drivers.compowayf.amplifier import ZxlAmplifier
 from drivers.compowayf.transport import CompowayFPort, LinkSettings
 from drivers.compowayf.urls import parse_device_url
 from drivers.exciter.urls import CanTarget, parse_exciter_url
+from drivers.interfaces import Exciter, LaserAmplifier
 from estimator.errors import one_line
 
 DEFAULT_TIMEOUT_S = 0.5
@@ -82,12 +83,15 @@ def _probe_laser_line(lasers: list[LaserConfig], timeout_s: float) -> list[Devic
     except Exception as exc:  # a probe reports every failure as the device's error
         return [_failed(laser, exc) for laser in lasers]
     with port:
-        return [probe_laser(laser, port) for laser in lasers]
+        return [
+            probe_laser(laser, ZxlAmplifier(port, laser.device()[1], laser.amplifier_config()))
+            for laser in lasers
+        ]
 
 
-def probe_laser(laser: LaserConfig, port: CompowayFPort) -> DeviceReport:
-    """Model, status and one position of the amplifier `laser` names, on an open `port`."""
-    amplifier = ZxlAmplifier(port, laser.device()[1], laser.amplifier_config())
+def probe_laser(laser: LaserConfig, amplifier: LaserAmplifier) -> DeviceReport:
+    """Model, status and one position of the amplifier `laser` names (any drivers.interfaces.LaserAmplifier:
+    the ZX-L driver on an open port, or a mock)."""
     try:
         model = amplifier.read_model()
         status = amplifier.read_status()
@@ -123,7 +127,7 @@ async def probe_exciter(exciter: ExciterConfig, timeout_s: float = DEFAULT_TIMEO
 
     try:
         async with asyncio.timeout(deadline_s):
-            drive = await exciter.open(keepalive_interval_s=None)  # with its register map, if any
+            drive: Exciter = await exciter.open(keepalive_interval_s=None)  # with its register map, if any
             try:
                 status = await drive.status()
             finally:

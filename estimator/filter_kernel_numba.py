@@ -25,7 +25,7 @@ import numpy as np
 
 
 @numba.njit(cache=True, error_model="numpy")
-def _recursion(a1: float, a2: float, right) -> None:
+def recursion(a1: float, a2: float, right) -> None:
     """In place, every column of right (samples, columns): y[n] + a1·y[n−1] + a2·y[n−2] = right[n], zero
     before n = 0. A column at a time: its samples are contiguous in the column-major arrays the filters
     pass."""
@@ -106,7 +106,7 @@ def _cascade(buffer, start: int, step: int, length: int, coefficients, zi, scale
 
 
 @numba.njit(cache=True, error_model="numpy")
-def _zero_phase(sos, zi, edge: int, x, out) -> None:
+def zero_phase(sos, zi, edge: int, x, out) -> None:
     """scipy.signal.sosfiltfilt of every column of x (samples, columns) into out (samples, columns):
     odd extension by `edge` samples at each end, forward then backward through the sections sos
     (sections, 5: b0, b1, b2, a1, a2 with a0 = 1) from the steady states zi (sections, 2) times the first
@@ -129,6 +129,6 @@ def _zero_phase(sos, zi, edge: int, x, out) -> None:
 
 
 RECURSION_SIGNATURE = "void(f8, f8, f8[:, :])"
-"""_recursion's argument types, as the extension exports it (any memory layout)."""
+"""recursion's argument types, as the extension exports it (any memory layout)."""
 ZERO_PHASE_SIGNATURE = "void(f8[:, :], f8[:, :], i8, f8[:, :], f8[:, :])"
-"""_zero_phase's argument types, as the extension exports it (any memory layout)."""
+"""zero_phase's argument types, as the extension exports it (any memory layout)."""

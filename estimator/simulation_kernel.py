@@ -120,9 +120,15 @@ def _kernel() -> tuple[str, Callable[..., None]]:
     extension = _extension()
     if extension is not None:
         return "extension", extension.integrate
-    from estimator.simulation_kernel_numba import _integrate
+    from estimator.simulation_kernel_numba import integrate
 
-    return "numba", _integrate
+    return "numba", integrate
+
+
+def forget_loaded_kernel() -> None:
+    """Look for the kernel again at its next use (after an extension was built or removed)."""
+    _extension.cache_clear()
+    _kernel.cache_clear()
 
 
 def compiled_filters() -> ModuleType | None:

@@ -145,6 +145,13 @@ def relative_difference_percent(left: float, right: float) -> float:
     return 0.0 if larger == 0 else 100.0 * abs(left - right) / larger
 
 
+def imbalance_outcome(difference_percent: float, limits: VerdictThresholds) -> Outcome:
+    """How an axle's left/right EUSAMA difference (relative_difference_percent) is judged."""
+    if difference_percent > limits.imbalance_fail_above_percent:
+        return Outcome.FAIL
+    return Outcome.CHECK if difference_percent > limits.imbalance_check_above_percent else Outcome.PASS
+
+
 def judge(inspection: Mapping[str, Any], limits: VerdictThresholds | None = None) -> Verdict:
     """The verdict on a result's `inspection` (as `identify --json` writes it): a corner's figures, or an
     axle's `left`, `right` (and `imbalance`)."""
@@ -157,10 +164,13 @@ def judge(inspection: Mapping[str, Any], limits: VerdictThresholds | None = None
         if eusama_l is not None and eusama_r is not None:
             difference = relative_difference_percent(eusama_l, eusama_r)
             differ = f"left/right EUSAMA differ by {difference:.1f}%"
-            if difference > limits.imbalance_fail_above_percent:
-                found.append((Outcome.FAIL, f"{differ} (> {limits.imbalance_fail_above_percent:g}%)"))
-            elif difference > limits.imbalance_check_above_percent:
-                found.append((Outcome.CHECK, f"{differ} (> {limits.imbalance_check_above_percent:g}%)"))
+            outcome = imbalance_outcome(difference, limits)
+            if outcome is not Outcome.PASS:
+                above = {
+                    Outcome.FAIL: limits.imbalance_fail_above_percent,
+                    Outcome.CHECK: limits.imbalance_check_above_percent,
+                }[outcome]
+                found.append((outcome, f"{differ} (> {above:g}%)"))
     else:
         found += _judge_corner("", inspection, limits)
     outcome = max((o for o, _ in found), key=_SEVERITY.__getitem__, default=Outcome.PASS)

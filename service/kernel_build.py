@@ -1,5 +1,5 @@
 """Build the output-error simulation kernel ahead of time: numba's pycc compiles
-estimator/simulation_kernel_numba.py's `_integrate` (and estimator/filter_kernel_numba.py's recursive filters)
+estimator/simulation_kernel_numba.py's `integrate` (and estimator/filter_kernel_numba.py's recursive filters)
 into the Python extension
 `estimator/_simulation_kernel_aot_<digest>` that estimator.simulation_kernel loads when its digest matches the
 present source (see that module). `shockbench demo` runs this once; so can an install script:
@@ -31,10 +31,10 @@ def build_extension(module_name: str, output_dir: Path) -> Path:
     from estimator.filter_kernel_numba import (
         RECURSION_SIGNATURE,
         ZERO_PHASE_SIGNATURE,
-        _recursion,
-        _zero_phase,
+        recursion,
+        zero_phase,
     )
-    from estimator.simulation_kernel_numba import INTEGRATE_SIGNATURE, _integrate
+    from estimator.simulation_kernel_numba import INTEGRATE_SIGNATURE, integrate
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # pycc is pending deprecation in numba; no replacement exists yet
@@ -43,9 +43,9 @@ def build_extension(module_name: str, output_dir: Path) -> Path:
         compiler = CC(module_name)
         compiler.output_dir = str(output_dir)
         compiler.verbose = False
-        compiler.export("integrate", INTEGRATE_SIGNATURE)(_integrate.py_func)
-        compiler.export("recursion", RECURSION_SIGNATURE)(_recursion.py_func)
-        compiler.export("zero_phase", ZERO_PHASE_SIGNATURE)(_zero_phase.py_func)
+        compiler.export("integrate", INTEGRATE_SIGNATURE)(integrate.py_func)
+        compiler.export("recursion", RECURSION_SIGNATURE)(recursion.py_func)
+        compiler.export("zero_phase", ZERO_PHASE_SIGNATURE)(zero_phase.py_func)
         compiler.compile()
     built = [path for path in output_dir.iterdir() if path.name.startswith(module_name + ".")]
     if not built:
@@ -72,8 +72,7 @@ def compile_ahead() -> str:
         if not stale.name.startswith(name + "."):
             stale.unlink(missing_ok=True)
     importlib.invalidate_caches()
-    simulation_kernel._extension.cache_clear()
-    simulation_kernel._kernel.cache_clear()
+    simulation_kernel.forget_loaded_kernel()
     simulation_kernel.warm()
     return simulation_kernel.kernel_in_use()
 

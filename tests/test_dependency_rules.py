@@ -49,6 +49,7 @@ SIMULATOR_VISIBLE_DRIVER_MODULES = frozenset(
         "drivers.compowayf",
         "drivers.exciter",
         "drivers.compowayf.codec",  # CompoWay/F frames
+        "drivers.compowayf.service_data",  # what the frames carry (the codec's service data)
         "drivers.compowayf.layout",  # the amplifier's address map (AmplifierConfig)
         "drivers.compowayf.errors",  # the codec's errors
         "drivers.exciter.codes",  # command, state, fault and law codes; ExciterStatus

@@ -26,6 +26,9 @@ whose polls are held back by its line's wait after another node's lost reply say
 Values: `LaserConfig.to_channel_m` of the reading (the recorder subtracts the channel's mean at rest, taken
 by the sweep orchestration). An out-of-range reading is NaN (a gap in the recording, never a value).
 
+Devices: the source needs only drivers.interfaces.LaserAmplifier (the ZX-L driver, or an in-process mock
+from drivers/mock.py in unit tests).
+
 Threads: `poll` is called from one thread at a time (a line's polling thread, or the simulated pacing);
 `statistics` from any.
 """
@@ -43,7 +46,8 @@ import numpy as np
 from daq.bench_config import LaserConfig
 from daq.ring_buffer import Clock, RingBuffer
 from daq.sources.clock_mapping import DeviceClockMapping
-from drivers.compowayf.amplifier import COUNTER_MODULUS, ZxlAmplifier
+from drivers.compowayf.layout import COUNTER_MODULUS
+from drivers.interfaces import LaserAmplifier
 
 DEFAULT_CAPACITY = 1 << 16
 """Ring-buffer samples per source: 65 s at 1 kHz, far more than a recorder ever falls behind."""
@@ -77,7 +81,7 @@ class LaserSource:
     def __init__(
         self,
         laser: LaserConfig,
-        amplifier: ZxlAmplifier,
+        amplifier: LaserAmplifier,
         *,
         host_clock: Callable[[], float] = time.monotonic,
         capacity: int = DEFAULT_CAPACITY,

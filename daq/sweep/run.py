@@ -55,6 +55,7 @@ from daq.live_view import LiveView
 from daq.recorder import Recorder, max_interval_s
 from daq.sources.laser_source import LaserSource
 from daq.storage.hdf5_recording import MetadataValue, RecordingWriter
+from daq.sweep.devices import Devices, DriverDevices
 from daq.sweep.model import (
     SAMPLE_TIME_S,
     StopKind,
@@ -67,11 +68,9 @@ from daq.sweep.model import (
 from daq.sweep.pacing import Pacing, RealtimePacing
 from daq.sweep.plan import SweepPlan
 from daq.sweep.silence import NO_ERROR, silence_reason
-from drivers.compowayf.amplifier import ZxlAmplifier
-from drivers.compowayf.transport import CompowayFPort
-from drivers.exciter.codes import ExciterState
+from drivers.exciter.codes import ExciterState, ExciterStatus
 from drivers.exciter.errors import EnvelopeBreachError, ExciterDeviceExceptionError
-from drivers.exciter.interface import ExciterStatus, PlateExciter
+from drivers.interfaces import Exciter, LaserLine
 
 log = logging.getLogger(__name__)
 
@@ -113,7 +112,7 @@ async def run_sweep(
     silence_timeout_s: float = DEFAULT_SILENCE_TIMEOUT_S,
     abort_reason: Callable[[], str] | None = None,
     live: LiveView | None = None,
-    open_port: Callable[[str], CompowayFPort] = CompowayFPort,
+    devices: Devices | None = None,
 ) -> SweepOutcome:
     """Run one planned sweep (daq.sweep.plan.plan_sweep on this `config`) on the bench `config` describes
     and record it at out_path (HDF5). See the module.
@@ -122,8 +121,9 @@ async def run_sweep(
     are looked at every orchestration cycle, STEP_S). abort_reason: what an abort is recorded as (default
     "aborted by the operator"; the service says "service stopped" when its own stop aborts the sweep).
     live: a daq.live_view.LiveView the recorder copies its rows to, decimated, for screens (its owner
-    starts it with the bench's channels). open_port: opens a laser line from its URL (a simulated bench on a
-    manual clock passes one that reaches its amplifiers in process on that clock)."""
+    starts it with the bench's channels). devices: how the lasers and the exciter are reached (default: the
+    drivers, daq.sweep.devices.DriverDevices; a simulated bench on a manual clock passes one whose lines
+    reach its amplifiers in process on that clock; unit tests pass MockDevices)."""
     if plan.bench != config.name:  # a programming error, not an input: plans are made for one bench
         raise ValueError(f"a sweep planned for bench {plan.bench!r} cannot run on bench {config.name!r}")
     run = _SweepRun(config, plan.request, Path(out_path), pacing or RealtimePacing(), progress, abort)
@@ -132,7 +132,7 @@ async def run_sweep(
     run.emergency = emergency or threading.Event()
     run.silence_timeout_s = silence_timeout_s
     run.live = live
-    run.open_port = open_port
+    run.devices = devices or DriverDevices()
     return await run.run()
 
 
@@ -164,11 +164,11 @@ class _SweepRun:
         self.abort_reason: Callable[[], str] = lambda: "aborted by the operator"
         self.emergency = threading.Event()
         self.silence_timeout_s = DEFAULT_SILENCE_TIMEOUT_S
-        self.ports: list[CompowayFPort] = []
-        self.open_port: Callable[[str], CompowayFPort] = CompowayFPort
+        self.ports: list[LaserLine] = []
+        self.devices: Devices = DriverDevices()
         self.sources: list[LaserSource] = []
         self.models: dict[str, str] = {}
-        self.exciter: PlateExciter | None = None
+        self.exciter: Exciter | None = None
         self.writer: RecordingWriter | None = None
         self.recorder: Recorder | None = None
         self.live: LiveView | None = None
@@ -238,9 +238,9 @@ class _SweepRun:
             port = next((p for p in self.ports if p.pyserial_url == url), None)
             try:
                 if port is None:
-                    port = await asyncio.to_thread(self.open_port, laser.url)
+                    port = await asyncio.to_thread(self.devices.open_line, laser.url)
                     self.ports.append(port)
-                amplifier = ZxlAmplifier(port, node, laser.amplifier_config())
+                amplifier = self.devices.amplifier(port, node, laser.amplifier_config())
                 self.models[laser.name] = await asyncio.to_thread(amplifier.read_model)
             except Exception as exc:
                 raise SweepError(f"laser {laser.name!r} ({laser.url}): {exc}") from None
@@ -248,8 +248,8 @@ class _SweepRun:
             self.sources.append(source)
             lines[url].append(source)
         try:
-            self.exciter = await self.config.exciter.open(
-                envelope=self.config.safety_envelope(), clock=self.clock
+            self.exciter = await self.devices.open_exciter(
+                self.config.exciter, self.config.safety_envelope(), self.clock
             )
             status = await self.exciter.status()
         except Exception as exc:

@@ -22,20 +22,7 @@ import contextlib
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from drivers.compowayf.codec import (
-    ControllerAttributes,
-    ResponseFrame,
-    Service,
-    StatusReport,
-    decode_values,
-    encode_operation_command,
-    encode_parameter_area_read,
-    encode_parameter_area_write,
-    encode_variable_area_read,
-    max_elements_per_read,
-    parameter_element_width,
-    variable_element_width,
-)
+from drivers.compowayf.codec import ResponseFrame, Service
 from drivers.compowayf.errors import (
     CompowayFError,
     DeviceUrlError,
@@ -53,6 +40,18 @@ from drivers.compowayf.layout import (
     streaming_measured_config,
 )
 from drivers.compowayf.rate import RateMeter, ReadRate
+from drivers.compowayf.service_data import (
+    ControllerAttributes,
+    StatusReport,
+    decode_values,
+    encode_operation_command,
+    encode_parameter_area_read,
+    encode_parameter_area_write,
+    encode_variable_area_read,
+    max_elements_per_read,
+    parameter_element_width,
+    variable_element_width,
+)
 from drivers.compowayf.transport import CompowayFPort, LinkSettings, Opener
 from drivers.compowayf.urls import SerialSettings, parse_device_url
 

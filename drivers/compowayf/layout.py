@@ -29,7 +29,7 @@ import math
 from dataclasses import dataclass, field
 from enum import Enum, StrEnum
 
-from drivers.compowayf.codec import parameter_element_width, variable_element_width
+from drivers.compowayf.service_data import parameter_element_width, variable_element_width
 
 
 class MeasuredArea(StrEnum):

@@ -10,7 +10,9 @@ disagreement remains that no candidate explains.
 - evidence.py: what a candidate explains, in numbers and in words;
 - expected.py: the gap and residual a model without missing effects reaches (parametric bootstrap);
 - diagnose.py: the loop; result.py: what it returns and its JSON.
-"""
+
+
+Must not import daq, drivers, service or simulators (the estimator's layer rule), and does no I/O."""
 
 from estimator.doctor.diagnose import DiagnoseOptions, DiagnoseProgress, diagnose
 from estimator.doctor.result import DiagnosisResult

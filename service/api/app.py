@@ -1,8 +1,10 @@
 """`create_app(settings)`: the FastAPI application of the bench service.
 
-Everything is under /api/v1 (OpenAPI schema at /api/v1/openapi.json, interactive docs at /docs). What the
-app owns (database, job store, job manager with its worker process) is made and closed by the lifespan
-(no startup events) and reachable from a request as `request.app.state.services`.
+Everything is under /api/v1 (OpenAPI schema at /api/v1/openapi.json, interactive docs at /docs), but the
+operations endpoints: the probes /healthz and /readyz (service.api.routes.health) and /metrics
+(service.api.metrics). What the app owns (database, job store, job manager with its worker process) is made
+and closed by the lifespan (no startup events) and reachable from a request as `request.app.state.services`;
+its metrics registry is `app.state.metrics`.
 """
 
 from __future__ import annotations
@@ -15,45 +17,47 @@ import time
 from collections.abc import AsyncIterator, Callable
 from contextlib import AbstractAsyncContextManager, asynccontextmanager
 from dataclasses import dataclass, field
-from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
 from fastapi import APIRouter, FastAPI
 from starlette.types import ASGIApp
 
+from daq.sweep.model import SweepOutcome
+from daq.sweep.plan import SweepPlan
 from service.access import KeyRing
 from service.api.central_sync import SyncAgent
 from service.api.contract import install_contract
+from service.api.docs_page import install_docs
 from service.api.errors import install_error_handlers
 from service.api.input_check import CHECKER
 from service.api.key_gate import KeyGate
 from service.api.limits import BodyDeadline, BodyDeadlines, BodySizeLimit
 from service.api.methods import AllowedMethods
+from service.api.metrics import ServiceMetrics, install_metrics
 from service.api.quotas import install_quotas, retention_task
 from service.api.results import verdict_of
-from service.api.routes import bench, events, jobs, live, schedules, status, sweeps, vehicles
+from service.api.routes import bench, events, health, jobs, live, schedules, status, sweeps, vehicles
 from service.api.scheduler import InspectionScheduler
 from service.api.schemas import API_PREFIX
-from service.api.security_headers import SecurityHeaders, install_docs
+from service.api.security_headers import SecurityHeaders
 from service.api.settings import ServiceSettings
 from service.api.stream_limit import StreamLimit
 from service.api.web import install_page
-from service.bench_control import BenchController
+from service.bench_control import BenchController, SweepDone
 from service.jobs.manager import JobManager
 from service.store.chain_anchor import HeadLog
 from service.store.database import Database
 from service.store.jobs import JobStore
 from service.store.schedules import ScheduleStore
 from service.store.sweeps import SweepStore
+from service.version import shockbench_version
 
 log = logging.getLogger("shockbench.api")
 
 
 def service_version() -> str:
-    try:
-        return version("shockbench")
-    except PackageNotFoundError:
-        return "0+unknown"
+    """The version `shockbench --version` says (service.version: installed metadata, else the source's)."""
+    return shockbench_version()
 
 
 @dataclass
@@ -80,6 +84,9 @@ class Services:
     """Runs the scheduled tests on the bench (None without a bench)."""
     sync: SyncAgent | None = None
     """Pushes the local store to the central database (None without a local store: settings.central_url)."""
+    bench_startup: BenchStartup | None = None
+    """What the stop command at start-up found (None without a bench): the readiness probe's knowledge of
+    the drive until a sweep has run."""
 
     def wake_scheduler(self) -> None:
         """Something changed (a test submitted, a sweep ended): let the scheduler look now. Any thread."""
@@ -87,19 +94,58 @@ class Services:
             self.scheduler.wake()
 
 
-def open_bench(settings: ServiceSettings) -> BenchController | None:
+@dataclass(frozen=True)
+class BenchStartup:
+    drive_reached: bool
+    note: str
+    """What BenchController.stop_drive said, in words."""
+
+
+STARTUP_STOP_FAILED = "could not command"
+"""How BenchController.stop_drive's answer begins when no stop reached the drive."""
+
+
+class ObservedBench(BenchController):
+    """The bench, telling `on_sweep_end` (the metrics) how each sweep ended, after the sweep's own `done`
+    (which stores it) and whatever that did."""
+
+    on_sweep_end: Callable[[SweepOutcome | None], None] | None = None
+
+    def start_sweep(self, sweep_id: str, plan: SweepPlan, out_path: Path, done: SweepDone) -> None:
+        observe = self.on_sweep_end
+
+        def done_then_observe(sweep_id: str, outcome: SweepOutcome | None, error: str) -> None:
+            try:
+                done(sweep_id, outcome, error)
+            finally:
+                if observe is not None:
+                    try:
+                        observe(outcome)
+                    except Exception:  # the sweep's thread reports; metrics never stop it
+                        log.exception("could not count the end of sweep %s", sweep_id)
+
+        super().start_sweep(sweep_id, plan, out_path, done_then_observe)
+
+
+def open_bench(
+    settings: ServiceSettings, on_sweep_end: Callable[[SweepOutcome | None], None] | None = None
+) -> tuple[BenchController | None, BenchStartup | None]:
     """The bench of `--config` (loaded and checked), its drive commanded to stop at once (a crashed
-    predecessor may have left the plate running); else the in-process simulated bench of `--simulated`,
-    else None. Blocking (files, devices): call it in a thread."""
+    predecessor may have left the plate running), with what that stop found; else the in-process simulated
+    bench of `--simulated`; else None. Blocking (files, devices): call it in a thread."""
+    bench: ObservedBench | None = None
+    startup = None
     if settings.bench_config is not None:
         from daq.bench_config import load_bench_config
 
-        bench = BenchController(load_bench_config(settings.bench_config))
-        bench.stop_drive()
-        return bench
-    if settings.simulated:
-        return BenchController(simulated=True)
-    return None
+        bench = ObservedBench(load_bench_config(settings.bench_config))
+        note = bench.stop_drive()
+        startup = BenchStartup(not note.startswith(STARTUP_STOP_FAILED), note)
+    elif settings.simulated:
+        bench = ObservedBench(simulated=True)
+    if bench is not None:
+        bench.on_sweep_end = on_sweep_end
+    return bench, startup
 
 
 FINGERPRINT_SECRET_FILE = "key-id.secret"
@@ -142,7 +188,9 @@ def lifespan_factory(settings: ServiceSettings) -> Lifespan:
             database.upgrade_schema()
             return database
 
-        bench = await asyncio.to_thread(open_bench, settings)  # first: the drive stops before anything
+        metrics: ServiceMetrics = app.state.metrics
+        # first: the drive stops before anything
+        bench, bench_startup = await asyncio.to_thread(open_bench, settings, metrics.sweep_ended)
         try:
             database = await asyncio.to_thread(prepare)
         except BaseException:
@@ -154,7 +202,9 @@ def lifespan_factory(settings: ServiceSettings) -> Lifespan:
         failed_sweeps = await asyncio.to_thread(sweep_store.recover_interrupted)
         if failed_sweeps:
             log.warning("sweeps %s were cut off by a restart; marked failed", failed_sweeps)
-        manager = JobManager(store, settings.worker, completing=verdict_of(settings.verdict))
+        manager = JobManager(
+            store, settings.worker, completing=verdict_of(settings.verdict), on_finished=metrics.job_finished
+        )
         tests = ScheduleStore(database, lane=settings.lane)
         sync = SyncAgent(database, Database(settings.central_url)) if settings.central_url else None
         scheduler = None
@@ -174,6 +224,7 @@ def lifespan_factory(settings: ServiceSettings) -> Lifespan:
             tests=tests,
             scheduler=scheduler,
             sync=sync,
+            bench_startup=bench_startup,
         )
         retention = retention_task(settings, database)
         try:
@@ -239,6 +290,7 @@ def create_app(settings: ServiceSettings) -> FastAPI:
         openapi_url=f"{API_PREFIX}/openapi.json",
     )
     app.state.settings = settings  # for the server: the connection limits
+    app.state.metrics = ServiceMetrics(lambda: getattr(app.state, "services", None))
     install_error_handlers(app)
     install_quotas(app, settings)  # innermost of the body guards: an oversized body is a 413 first
     app.add_middleware(
@@ -253,6 +305,8 @@ def create_app(settings: ServiceSettings) -> FastAPI:
     app.add_middleware(BodyDeadline, deadlines=deadlines)
     app.add_middleware(KeyGate, routes=app.router.routes, keys=settings.keys)
     app.include_router(api_router())
+    app.include_router(health.router)
+    install_metrics(app, app.state.metrics, settings.metrics_access)
     install_page(app)
     install_docs(app)
     install_contract(app)

@@ -19,7 +19,7 @@ from fastapi import FastAPI, UploadFile
 from fastapi.openapi.utils import get_openapi
 from pydantic import BaseModel, ConfigDict, Field, WithJsonSchema, create_model
 
-from service.api.errors import ErrorBody
+from service.api.errors import ErrorBody, responses
 from service.api.schemas import (
     JOB_EVENTS,
     ClosingEvent,
@@ -150,6 +150,19 @@ def event_stream(
             "description": description,
             "content": {"text/event-stream": {"itemSchema": {"oneOf": variants}}},
         }
+    }
+
+
+def stream_errors(*statuses: int) -> dict[int | str, dict[str, Any]]:
+    """The error answers of an event stream route (errors.responses), stated as JSON: FastAPI would put
+    their model under the route's own media type, and an EventSourceResponse route's is text/event-stream
+    while its errors stay JSON (ErrorBody)."""
+    return {
+        status: {
+            "description": answer["description"],
+            "content": {"application/json": {"schema": {"$ref": REF.format(model="ErrorBody")}}},
+        }
+        for status, answer in responses(*statuses).items()
     }
 
 

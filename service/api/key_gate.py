@@ -8,10 +8,13 @@ in front of everything that reads a body) finds the route a request is for; when
 401 at once, with `Connection: close` when a body was announced, so that uvicorn drops the unread body
 with the connection instead of reading it to its end. Role checks (403) stay in the routes' dependencies.
 
-What stays open without a key: the operator page (`/`, `/web/...`), the API docs (`/docs`) and the
-OpenAPI schema (`/api/v1/openapi.json`), none of which takes a body. Every route under /api/v1 needs a
-key. A path no route serves, or a method the path does not take, goes on to its 404 or 405 (neither
-reads the body; `service.api.limits.BodyDeadline` closes the connection behind it).
+What stays open without a key: the operator page (`/`, `/web/...`), the API docs (`/docs`, its assets
+under `/docs/assets/`) and the OpenAPI schema (`/api/v1/openapi.json`), none of which takes a body, and the
+probes `/healthz` and `/readyz` (service.api.routes.health), exempt here by name (`EXEMPT_PATHS`): a
+supervisor polls them every few seconds, so they skip the route table and the key look-up altogether.
+Every route under /api/v1 needs a key; /metrics needs one unless its setting opens it (service.api.metrics).
+A path no route serves, or a method the path does not take, goes on to its 404 or 405 (neither reads the
+body; `service.api.limits.BodyDeadline` closes the connection behind it).
 
 The gate also tells the body cap (`service.api.limits.BodySizeLimit`) which limit applies: the upload
 limit for the routes that take a multipart upload (POST /jobs, /diagnoses, /validations), the JSON limit
@@ -34,6 +37,7 @@ from starlette.types import ASGIApp, Receive, Scope, Send
 from service.access import KeyRing
 from service.api.auth import CHALLENGE, KEY_CHECKS, NO_KEY, UNKNOWN_KEY, bearer
 from service.api.errors import error_response
+from service.api.routes.health import HEALTH_PATH, READY_PATH
 
 POLICY_SCOPE_KEY = "shockbench.route_policy"
 """Where the gate leaves a request's `RoutePolicy` for the middleware inside it."""
@@ -49,6 +53,8 @@ class RoutePolicy:
 
 OPEN = RoutePolicy()
 """A request no key-checked route serves: the page, the docs, the schema, a 404 or a 405."""
+EXEMPT_PATHS = frozenset({HEALTH_PATH, READY_PATH})
+"""The probes: open to anyone, answered without a look at the route table (see the module docstring)."""
 
 
 def announces_body(scope: Scope) -> bool:
@@ -116,9 +122,11 @@ class KeyGate:
         self._table_of = -1
 
     def policy(self, scope: Scope) -> RoutePolicy:
+        path, method = scope["path"], scope["method"]
+        if path in EXEMPT_PATHS:
+            return OPEN
         if self._table_of != len(self.routes):
             self._table, self._table_of = route_table(self.routes), len(self.routes)
-        path, method = scope["path"], scope["method"]
         for entry in self._table:
             if method in entry.methods and entry.path.match(path):
                 return entry.policy

@@ -5,9 +5,9 @@ the 500 of an unexpected error included).
   modules, styles and nothing else from the service itself and talks only to it: `PAGE_POLICY` allows
   exactly that ('self'), and `frame-ancestors 'none'` keeps it out of other sites' frames (clickjacking the
   emergency stop). The API answers with the same policy (a JSON or SVG answer opened in a browser runs
-  nothing either). The docs page (/docs, FastAPI's Swagger UI) loads Swagger UI from its CDN and starts it
-  with one inline script: it is served here (`install_docs`) with its own policy allowing that CDN and
-  that one script by its hash, so that no other inline script would run there.
+  nothing either). The docs page (/docs, FastAPI's Swagger UI, served from the package:
+  service.api.docs_page) starts Swagger UI with one inline script: it has its own policy allowing that one
+  script by its hash (`script_hashes`), so that no other inline script would run there.
 - X-Content-Type-Options: nosniff (a download is never sniffed into HTML), Referrer-Policy: no-referrer,
   and X-Frame-Options: DENY for browsers that predate frame-ancestors.
 
@@ -21,9 +21,6 @@ import base64
 import hashlib
 import re
 
-from fastapi import FastAPI
-from fastapi.openapi.docs import get_swagger_ui_html
-from fastapi.responses import HTMLResponse
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 PAGE_POLICY = "; ".join(
@@ -48,10 +45,6 @@ HEADERS: dict[str, str] = {
     "x-frame-options": "DENY",
 }
 
-SWAGGER_CDN = "https://cdn.jsdelivr.net"
-"""Where FastAPI's docs page loads Swagger UI from (its JavaScript and CSS)."""
-FASTAPI_FAVICON = "https://fastapi.tiangolo.com"
-
 
 def script_hashes(html: str) -> list[str]:
     """The CSP sources ('sha256-...') of the inline scripts of `html` (a page made here, never input)."""
@@ -59,37 +52,6 @@ def script_hashes(html: str) -> list[str]:
     return [
         f"'sha256-{base64.b64encode(hashlib.sha256(body.encode()).digest()).decode()}'" for body in bodies
     ]
-
-
-def docs_policy(html: str) -> str:
-    """The docs page's policy: Swagger UI from its CDN, the page's own inline script by its hash, inline
-    styles (Swagger UI sets style attributes), images from the service, data: URLs and FastAPI's favicon,
-    and requests to the service only (the OpenAPI schema, "Try it out")."""
-    return "; ".join(
-        [
-            "default-src 'none'",
-            f"script-src {SWAGGER_CDN} {' '.join(script_hashes(html))}",
-            f"style-src {SWAGGER_CDN} 'unsafe-inline'",
-            f"img-src 'self' data: {FASTAPI_FAVICON}",
-            "connect-src 'self'",
-            "base-uri 'none'",
-            "form-action 'none'",
-            "frame-ancestors 'none'",
-        ]
-    )
-
-
-def install_docs(app: FastAPI, path: str = "/docs") -> None:
-    """GET `path`: FastAPI's Swagger UI page for the app's OpenAPI schema, with `docs_policy`. (The app is
-    made with docs_url=None: FastAPI's own route sends no header, and its page is the same.)"""
-    assert app.openapi_url is not None
-    page = get_swagger_ui_html(openapi_url=app.openapi_url, title=f"{app.title} - Swagger UI")
-    html = bytes(page.body).decode()
-    headers = {"Content-Security-Policy": docs_policy(html)}
-
-    @app.get(path, include_in_schema=False)
-    async def docs() -> HTMLResponse:
-        return HTMLResponse(html, headers=headers)
 
 
 class SecurityHeaders:

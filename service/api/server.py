@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import socket
 from types import FrameType
+from typing import Any
 
 import uvicorn
 from fastapi import FastAPI
@@ -63,15 +64,30 @@ def connection_limits(app: FastAPI) -> ConnectionLimits:
 
 
 class ServiceServer(uvicorn.Server):
-    def __init__(self, app: FastAPI, log_level: str = "info") -> None:
+    def __init__(
+        self,
+        app: FastAPI,
+        log_level: str = "info",
+        *,
+        log_config: dict[str, Any] | None = None,
+        access_log: bool = False,
+    ) -> None:
+        """log_config: the service's logging (service.api.logging_setup.log_config, levels included), which
+        uvicorn applies instead of its own; None: uvicorn's own at `log_level` (tests). access_log: uvicorn's
+        line per request."""
+        logging_options: dict[str, Any] = (
+            {"log_config": log_config, "log_level": None}
+            if log_config is not None
+            else {"log_level": log_level}
+        )
         super().__init__(
             uvicorn.Config(
                 app,
                 http=guarded_protocol(connection_limits(app)),
                 lifespan="on",
-                log_level=log_level,
-                access_log=False,
+                access_log=access_log,
                 timeout_graceful_shutdown=SHUTDOWN_GRACE_S,
+                **logging_options,
             )
         )
         self.service_app = app

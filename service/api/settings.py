@@ -8,6 +8,7 @@ import socket
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Literal, get_args
 
 from estimator.verdict import VerdictThresholds
 from service.access import KeyRing
@@ -44,6 +45,11 @@ DEFAULT_MAX_SCHEDULED_TESTS_PER_KEY = 100
 DEFAULT_MIN_FREE_BYTES = 1 << 30
 """1 GiB kept free on the data directory's file system: room for the recordings of the sweeps under way
 and for the database and logs to grow, whatever uploads arrive."""
+
+
+MetricsAccess = Literal["admin", "key", "open"]
+"""Who may read GET /metrics (service.api.metrics): an admin key, any valid key, or anyone."""
+METRICS_ACCESS: tuple[str, ...] = get_args(MetricsAccess)
 
 
 def disk_free_bytes(path: Path) -> int:
@@ -101,6 +107,9 @@ class ServiceSettings:
     lane: str = field(default_factory=socket.gethostname)
     """This instance's lane (`serve --lane`, default the host name): stamped on its sweeps, jobs and
     scheduled tests; its scheduler runs only its own lane's tests."""
+    metrics_access: MetricsAccess = "admin"
+    """Who may read GET /metrics (service.api.metrics): "admin" an admin key, "key" any valid key, "open"
+    anyone (a monitoring network the service's port is reachable from only)."""
     verdict: VerdictThresholds = field(default_factory=VerdictThresholds)
     """The limits an identification's lane figures are judged by (estimator.verdict; serve
     --verdict-thresholds): the verdict is stored with the result when the job ends."""

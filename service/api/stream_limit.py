@@ -9,10 +9,8 @@ Everything runs on the event loop: a counter per key, no lock needed.
 from __future__ import annotations
 
 from collections import Counter
-from collections.abc import Callable
-
-from fastapi.responses import StreamingResponse
-from starlette.types import Receive, Scope, Send
+from collections.abc import Iterator
+from contextlib import contextmanager
 
 from service.api.errors import ApiError
 
@@ -41,23 +39,17 @@ class StreamLimit:
             )
         self._open[key_id] += 1
 
+    @contextmanager
+    def held(self, key_id: str) -> Iterator[None]:
+        """One stream of `key_id` for the block (acquire, ApiError 429 when full), given back however the
+        block ends. The streams hold it in a dependency with yield, which ends once the response has."""
+        self.acquire(key_id)
+        try:
+            yield
+        finally:
+            self.release(key_id)
+
     def release(self, key_id: str) -> None:
         self._open[key_id] -= 1
         if self._open[key_id] <= 0:
             del self._open[key_id]
-
-
-class HeldStreamingResponse(StreamingResponse):
-    """A StreamingResponse that calls `on_close` once it has ended, however it ended (finished, client
-    gone, service stopping): the stream's place under the limit is given back even when the body
-    generator never started."""
-
-    def __init__(self, *args: object, on_close: Callable[[], None], **kwargs: object) -> None:
-        super().__init__(*args, **kwargs)  # type: ignore[arg-type]
-        self._on_close = on_close
-
-    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
-        try:
-            await super().__call__(scope, receive, send)
-        finally:
-            self._on_close()

@@ -8,7 +8,10 @@ measured on this project's 2-core machine under load). So every process started 
 (and the worker and device processes it spawns, which inherit the environment) uses one BLAS thread,
 unless the user's environment says otherwise. This must run before numpy is first imported, which is why
 it lives in the package's __init__ and the package imports nothing else.
-"""
+
+
+Must not import simulators except in service.cli.simulate (the offline vehicle simulation); a
+simulated bench comes from service.simulated_bench."""
 
 import os
 

@@ -18,6 +18,10 @@ if TYPE_CHECKING:
     from estimator.doctor.diagnose import DiagnoseProgress
     from estimator.doctor.result import DiagnosisResult
 
+DOCTOR_POINTS = {"quarter-car": 30, "axle": 15}
+"""estimator.doctor.diagnose's DEFAULT_POINTS (curve points per side), named here so that `--help` does not
+import the doctor (tests/service/test_readme_cli.py checks they are the same)."""
+
 
 def _micro(value: float) -> str:
     return f"{value * 1e6:.1f} µm" if math.isfinite(value) else "diverged"
@@ -96,7 +100,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         default="maxwell",
         help="tyre of the starting model (default maxwell)",
     )
-    p.add_argument("--points", type=int, default=None, help="curve points (default 20, axle 10 per side)")
+    p.add_argument(
+        "--points",
+        type=int,
+        default=None,
+        help=f"curve points (default {DOCTOR_POINTS['quarter-car']}, axle {DOCTOR_POINTS['axle']} per side: "
+        "1.5 times identify's, as 20 cannot follow a real damper's knee)",
+    )
     p.add_argument("--report", default=None, help="folder for report.md and its PNG plots")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(handler=run_diagnose)

@@ -36,7 +36,10 @@ def bug_log_dir() -> Path:
 
 
 def write_bug_log(command: str, exc: BaseException) -> Path:
-    """Write the traceback of `exc` to a new file named by a fresh error id; returns its path."""
+    """Write the traceback of `exc` to a new file named by a fresh error id; returns its path. The file is
+    the user's alone (0600, whatever the umask), unlike the outputs the user asks for: it lands in a shared
+    temporary directory, and the command line and the traceback's values may hold a secret (a database URL
+    with its password)."""
     import datetime as dt
     import secrets
     import traceback
@@ -47,10 +50,11 @@ def write_bug_log(command: str, exc: BaseException) -> Path:
     path = folder / f"shockbench-error-{error_id}.log"
     when = dt.datetime.now(dt.UTC).isoformat(timespec="seconds")
     text = "".join(traceback.format_exception(exc))
-    path.write_text(
-        f"error id {error_id}\ncommand: shockbench {command}\nargv: {sys.argv!r}\ntime: {when}\n\n{text}",
-        encoding="utf-8",
-    )
+    descriptor = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+    with open(descriptor, "w", encoding="utf-8") as log:
+        log.write(
+            f"error id {error_id}\ncommand: shockbench {command}\nargv: {sys.argv!r}\ntime: {when}\n\n{text}"
+        )
     return path
 
 

@@ -28,6 +28,7 @@ COMMAND_MODULES: dict[str, str] = {
     "probe": "devices",
     "sweep": "sweep",
     "export": "export",
+    "report": "report",
     "serve": "serve",
     "db": "db",
     "history": "history",
@@ -45,6 +46,21 @@ def _modules(names: Sequence[str]) -> list[ModuleType]:
     return [importlib.import_module(f"service.cli.{name}") for name in unique]
 
 
+class VersionAction(argparse.Action):
+    """`--version`: argparse's own action wants the text when the parser is built; this one looks it up
+    only when asked (service.version: importlib.metadata, else the source tree's pyproject.toml), so that no
+    other command line pays for importlib.metadata."""
+
+    def __init__(self, option_strings: Sequence[str], dest: str, **kwargs: object) -> None:
+        super().__init__(option_strings, dest, nargs=0, default=argparse.SUPPRESS, help=kwargs.get("help"))
+
+    def __call__(self, parser: argparse.ArgumentParser, *_: object) -> None:
+        from service.version import shockbench_version
+
+        print(f"shockbench {shockbench_version()}")  # on stdout, as argparse's own version action does
+        parser.exit()
+
+
 def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     """The `shockbench` parser with every command, or with only `command`'s module when it is a known one."""
     parser = argparse.ArgumentParser(
@@ -52,6 +68,7 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
         description="On-vehicle shock absorber test bench: identify the damper force-velocity curve "
         "from laser displacement measurements.",
     )
+    parser.add_argument("--version", action=VersionAction, help="print shockbench's version and exit")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     names = [COMMAND_MODULES[command]] if command in COMMAND_MODULES else list(COMMAND_MODULES.values())
     for module in _modules(names):

@@ -17,10 +17,12 @@ DEFAULT_WORKERS = 2
 
 def run_reanalyse(args: argparse.Namespace) -> int:
     from estimator.identify import check_curve_points
-    from service.reanalyse.run import RunSettings, reanalyse
+    from service.extras import require_extra
+    from service.reanalyse.run import DASK_NEEDED_FOR, RunSettings, reanalyse
     from service.reanalyse.sources import items_in_database, items_in_folder
     from service.reanalyse.task import Analysis, AnalysisOptions
 
+    require_extra("cluster", DASK_NEEDED_FOR)  # before any work: not after scanning an archive
     if (args.source is None) == (args.database is None):
         raise CliError("give either SOURCE (a folder of recordings) or --database URL, not both")
     if args.workers < 1:

@@ -6,19 +6,29 @@
                      [--max-json-kb N] [--header-timeout-s S] [--body-min-rate-bytes-s N]
                      [--body-rate-grace-s S] [--body-total-timeout-s S] [--max-connections-per-address N]
                      [--max-queued-jobs-per-key N] [--max-scheduled-tests-per-key N]
-                     [--min-free-mb N] [--retain-days DAYS]
+                     [--min-free-mb N] [--retain-days DAYS] [--worker-nice N] [--job-lease-s S]
+                     [--lane NAME] [--verdict-thresholds FILE.toml] [--metrics-access admin|key|open]
+                     [--log-level LEVEL] [--log-format text|json] [--access-log]
 
 Listens on loopback by default; any other address needs a keys file. Without a keys file an operator key
 is generated and printed at start-up (as Jupyter prints its token). Port 0 takes a free port; the line
 "listening on http://HOST:PORT" says which. Also runnable as `python -m service.cli.serve ...`.
+
+Every option can also be given by an environment variable, SHOCKBENCH_ and the option's name in capitals
+(`--max-upload-mb` is SHOCKBENCH_MAX_UPLOAD_MB), but `--database`, which is SHOCKBENCH_DATABASE_URL
+(`env_name`); `--help` shows each one. The command line wins over the environment. A switch takes 1, true,
+yes, on or 0, false, no, off; an empty variable counts as unset. So a systemd unit's EnvironmentFile can
+hold the database password instead of the process list (deploy/).
 """
 
 from __future__ import annotations
 
 import argparse
 import contextlib
+import os
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -28,6 +38,64 @@ if TYPE_CHECKING:
     from estimator.verdict import VerdictThresholds
 
 DEFAULT_PORT = 8000
+ENV_PREFIX = "SHOCKBENCH_"
+ENV_NAMES = {"database": "SHOCKBENCH_DATABASE_URL"}
+"""The options whose variable is not ENV_PREFIX + the option's name in capitals."""
+TRUE_WORDS = ("1", "true", "yes", "on")
+FALSE_WORDS = ("0", "false", "no", "off")
+TYPE_WORDS = {int: "a whole number", float: "a number"}
+
+
+def env_name(dest: str) -> str:
+    """The environment variable of the option stored as `dest` (the one place names are made)."""
+    return ENV_NAMES.get(dest, ENV_PREFIX + dest.upper())
+
+
+@dataclass(frozen=True)
+class EnvValue:
+    """An option's default taken from the environment, converted (and checked) by `resolve_environment`
+    when the command runs, so that a bad value is the command's one-line error, not argparse's usage."""
+
+    name: str
+    raw: str
+    action: argparse.Action
+
+    def value(self) -> object:
+        flag = self.action.option_strings[-1]
+        where = f"{self.name}={self.raw!r} (for {flag})"
+        if self.action.nargs == 0:  # a switch (store_true)
+            word = self.raw.strip().lower()
+            if word not in TRUE_WORDS + FALSE_WORDS:
+                raise CliError(f"{where}: must be one of {', '.join(TRUE_WORDS + FALSE_WORDS)}")
+            return word in TRUE_WORDS
+        converter = self.action.type
+        try:
+            value = converter(self.raw) if callable(converter) else self.raw
+        except ValueError:
+            raise CliError(f"{where}: not {TYPE_WORDS.get(converter, 'a valid value')}") from None  # type: ignore[call-overload]
+        if self.action.choices is not None and value not in self.action.choices:
+            raise CliError(f"{where}: must be one of {', '.join(map(str, self.action.choices))}")
+        return value
+
+
+def add_environment(parser: argparse.ArgumentParser, environ: Mapping[str, str] = os.environ) -> None:
+    """Each option of `parser` also from its variable (`env_name`): named in its help, and its default when
+    set (not empty); the command line still wins."""
+    for action in parser._actions:
+        if not action.option_strings or action.dest == "help":
+            continue
+        name = env_name(action.dest)
+        action.help = f"{action.help or ''} [env {name}]".strip()
+        raw = environ.get(name, "")
+        if raw != "":
+            action.default = EnvValue(name, raw, action)
+
+
+def resolve_environment(args: argparse.Namespace) -> None:
+    """Replace the defaults taken from the environment by their values (CliError naming the variable)."""
+    for dest, given in vars(args).items():
+        if isinstance(given, EnvValue):
+            setattr(args, dest, given.value())
 
 
 def is_loopback(host: str) -> bool:
@@ -42,6 +110,7 @@ def is_loopback(host: str) -> bool:
 
 
 def run_serve(args: argparse.Namespace) -> int:
+    resolve_environment(args)
     if not 0 <= args.port <= 65535:
         raise CliError("--port must lie between 0 and 65535")
     if not is_loopback(args.host) and args.keys is None:
@@ -73,8 +142,12 @@ def run_serve(args: argparse.Namespace) -> int:
         if given and args.database is None:
             raise CliError(f"{flag} needs --database URL (the central database)")
     import logging
+    import logging.config
 
     from service.access import KeyRing, load_keys  # here, not at the top: every command imports this module
+    from service.api.logging_setup import log_config
+
+    logging_config = log_config(args.log_level, args.log_format, args.access_log)
 
     verdict = load_verdict_thresholds(Path(args.verdict_thresholds)) if args.verdict_thresholds else None
     generated_key = None
@@ -117,6 +190,7 @@ def run_serve(args: argparse.Namespace) -> int:
         max_upload_bytes=int(args.max_upload_mb * 2**20),
         **limits,  # type: ignore[arg-type]
         worker=WorkerSettings(nice=args.worker_nice, lease_s=args.job_lease_s),
+        metrics_access=args.metrics_access,
         **({"verdict": verdict} if verdict is not None else {}),  # type: ignore[arg-type]
         **({"lane": args.lane} if args.lane else {}),  # type: ignore[arg-type]
     )
@@ -126,30 +200,37 @@ def run_serve(args: argparse.Namespace) -> int:
         database.upgrade_schema()
     finally:
         database.dispose()
-    logging.basicConfig(level=args.log_level.upper(), format="%(levelname)-9s %(name)s: %(message)s")
+    # after the checks above, so that a refusal stays one line on stderr (no schema records before it)
+    logging.config.dictConfig(logging_config)
+    announce = announcer(args.log_format)
     try:
         sock = bind(args.host, args.port)
     except OSError as exc:
         raise CliError(f"cannot listen on {args.host}:{args.port} ({exc.strerror or exc})") from None
     url = url_of(sock)
-    print(f"shockbench serve: listening on {url} (API {url}/api/v1, docs {url}/docs)", flush=True)
-    print(
-        f"shockbench serve: lane {settings.lane!r}, data in {settings.data_dir}, "
-        f"database {database.safe_url}",
-        flush=True,
-    )
+    announce(f"listening on {url} (API {url}/api/v1, docs {url}/docs, probes {url}/healthz {url}/readyz)")
+    announce(f"lane {settings.lane!r}, data in {settings.data_dir}, database {database.safe_url}")
     if central_note is not None:
-        print(f"shockbench serve: {central_note}", flush=True)
+        announce(central_note)
     if generated_key is not None:
-        print(
-            "shockbench serve: no keys file, so this operator key was generated for this run; send it as "
-            f"'Authorization: Bearer KEY':\n    {generated_key}",
-            flush=True,
+        announce(
+            "no keys file, so this operator key was generated for this run; send it as "
+            f"'Authorization: Bearer KEY':\n    {generated_key}"
         )
-    server = ServiceServer(create_app(settings), log_level=args.log_level)
+    server = ServiceServer(create_app(settings), log_config=logging_config, access_log=args.access_log)
     with contextlib.suppress(KeyboardInterrupt):  # uvicorn stops gracefully on Ctrl-C, then re-raises it
         server.run(sockets=[sock])
     return 0 if server.started else EXIT_FAILED
+
+
+def announcer(log_format: str) -> Callable[[str], None]:
+    """How serve says where it listens and with what: a line on standard output ("shockbench serve: ..."),
+    or with --log-format json a record of the log (so that every line of the output is one JSON object)."""
+    if log_format == "json":
+        import logging
+
+        return logging.getLogger("shockbench.serve").info
+    return lambda message: print(f"shockbench serve: {message}", flush=True)
 
 
 def check_connection_limits(args: argparse.Namespace) -> None:
@@ -352,8 +433,32 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="a job's claim in the shared queue lasts this long unless renewed; another instance runs "
         "the job again after it if this one dies (default 30)",
     )
-    p.add_argument("--log-level", default="info", choices=["critical", "error", "warning", "info", "debug"])
+    p.add_argument(
+        "--metrics-access",
+        default="admin",
+        choices=["admin", "key", "open"],
+        help="who may read GET /metrics (Prometheus): an admin key, any valid key, or anyone (default admin)",
+    )
+    p.add_argument(
+        "--log-level",
+        default="info",
+        choices=["critical", "error", "warning", "info", "debug"],
+        help="the least severe records logged, the service's and uvicorn's alike (default info)",
+    )
+    p.add_argument(
+        "--log-format",
+        default="text",
+        choices=["text", "json"],
+        help="text: a UTC timestamp, the level, the logger and the message; json: one object per line with "
+        "time, level, logger and message, for log collectors (default text)",
+    )
+    p.add_argument(
+        "--access-log",
+        action="store_true",
+        help="log a line per HTTP request (client, request line, status; never a key) (default off)",
+    )
     p.set_defaults(handler=run_serve)
+    add_environment(p)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING
 from estimator.sweep import SweepSettings
 from estimator.vehicle import TyreModel
 from service.cli.errors import CliError
+from service.cli.options import add_option
 
 if TYPE_CHECKING:
     from simulators.vehicle_sim import SimulatedVehicle, SimulationSettings
@@ -44,22 +45,52 @@ def damper_from_option(value: str):
 
 
 def add_simulation_options(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--seconds", type=float, default=20.0, help="sweep duration in s (default 20)")
-    p.add_argument("--settle", type=float, default=1.0, help="recorded time after the sweep, s (default 1)")
+    """The simulation's options; the unit-bearing ones spelled as `sweep` spells them, their spellings before
+    that still accepted (service.cli.options)."""
+    add_option(
+        p,
+        "--duration-s",
+        formerly="--seconds",
+        type=float,
+        default=20.0,
+        help="sweep duration, s (default 20)",
+    )
+    add_option(
+        p,
+        "--settle-s",
+        formerly="--settle",
+        type=float,
+        default=1.0,
+        help="recorded after the sweep, s (default 1)",
+    )
     p.add_argument("--seed", type=int, default=0, help="random seed of the sensor noise (default 0)")
     p.add_argument(
         "--noise-m", type=float, default=5e-6, help="sensor noise standard deviation, m (default 5e-6)"
     )
     p.add_argument("--resolution-m", type=float, default=1e-6, help="sensor resolution, m (default 1e-6)")
-    p.add_argument("--amplitude-m", type=float, default=0.004, help="plate amplitude, m (default 0.004)")
+    add_option(
+        p,
+        "--amplitude-mm",
+        formerly="--amplitude-m",
+        factor=1e3,
+        unit="mm",
+        type=float,
+        default=4.0,
+        help="plate amplitude, 0-peak, mm (default 4)",
+    )
     p.add_argument("--stop-hz", type=float, default=20.0, help="sweep end frequency, Hz (default 20)")
     p.add_argument("--damper", default="valve", help=f"the damper: {DAMPER_CHOICES} (default valve)")
     p.add_argument("--damper-right", default="valve-weak", help="axle: the right damper (default valve-weak)")
     p.add_argument(
         "--sprung-fraction", type=float, default=0.89, help="true sprung share of mass_kg (default 0.89)"
     )
-    p.add_argument(
-        "--tyre-damping", type=float, default=1500.0, help="true tyre damping C_d, N·s/m (default 1500)"
+    add_option(
+        p,
+        "--tyre-damping-ns-per-m",
+        formerly="--tyre-damping",
+        type=float,
+        default=1500.0,
+        help="true tyre damping C_d, N·s/m (default 1500)",
     )
     p.add_argument(
         "--tyre",
@@ -67,8 +98,13 @@ def add_simulation_options(p: argparse.ArgumentParser) -> None:
         default="maxwell",
         help="true tyre model (default maxwell)",
     )
-    p.add_argument(
-        "--roll-inertia", type=float, default=280.0, help="axle: true roll inertia, kg·m² (default 280)"
+    add_option(
+        p,
+        "--roll-inertia-kg-m2",
+        formerly="--roll-inertia",
+        type=float,
+        default=280.0,
+        help="axle: true roll inertia, kg·m² (default 280)",
     )
 
 
@@ -93,23 +129,23 @@ def simulated_vehicle_from_args(args: argparse.Namespace) -> SimulatedVehicle:
         known=known,
         sprung_mass_kg=args.sprung_fraction * known.mass_kg,
         dampers=dampers,
-        tyre_damping_Ns_per_m=args.tyre_damping,
+        tyre_damping_Ns_per_m=args.tyre_damping_ns_per_m,
         tyre_model=TyreModel(args.tyre),
-        roll_inertia_kg_m2=args.roll_inertia,
+        roll_inertia_kg_m2=args.roll_inertia_kg_m2,
     )
 
 
 def settings_from_args(args: argparse.Namespace) -> SimulationSettings:
     from simulators.vehicle_sim import SensorModel, SimulationSettings
 
-    if args.seconds <= 0 or args.seconds > 600:
-        raise CliError("--seconds must lie in (0, 600]")
+    if args.duration_s <= 0 or args.duration_s > 600:
+        raise CliError("--duration-s must lie in (0, 600]")
     sweep = SweepSettings(
-        start_Hz=0.0, stop_Hz=args.stop_hz, amplitude_m=args.amplitude_m, duration_s=args.seconds
+        start_Hz=0.0, stop_Hz=args.stop_hz, amplitude_m=args.amplitude_mm * 1e-3, duration_s=args.duration_s
     )
     return SimulationSettings(
         sweep=sweep,
-        settle_s=args.settle,
+        settle_s=args.settle_s,
         seed=args.seed,
         sensor=SensorModel(noise_m=args.noise_m, resolution_m=args.resolution_m),
     )
@@ -123,7 +159,7 @@ def run_simulate(args: argparse.Namespace) -> int:
     result = simulate(vehicle, settings_from_args(args))
     result.recording.metadata |= {
         "vehicle": str(args.vehicle),
-        "sweep": f"0-{args.stop_hz} Hz, {args.amplitude_m * 1e3:g} mm, {args.seconds:g} s",
+        "sweep": f"0-{args.stop_hz} Hz, {args.amplitude_mm:g} mm, {args.duration_s:g} s",
         "damper": args.damper,
     }
     write_recording_csv(args.out, result.recording)

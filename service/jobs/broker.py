@@ -9,24 +9,44 @@ from __future__ import annotations
 import asyncio
 from collections import defaultdict
 from dataclasses import dataclass
-from typing import Literal
 
 from service.jobs.messages import Progress
 from service.store.jobs import JobRecord
 
-EventName = Literal["state", "progress", "finished", "closing"]
+
+@dataclass(frozen=True)
+class JobStateEvent:
+    """The job changed status (it left the queue, or started)."""
+
+    job_id: int
+    record: JobRecord
 
 
 @dataclass(frozen=True)
-class JobEvent:
-    """state: the job changed status (record set); progress: new progress (progress set); finished: the
-    job reached its final status (record set), nothing follows; closing: the service is stopping, nothing
-    follows."""
+class JobProgressEvent:
+    """New progress from the job's worker."""
 
-    name: EventName
     job_id: int
-    record: JobRecord | None = None
-    progress: Progress | None = None
+    progress: Progress
+
+
+@dataclass(frozen=True)
+class JobFinishedEvent:
+    """The job reached its final status (as written): nothing follows."""
+
+    job_id: int
+    record: JobRecord
+
+
+@dataclass(frozen=True)
+class JobClosingEvent:
+    """The service is stopping: nothing follows."""
+
+    job_id: int
+
+
+JobEvent = JobStateEvent | JobProgressEvent | JobFinishedEvent | JobClosingEvent
+"""What a listener of one job hears, each with its own typed payload."""
 
 
 class EventBroker:
@@ -39,7 +59,7 @@ class EventBroker:
         queue: asyncio.Queue[JobEvent] = asyncio.Queue(self._size)
         self._listeners[job_id].add(queue)
         if self.closing:
-            queue.put_nowait(JobEvent("closing", job_id))
+            queue.put_nowait(JobClosingEvent(job_id))
         return queue
 
     def close(self) -> None:
@@ -47,7 +67,7 @@ class EventBroker:
         of holding up the server's shutdown."""
         self.closing = True
         for job_id in list(self._listeners):
-            self.publish(JobEvent("closing", job_id))
+            self.publish(JobClosingEvent(job_id))
 
     def unsubscribe(self, job_id: int, queue: asyncio.Queue[JobEvent]) -> None:
         listeners = self._listeners.get(job_id)

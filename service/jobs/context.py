@@ -9,13 +9,25 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, TypeAlias, TypeVar
+
+from pydantic import BaseModel
+from pydantic.dataclasses import dataclass as checked_dataclass
 
 from estimator.recording import Recording
 from estimator.solvers.differential_evolution import DEProgress
 from estimator.vehicle import VehicleParameters
 from service.jobs.input_error import InputError as InputError  # re-exported: the job kinds raise it from here
-from service.jobs.messages import Progress
+from service.jobs.messages import JsonObject, JsonValue, Progress
+
+if TYPE_CHECKING:
+    from estimator.output_error import IdentifiedModel
+
+    Companion: TypeAlias = VehicleParameters | IdentifiedModel
+else:
+    Companion: TypeAlias = Any  # the estimator's model module loads in the worker only
+
+Options = TypeVar("Options", bound=BaseModel)
 
 
 class ProgressReporter:
@@ -85,24 +97,33 @@ class JobContext:
     job_id: int
     recording: Recording
     vehicle: VehicleParameters
-    options: dict[str, Any]
-    """As stored at submit; the job function validates them with its kind's options model."""
+    options: BaseModel
+    """The options stored at submit, as the kind's options model read them (JobKindSpec.options_model)."""
     output_dir: Path
     cancel: threading.Event
     progress: ProgressReporter
-    companion: Any = None
+    companion: Companion = None
     """What the kind's file beside the recording was read into (service.jobs.inputs): the vehicle
     parameters, or a validation's identified model."""
 
+    def options_as(self, model: type[Options]) -> Options:
+        """The options, as the kind's model (TypeError when the worker read them with another)."""
+        if not isinstance(self.options, model):
+            raise TypeError(f"job {self.job_id} carries {type(self.options).__name__}, not {model.__name__}")
+        return self.options
 
-@dataclass
+
+@checked_dataclass
 class JobOutcome:
-    result: dict[str, Any]
+    """What a job function gives back; checked when made, so a result that is not a JSON document fails
+    the job in the worker (an internal error with its id) instead of the service's write."""
+
+    result: JsonObject
     artefacts: dict[str, str] = field(default_factory=dict)
     """Artefact name -> file name written into JobContext.output_dir."""
 
 
-def finite_json(value: Any) -> Any:
+def finite_json(value: Any) -> JsonValue:
     """A JSON-able copy with NaN and ±inf replaced by None (JSON has no such numbers)."""
     if isinstance(value, float):
         return value if math.isfinite(value) else None

@@ -47,7 +47,7 @@ def run(job: JobContext) -> JobOutcome:
     from estimator.doctor.diagnose import DiagnoseOptions, DiagnoseProgress, diagnose
     from service.doctor_report import write_report  # matplotlib: loaded in the worker only
 
-    options = DiagnoseJobOptions.model_validate(job.options)
+    options = job.options_as(DiagnoseJobOptions)
 
     def progress(p: DiagnoseProgress) -> None:
         job.progress.stage(f"step {p.step}: {p.stage}")

@@ -26,7 +26,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-from service.jobs.broker import EventBroker, JobEvent
+from service.jobs.broker import EventBroker, JobFinishedEvent, JobProgressEvent, JobStateEvent
 from service.jobs.messages import (
     CancelJob,
     FromWorker,
@@ -35,6 +35,7 @@ from service.jobs.messages import (
     JobProgress,
     JobStarted,
     JobSucceeded,
+    JsonObject,
     Progress,
     RunJob,
     WorkerExited,
@@ -81,6 +82,8 @@ class _Current:
     progress: Progress | None = None
     cancel_requested: bool = False
     persisted_at: float = -math.inf
+    dispatched_at: float = field(default_factory=time.monotonic)
+    """When it left the queue (time.monotonic()): its run time, for the metrics, is counted from here."""
 
 
 @dataclass(frozen=True)
@@ -107,14 +110,17 @@ class JobManager:
         self,
         store: JobStore,
         settings: WorkerSettings = WorkerSettings(),
-        completing: Callable[[str, dict], dict] | None = None,
+        completing: Callable[[str, JsonObject], JsonObject] | None = None,
+        on_finished: Callable[[str, str, float], None] | None = None,
     ) -> None:
         """completing(kind, result): what to store as a succeeded job's result (the service adds the
-        verdict an identification's figures earn under its configured thresholds). In the shared queue
-        this service is named by its store's lane (one instance per lane)."""
+        verdict an identification's figures earn under its configured thresholds). on_finished(kind,
+        status, run time in s): told of every job that ran here once it ended (the service's metrics). In
+        the shared queue this service is named by its store's lane (one instance per lane)."""
         self.store = store
         self.settings = settings
         self.completing = completing
+        self.on_finished = on_finished
         self.queue = JobQueue(store.db, store.lane or "default", settings.lease_s)
         self._queued = 0  # the queue's length as last counted (status answers from memory)
         self.broker = EventBroker()
@@ -215,7 +221,7 @@ class JobManager:
             self._queued = max(0, self._queued - 1)
             record = await asyncio.to_thread(self.store.get, job_id)
             if record is not None:
-                self.broker.publish(JobEvent("finished", job_id, record=record))
+                self.broker.publish(JobFinishedEvent(job_id, record))
             return record
         # running: here (it went from queued to running meanwhile; the dispatcher passes the request on),
         # or on another instance, which sees the request at its next lease renewal
@@ -271,7 +277,7 @@ class JobManager:
             # from here to the send no job is invisible: it is `current` as soon as it left the queue
             current = _Current(job_id, record.kind, 0, self._loop.create_future())
             self._current = current
-            self.broker.publish(JobEvent("state", job_id, record=record))
+            self.broker.publish(JobStateEvent(job_id, record))
             await self._worker_up.wait()
             assert self._worker is not None
             process = self._worker.process
@@ -383,7 +389,7 @@ class JobManager:
             current.started = True
         elif isinstance(message, JobProgress):
             current.progress = message.progress
-            self.broker.publish(JobEvent("progress", current.job_id, progress=message.progress))
+            self.broker.publish(JobProgressEvent(current.job_id, message.progress))
             now = time.monotonic()
             if now - current.persisted_at >= self.settings.persist_interval_s:
                 current.persisted_at = now
@@ -404,8 +410,8 @@ class JobManager:
         current: _Current,
         status: JobStatus,
         *,
-        result: dict | None = None,
-        artefacts: dict | None = None,
+        result: JsonObject | None = None,
+        artefacts: dict[str, str] | None = None,
         reason: str | None = None,
     ) -> None:
         """Write the outcome, then tell the listeners (so that whoever hears it reads it back). Whatever
@@ -435,16 +441,22 @@ class JobManager:
                     progress=progress,
                     owner=self.queue.instance,
                 )
-            if not written:
+            self._current = None  # written: /status no longer shows it while it is read back
+            ran_s = time.monotonic() - current.dispatched_at
+            if not written:  # its end is the new owner's to write and to log (once, there)
                 log.warning(
                     "job %d %s here, but its claim was taken over meanwhile: not written",
                     job_id,
                     status.value,
                 )
+            else:
+                why = f": {reason}" if reason else ""
+                log.info("job %d (%s) %s after %.1f s%s", job_id, current.kind, status.value, ran_s, why)
+                if self.on_finished is not None:
+                    self.on_finished(current.kind, status.value, ran_s)
             record = await asyncio.to_thread(self.store.get, job_id)
             if record is not None:
-                self.broker.publish(JobEvent("finished", job_id, record=record))
-            log.info("job %d %s%s", job_id, status.value, f": {reason}" if reason else "")
+                self.broker.publish(JobFinishedEvent(job_id, record))
         finally:
             self._current = None
             if not current.done.done():

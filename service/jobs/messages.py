@@ -3,12 +3,24 @@
 Service -> worker: RunJob, CancelJob, Shutdown. Worker -> service: WorkerReady, then per job JobStarted,
 any number of JobProgress, and exactly one of JobSucceeded, JobFailed, JobCancelled. The service adds
 WorkerExited itself when the pipe closes (the worker died or stopped).
+
+Every message is a pydantic dataclass: its fields are checked when it is made (a job result that is not a
+JSON document fails in the worker that made it, not in the service that stores it), and it still pickles
+over the pipe and is built positionally. A job's options and result travel as JSON documents (JsonObject):
+they are what the database stores and the API returns, unchanged; the kind's options model reads the
+options in the worker (service.jobs.kinds), and the API's result models describe the result.
 """
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
-from typing import Any
+from dataclasses import asdict, field
+from typing import TypeAlias
+
+from pydantic import JsonValue
+from pydantic.dataclasses import dataclass
+
+JsonObject: TypeAlias = dict[str, JsonValue]
+"""A JSON object: what a job's options are stored as and its result is written as."""
 
 
 @dataclass(frozen=True)
@@ -17,8 +29,10 @@ class RunJob:
     kind: str
     recording_path: str
     vehicle_path: str
+    """The companion file (service.jobs.inputs): the vehicle file, or a validation's model."""
     output_dir: str
-    options: dict[str, Any]
+    options: JsonObject
+    """As stored at submit; the worker reads them with the kind's options model."""
 
 
 @dataclass(frozen=True)
@@ -54,7 +68,8 @@ class Progress:
     best_objective: float | None = None
     eta_s: float | None = None
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> JsonObject:
+        """The progress as the database keeps it and the API shows it (ProgressOut)."""
         return asdict(self)
 
 
@@ -67,7 +82,8 @@ class JobProgress:
 @dataclass(frozen=True)
 class JobSucceeded:
     job_id: int
-    result: dict[str, Any]
+    result: JsonObject
+    """The kind's result as JSON (e.g. `shockbench identify --json`), stored and served as it is."""
     artefacts: dict[str, str] = field(default_factory=dict)
     """Artefact name (e.g. 'plot.png') -> file name in the job's output folder."""
 

@@ -3,13 +3,11 @@ another recording's plate motion; the gap to the measured body and wheel motion 
 
 from __future__ import annotations
 
-from typing import Any
-
 from pydantic import BaseModel
 
 from estimator.output_error import IdentifiedModel
 from estimator.recording import Recording
-from service.jobs.context import InputError, JobContext, JobOutcome, finite_json
+from service.jobs.context import Companion, InputError, JobContext, JobOutcome, finite_json
 
 
 class ValidateJobOptions(BaseModel):
@@ -17,7 +15,7 @@ class ValidateJobOptions(BaseModel):
     diagnosis's model its effects). Unknown fields are refused by the submit endpoint."""
 
 
-def check_validate_inputs(options: BaseModel, recording: Recording, model: Any) -> None:
+def check_validate_inputs(options: BaseModel, recording: Recording, model: Companion) -> None:
     if not isinstance(options, ValidateJobOptions) or not isinstance(model, IdentifiedModel):
         raise TypeError("check_validate_inputs needs ValidateJobOptions and an IdentifiedModel")
     from estimator.validation import check_model_fits

@@ -99,7 +99,7 @@ def run_job(
     goes to the worker's stderr (the service log) under a fresh error id, and the reason names that id
     (never the traceback)."""
     from daq.formats.recording_file import read_recording_file
-    from service.jobs.context import JobContext, ProgressReporter
+    from service.jobs.context import JobContext, JobOutcome, ProgressReporter
     from service.jobs.kinds import kind_spec
 
     send(JobStarted(job.job_id))
@@ -115,15 +115,15 @@ def run_job(
         vehicle = spec.companion.vehicle_of(companion)
         # the submit checks again (bounds, bandwidth, model): a job queued before a check existed, or
         # whose files changed on disk, fails here in words instead of deep in the estimator
-        spec.check(spec.options_model.model_validate(job.options), recording, companion)
+        options = spec.options_model.model_validate(job.options)
+        spec.check(options, recording, companion)
         output_dir = Path(job.output_dir)
         output_dir.mkdir(parents=True, exist_ok=True)
         if cancel.is_set():
             raise InterruptedError("cancelled before it started")
-        context = JobContext(
-            job.job_id, recording, vehicle, dict(job.options), output_dir, cancel, reporter, companion
-        )
-        outcome = runner(context)
+        context = JobContext(job.job_id, recording, vehicle, options, output_dir, cancel, reporter, companion)
+        outcome: JobOutcome = runner(context)
+        succeeded = JobSucceeded(job.job_id, outcome.result, outcome.artefacts)
         reporter.stage("done")
     except InterruptedError:
         send(JobCancelled(job.job_id))
@@ -139,7 +139,7 @@ def run_job(
         )
         send(JobFailed(job.job_id, _without_paths(reason, job)))
     else:
-        send(JobSucceeded(job.job_id, outcome.result, outcome.artefacts))
+        send(succeeded)
 
 
 def worker_main(conn: Connection, nice: int = 0, progress_interval_s: float = 0.2) -> None:

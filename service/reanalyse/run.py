@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from estimator.errors import UserError, one_line
+from service.extras import extra_needed
 from service.reanalyse.results import Done, save, stored, summary_row, write_summary
 from service.reanalyse.sources import Item, input_digest
 from service.reanalyse.task import Analysis, AnalysisOptions, Outcome, Task, run_task
@@ -30,6 +31,8 @@ class SchedulerError(UserError, ValueError):
     """--scheduler is not an address Dask understands; one line."""
 
 
+DASK_NEEDED_FOR = "shockbench reanalyse (on dask.distributed)"
+"""What needs the [cluster] extra, in the one line that says it is missing (service.extras)."""
 CONNECT_TIMEOUT = "10s"
 """How long to try a scheduler given by address before a one-line error."""
 NO_MALLOC_TRIM = {"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}
@@ -72,8 +75,9 @@ class RunReport:
 def dask_client(settings: RunSettings) -> Iterator[Client]:
     """A client of the scheduler at settings.scheduler, or of a LocalCluster of settings.workers processes
     with one thread each (the estimator is single-threaded numpy: processes, not threads, run in parallel)."""
-    import dask
-    from dask.distributed import Client, LocalCluster
+    with extra_needed("cluster", DASK_NEEDED_FOR):
+        import dask
+        from dask.distributed import Client, LocalCluster
 
     if settings.scheduler is not None:
         try:
@@ -100,7 +104,8 @@ def dask_client(settings: RunSettings) -> Iterator[Client]:
 def run_on_dask(tasks: Sequence[Task], settings: RunSettings) -> Iterator[Outcome]:
     """The outcome of each task as it finishes. A task whose worker failed under it (KilledWorker after
     the scheduler's retries, a lost connection) is a failed outcome naming the exception."""
-    from dask.distributed import as_completed
+    with extra_needed("cluster", DASK_NEEDED_FOR):
+        from dask.distributed import as_completed
 
     with dask_client(settings) as client:
         futures = client.map(run_task, list(tasks), pure=False)

@@ -104,7 +104,8 @@ class HeadLog:
         }
         text = json.dumps(line, sort_keys=True, separators=(",", ":"), ensure_ascii=False) + "\n"
         created = not self.path.exists()
-        descriptor = os.open(self.path, os.O_RDWR | os.O_APPEND | os.O_CREAT, 0o600)
+        # 0o666 less the umask, as the database beside it: hashes, no secret; an auditor may read the log
+        descriptor = os.open(self.path, os.O_RDWR | os.O_APPEND | os.O_CREAT, 0o666)
         try:
             size = os.fstat(descriptor).st_size
             torn = size > 0 and os.pread(descriptor, 1, size - 1) != b"\n"

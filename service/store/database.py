@@ -19,6 +19,7 @@ from sqlalchemy.exc import ArgumentError, NoSuchModuleError, SQLAlchemyError
 from sqlalchemy.orm import Session, sessionmaker
 
 from estimator.errors import UserError
+from service.extras import extra_needed
 
 DATABASE_FILE = "shockbench.sqlite3"
 CONNECT_TIMEOUT_S = 10
@@ -78,7 +79,10 @@ class Database:
                     k: v for k, v in defaults.items() if k not in parsed.query
                 }  # URL wins
         try:
-            self.engine: Engine = create_engine(parsed, **kwargs)
+            # PostgreSQL's driver is the [postgres] extra: SQLAlchemy imports it here, and its absence is one
+            # line naming the extra (service.extras), not "No module named 'psycopg'"
+            with extra_needed("postgres", f"database {self.safe_url}", DatabaseError):
+                self.engine: Engine = create_engine(parsed, **kwargs)
         except (NoSuchModuleError, ModuleNotFoundError, ArgumentError) as exc:
             raise DatabaseError(f"database {self.safe_url}: {str(exc).splitlines()[0]}") from None
         if parsed.get_backend_name() == "sqlite":

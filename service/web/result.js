@@ -145,7 +145,11 @@ export function showPending(sweep, message) {
 }
 
 function wireDownloads(sweep, job) {
+  const report = $("open-report");
+  report.disabled = !sweep.links.report_pdf;
+  report.onclick = () => openReport(sweep.links.report_pdf, `sweep-${sweep.id}-report.pdf`);
   const links = {
+    "dl-report-html": [sweep.links.report_html, `sweep-${sweep.id}-report.html`],
     "dl-csv": [sweep.links.recording_csv, `sweep-${sweep.id}.csv`],
     "dl-h5": [sweep.links.recording_h5 ?? `${sweep.links.self}/recording.h5`, `sweep-${sweep.id}.h5`],
     "dl-json": [job.links.self, `job-${job.id}.json`],
@@ -164,6 +168,29 @@ function wireDownloads(sweep, job) {
         $("download-status").textContent = `${name}: ${error.message}`;
       }
     };
+  }
+}
+
+/** Open the test's report (PDF) in a new tab: fetched with the key (a link could not send it), shown
+ * from an object URL. The tab is opened at the click, so that a popup blocker lets it through; when it is
+ * blocked all the same, the report is saved instead. */
+async function openReport(link, filename) {
+  const status = $("download-status");
+  const tab = window.open("", "_blank");
+  status.textContent = "preparing the report…";
+  try {
+    if (!tab) {
+      await download(link, filename);
+      status.textContent = `saved ${filename} (the new tab was blocked)`;
+      return;
+    }
+    const url = URL.createObjectURL(await fetchBlob(link));
+    tab.location.href = url;
+    status.textContent = "report opened in a new tab";
+    setTimeout(() => URL.revokeObjectURL(url), 60_000);
+  } catch (error) {
+    tab?.close();
+    status.textContent = `report: ${error.message}`;
   }
 }
 

@@ -29,12 +29,12 @@ from drivers.exciter.codes import (
     ExciterStatus,
     LawCode,
 )
-from estimator.sweep import SweepSettings
+from estimator.sweep import SETTING_NAMES, SweepSettings
 from simulators.coupling import PlatePhysics, PlateState
 
 DEFAULT_WATCHDOG_TIMEOUT_S = 0.5
 
-SWEEP_FIELDS = ("start_Hz", "stop_Hz", "amplitude_m", "duration_s", "law")
+SWEEP_FIELDS = SETTING_NAMES
 """Sweep settings as the drive stores them (law as its numeric code)."""
 
 

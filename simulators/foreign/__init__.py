@@ -12,4 +12,6 @@ file writer. It imports nothing from estimator/, drivers/, daq/ or service/.
 - world.py: simulate a sweep and measure the force effects' sizes;
 - draws.py: classes, random draws by namespace (DEV, HELD-OUT) and the truth record;
 - manifest.py: freezing the held-out draws (benchmarks/heldout/manifest.json) and verifying them.
-"""
+
+
+Must not import estimator, drivers, daq or service (it would share their mistakes)."""

@@ -14,4 +14,7 @@ and vehicle TOML itself (files.py), so that the only thing it has in common with
 - physics.py: the right-hand sides of the quarter car and the axle;
 - sensors.py: laser channels (delay, offset, noise, quantisation);
 - world.py: simulate a sweep; files.py: write it; cases.py: random cases per effect class.
-"""
+
+
+Must not import estimator, drivers, daq, service or the rest of simulators (it would share their
+mistakes)."""

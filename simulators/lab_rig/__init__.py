@@ -11,4 +11,6 @@ the generic pieces only: the chirp, the laser noise and quantisation, and the fi
 - signals.py: multisines, smooth steps and bumps (the plate's runs and the coil's command);
 - physics.py: the right-hand side, in absolute heights with gravity;
 - world.py: a run simulated, read by the lasers and written; draws.py: random rigs and their runs.
-"""
+
+
+Must not import estimator, drivers, daq or service (it would share their mistakes)."""

@@ -1,5 +1,7 @@
-"""Laser sources over a real transport (TCP) against simulated ZX-L amplifiers on a manual clock: every
-sample arrives once with its device time, losses are counted exactly, failures are counted and recovered."""
+"""Laser sources: over a real transport (TCP) against simulated ZX-L amplifiers on a manual clock, every
+sample arrives once with its device time; on in-process mock amplifiers (drivers/mock.py), losses are
+counted exactly, failures are counted and recovered, a line's late-reply wait is honoured; and where the
+measured value lives, from the bench file to the driver."""
 
 from __future__ import annotations
 
@@ -12,13 +14,15 @@ import pytest
 from daq.bench_config import BenchConfigError, parse_bench_config
 from daq.sources.laser_source import LaserSource
 from drivers.compowayf.amplifier import CountUnit, MeasuredArea, MeasuredValueConfig, ZxlAmplifier
-from drivers.compowayf.errors import AreaTypeError, CompowayFError
+from drivers.compowayf.errors import AreaTypeError, CompowayFError, MalformedFrameError
 from drivers.compowayf.transport import CompowayFPort
+from drivers.mock import ManualClock, MockAmplifier
 from estimator.sweep import SweepSettings
 from service.simulated_bench import SimulatedBench
-from simulators.devices.laser_amplifier import FaultKind, SimulatedAmplifier, TcpAmplifierServer
+from simulators.devices.laser_amplifier import SimulatedAmplifier, TcpAmplifierServer
 from simulators.excitation import sweep_position_m
 from simulators.plate import EmptyPlate
+from tests.daq.mock_bench import bench_toml
 
 
 def _source(bench: SimulatedBench, channel: str) -> LaserSource:
@@ -68,55 +72,100 @@ def test_streaming_source_gets_every_sample_once_with_device_time(bench: Simulat
     assert stats.achieved_rate_Hz == pytest.approx(1000.0, rel=1e-9)
 
 
-def test_a_pause_longer_than_the_amplifier_buffer_loses_exactly_the_overwritten_samples(
-    bench: SimulatedBench,
-) -> None:
-    source = _source(bench, "x_s")
-    buffer_length = source.amplifier.config.measured.buffer_length
+# ---- the source's bookkeeping, on mock amplifiers ---------------------------------------------------------
+
+
+def _mock_source(
+    *, streaming: bool = True, channel: str = "x_s"
+) -> tuple[LaserSource, MockAmplifier, ManualClock]:
+    """A source on an in-process mock amplifier (drivers/mock.py) reading 1 mm + 1 µm per sample number."""
+    laser = parse_bench_config(bench_toml(streaming=streaming)).laser_for(channel)
+    assert laser is not None
+    clock = ManualClock()
+    amplifier = MockAmplifier(
+        laser.amplifier_config(), reading_m=lambda t: 0.001 + round(t * 1e3) * 1e-6, clock=clock.now_s
+    )
+    return LaserSource(laser, amplifier, host_clock=clock.now_s), amplifier, clock
+
+
+def test_a_pause_longer_than_the_amplifier_buffer_loses_exactly_the_overwritten_samples() -> None:
+    source, amplifier, clock = _mock_source()
+    buffer_length = amplifier.config.measured.buffer_length
+    clock.advance(0.5)
     source.poll()
-    bench.clock.advance(0.02)
+    clock.advance(0.02)
     source.poll()
     pause = buffer_length + 300  # samples taken meanwhile; the amplifier keeps buffer_length of them
-    bench.clock.advance(pause * 1e-3)
+    clock.advance(pause * 1e-3)
     source.poll()
-    times, _ = _drain(source)
+    times, values = _drain(source)
     assert source.statistics().lost_samples == pause - buffer_length
     steps = np.round(np.diff(times) * 1e3).astype(int)
     assert sorted(set(steps)) == [1, pause - buffer_length + 1]  # one hole, exactly as long as the loss
+    np.testing.assert_allclose(values, np.round(times * 1e3) * 1e-6, atol=1e-12)  # each value its sample's
 
 
-def test_failed_reads_are_counted_and_the_next_read_catches_up_without_loss(bench: SimulatedBench) -> None:
-    source = _source(bench, "x_t")
+def test_failed_reads_are_counted_and_the_next_read_catches_up_without_loss() -> None:
+    source, amplifier, clock = _mock_source(channel="x_t")
     source.poll()
-    line = bench.laser_lines["x_t"]
-    line.inject_fault(FaultKind.GARBAGE)
-    bench.clock.advance(0.05)
+    amplifier.fail(MalformedFrameError("no ETX in 40 bytes"))
+    clock.advance(0.05)
     with pytest.raises(CompowayFError):
         source.poll()
-    line.clear_faults()
-    bench.clock.advance(0.05)
+    clock.advance(0.05)
     source.poll()
     times, _ = _drain(source)
     stats = source.statistics()
-    assert stats.failed_reads == 1 and stats.last_error.startswith("MalformedFrameError")
+    assert stats.failed_reads == 1 and stats.last_error == "MalformedFrameError: no ETX in 40 bytes"
     assert stats.lost_samples == 0
     np.testing.assert_allclose(np.diff(times), 1e-3, atol=1e-12)
-    assert times.size == 101
+    assert times.size == 101  # samples 0 to 100: the first poll found sample 0, nothing was lost after
 
 
 def test_polled_source_stamps_host_time_and_reports_the_rate_it_got() -> None:
-    with SimulatedBench(noise_sigma_m=0.0, laser_sample_period_s=None) as bench:
-        source = _source(bench, "x_r")
-        assert not source.streaming
-        for _ in range(20):
-            bench.clock.advance(0.004)  # one read per 4 ms of host time: 250 Hz
-            source.poll()
-        times, _ = _drain(source)
-        np.testing.assert_allclose(np.diff(times), 0.004, atol=1e-12)
-        stats = source.statistics()
-        assert stats.nominal_rate_Hz is None
-        assert stats.achieved_rate_Hz == pytest.approx(250.0)
-        assert str(stats.clock) == "host_monotonic"
+    source, _, clock = _mock_source(streaming=False, channel="x_r")
+    assert not source.streaming
+    for _ in range(20):
+        clock.advance(0.004)  # one read per 4 ms of host time: 250 Hz
+        source.poll()
+    times, values = _drain(source)
+    np.testing.assert_allclose(np.diff(times), 0.004, atol=1e-12)
+    np.testing.assert_allclose(values, np.round(times * 1e3) * 1e-6, atol=1e-12)  # reading minus zero_m
+    stats = source.statistics()
+    assert stats.nominal_rate_Hz is None
+    assert stats.achieved_rate_Hz == pytest.approx(250.0)
+    assert str(stats.clock) == "host_monotonic"
+
+
+def test_a_line_waiting_out_a_late_reply_is_not_polled_and_says_why() -> None:
+    source, amplifier, clock = _mock_source()
+    line = amplifier.port
+    failure = "ResponseTimeoutError: node 01: no reply within 0.5 s"
+    line.quiet_for_s, line.last_failure = 2.5, failure
+    clock.advance(0.05)
+    assert source.poll() == 0 and amplifier.reads == 0
+    stats = source.statistics()
+    assert stats.line_waits == 1 and stats.failed_reads == 0
+    assert (
+        stats.last_error
+        == "its line waits out a late reply after ResponseTimeoutError: node 01: no reply within 0.5 s"
+    )
+    line.counters.unanswered += 1
+    assert source.line_lost_reply_since_data()  # its silence may be the line's wait (daq/sweep/silence.py)
+    line.quiet_for_s = 0.0
+    assert source.poll() == 1  # the first poll of a stream only finds where the counter stands
+
+
+def test_an_out_of_range_reading_is_a_nan_and_counted() -> None:
+    source, amplifier, clock = _mock_source(streaming=False)
+    clock.advance(0.01)
+    source.poll()
+    amplifier.reading_m = float("nan")
+    clock.advance(0.01)
+    source.poll()
+    _, values = _drain(source)
+    assert np.isnan(values).tolist() == [False, True]
+    assert source.statistics().out_of_range_samples == 1
 
 
 # ---- where the measured value lives: BENCH.toml keys to driver and simulator ------------------------------

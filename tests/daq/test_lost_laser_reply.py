@@ -22,6 +22,7 @@ import pytest
 
 from daq.sources.laser_source import SourceStatistics
 from daq.storage.hdf5_recording import FLAG_GAP, StoredRecording, load_recording
+from daq.sweep.devices import DriverDevices
 from daq.sweep.model import StopKind, SweepOutcome, SweepRequest
 from daq.sweep.pacing import DEFAULT_POLL_INTERVAL_S
 from daq.sweep.plan import plan_sweep
@@ -153,7 +154,7 @@ def sweep_with(tmp_path: Path, fault: Callable[[Rig], None], *, shared: bool = F
                 out,
                 pacing=pacing,
                 progress=at_fault_time(pacing, lambda: fault(rig)),
-                open_port=rig.open_port,
+                devices=DriverDevices(open_port=rig.open_port),
             )
         )
         pacing.run_out()

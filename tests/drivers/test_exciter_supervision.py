@@ -1,6 +1,7 @@
 """Supervision shared by every exciter back end (drivers/exciter/interface.py), on Modbus and on CAN:
 the keep-alive goes out only after a status read that passed its checks, a reported breach of the
-envelope gets the driver's own emergency stop, and closing with the plate moving stops it."""
+envelope gets the driver's own emergency stop, and closing falls back to an emergency stop. Closing with the
+plate moving, on every back end: test_exciter_contract.py."""
 
 from __future__ import annotations
 
@@ -22,7 +23,7 @@ from estimator.sweep import SweepSettings
 from simulators.devices.can_exciter import SimulatedCanExciter
 from simulators.devices.exciter import SimulatedExciter
 from simulators.devices.modbus_exciter import SimulatedModbusExciter
-from simulators.plate import CONTROLLED_STOP_RAMP_S, EmptyPlate
+from simulators.plate import EmptyPlate
 
 SWEEP = SweepSettings(start_Hz=0.0, stop_Hz=20.0, amplitude_m=0.004, duration_s=20.0)
 TIMEOUT_S = 0.3
@@ -135,20 +136,6 @@ def test_a_reported_breach_gets_an_emergency_stop_from_the_driver(backend: Backe
             r.advance(0.25)
             assert (await r.exciter.supervise()).state is ExciterState.IDLE  # halted
             assert await keepalives_received(r) == fed
-
-    asyncio.run(scenario())
-
-
-@pytest.mark.parametrize("backend", BACKENDS)
-def test_closing_with_the_plate_moving_stops_it(backend: Backend) -> None:
-    async def scenario() -> None:
-        async with rig(backend) as r:
-            await running(r)
-            plate = r.simulated.bench
-            await r.exciter.close()
-            assert r.simulated.commands == [CommandCode.START, CommandCode.STOP]
-            r.advance(CONTROLLED_STOP_RAMP_S + 0.05)
-            assert plate.plate_status().state == "idle"
 
     asyncio.run(scenario())
 

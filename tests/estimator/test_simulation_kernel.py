@@ -189,9 +189,7 @@ def test_quarter_car_population_with_every_effect(seed: int) -> None:
     tyre dashpot present in some columns and absent in others."""
     columns = 6
     physics = _quarter_car(seed, columns, TyreModel.MAXWELL, effects=True)
-    rng = np.random.default_rng(seed + 100)
-    plate, rate = _plate(rng, columns)
-    state0 = np.vstack([rng.normal(0, 1e-3, (4, columns)), np.zeros((1, columns))])
+    plate, rate, state0 = _quarter_car_drive(seed + 100, columns)
     reference, compiled = _both(physics, state0, plate, rate)
     assert np.all(np.isfinite(reference))
     assert_same_trajectories(reference, compiled)
@@ -204,16 +202,29 @@ def test_quarter_car_population_with_every_effect(seed: int) -> None:
     assert lifted.any()
 
 
+def _quarter_car_drive(seed: int, columns: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A plate per column (samples, columns), its rate, and a small random initial state."""
+    rng = np.random.default_rng(seed)
+    plate, rate = _plate(rng, columns)
+    state0 = np.vstack([rng.normal(0, 1e-3, (4, columns)), np.zeros((1, columns))])
+    return plate, rate, state0
+
+
+def _axle_drive(seed: int, columns: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Left and right plates stacked (2, samples, columns), their rates, and a small random initial state."""
+    rng = np.random.default_rng(seed)
+    left, left_rate = _plate(rng, columns)
+    right, right_rate = _plate(rng, columns)
+    state0 = np.vstack([rng.normal(0, 1e-3, (8, columns)), np.zeros((2, columns))])
+    return np.stack([left, right]), np.stack([left_rate, right_rate]), state0
+
+
 def test_axle_population_with_anti_roll_bar_and_every_effect() -> None:
     """Five axle models: own curves left and right (different grids), anti-roll bar, roll inertia, and the
     effects per corner and column; the plate is stacked (left, right) per column."""
     columns = 5
     physics = _axle(21, columns)
-    rng = np.random.default_rng(121)
-    left, left_rate = _plate(rng, columns)
-    right, right_rate = _plate(rng, columns)
-    plate, rate = np.stack([left, right]), np.stack([left_rate, right_rate])
-    state0 = np.vstack([rng.normal(0, 1e-3, (8, columns)), np.zeros((2, columns))])
+    plate, rate, state0 = _axle_drive(121, columns)
     reference, compiled = _both(physics, state0, plate, rate)
     assert np.all(np.isfinite(reference))
     assert_same_trajectories(reference, compiled)
@@ -352,9 +363,7 @@ def test_quarter_car_population_with_spring_hinges_and_stribeck_friction(seed: i
     columns = 6
     base = _quarter_car(seed, columns, TyreModel.MAXWELL, effects=True)
     physics = replace(base, corner=_with_shapes(base.corner, seed + 500, columns))
-    rng = np.random.default_rng(seed + 100)
-    plate, rate = _plate(rng, columns)
-    state0 = np.vstack([rng.normal(0, 1e-3, (4, columns)), np.zeros((1, columns))])
+    plate, rate, state0 = _quarter_car_drive(seed + 100, columns)
     reference, compiled = _both(physics, state0, plate, rate)
     assert np.all(np.isfinite(reference))
     assert_same_trajectories(reference, compiled)
@@ -374,11 +383,7 @@ def test_axle_population_with_spring_hinges_and_stribeck_friction() -> None:
         left=_with_shapes(base.left, 522, columns),
         right=_with_shapes(base.right, 523, columns, shared_hinges=True),
     )
-    rng = np.random.default_rng(122)
-    left, left_rate = _plate(rng, columns)
-    right, right_rate = _plate(rng, columns)
-    plate, rate = np.stack([left, right]), np.stack([left_rate, right_rate])
-    state0 = np.vstack([rng.normal(0, 1e-3, (8, columns)), np.zeros((2, columns))])
+    plate, rate, state0 = _axle_drive(122, columns)
     reference, compiled = _both(physics, state0, plate, rate)
     assert np.all(np.isfinite(reference))
     assert_same_trajectories(reference, compiled)

@@ -37,7 +37,7 @@ OPERATION_IDS = {
     "start_sweep", "list_sweeps", "get_sweep", "abort_sweep", "get_sweep_recording_csv",
     "submit_sweep_identify", "schedule_test", "list_scheduled_tests", "get_scheduled_test",
     "cancel_scheduled_test", "whoami", "bench_live", "get_sweep_recording_h5",
-    "submit_sweep_diagnose", "get_vehicle_results",
+    "submit_sweep_diagnose", "get_vehicle_results", "get_sweep_report_pdf", "get_sweep_report_html",
 }  # fmt: skip
 DOWNLOADS = {
     ("/api/v1/jobs/{job_id}/plot.png", "image/png"),
@@ -46,6 +46,8 @@ DOWNLOADS = {
     ("/api/v1/sweeps/{sweep_id}/recording.h5", "application/octet-stream"),
     ("/api/v1/jobs/{job_id}/files/{name}", "text/markdown"),
     ("/api/v1/jobs/{job_id}/files/{name}", "image/png"),
+    ("/api/v1/sweeps/{sweep_id}/report.pdf", "application/pdf"),
+    ("/api/v1/sweeps/{sweep_id}/report.html", "text/html"),
 }
 
 

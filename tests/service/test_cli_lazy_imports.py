@@ -117,7 +117,7 @@ def _simulated_sweep(folder: Path) -> tuple[Path, Path]:
         "tyre_stiffness_N_per_m = 200000.0\ntyre_viscoelastic_coefficient = 0.97\n"
     )
     recording = folder / "sweep.csv"
-    _modules_after(["simulate", "--vehicle", str(vehicle), "--out", str(recording), "--seconds", "4"])
+    _modules_after(["simulate", "--vehicle", str(vehicle), "--out", str(recording), "--duration-s", "4"])
     return recording, vehicle
 
 

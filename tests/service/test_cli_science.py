@@ -28,7 +28,7 @@ def quarter_car_files(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, P
     write_vehicle(vehicle, default_quarter_car().known)
     recording = folder / "rec.csv"
     done = run(
-        "simulate", "--vehicle", str(vehicle), "--out", str(recording), "--seconds", "10", "--seed", "4"
+        "simulate", "--vehicle", str(vehicle), "--out", str(recording), "--duration-s", "10", "--seed", "4"
     )
     assert done.returncode == 0, done.stderr
     return vehicle, recording
@@ -105,9 +105,8 @@ def test_axle_simulate_and_identify(tmp_path: Path) -> None:
     vehicle = tmp_path / "axle.toml"
     write_vehicle(vehicle, default_axle().known)
     recording = tmp_path / "axle.csv"
-    assert (
-        run("simulate", "--vehicle", str(vehicle), "--out", str(recording), "--seconds", "8").returncode == 0
-    )
+    simulated = run("simulate", "--vehicle", str(vehicle), "--out", str(recording), "--duration-s", "8")
+    assert simulated.returncode == 0, simulated.stderr
     done = run("identify", str(recording), "--vehicle", str(vehicle), "--json")
     assert done.returncode == 0, done.stderr
     out = json.loads(done.stdout)

@@ -33,7 +33,7 @@ def cli_json(capsys: pytest.CaptureFixture[str], *args: str) -> dict[str, object
 
 def simulate(folder: Path, name: str, vehicle: Path, seconds: str, seed: str, *extra: str) -> Path:
     out = folder / f"{name}.csv"
-    assert main(["simulate", "--vehicle", str(vehicle), "--out", str(out), "--seconds", seconds,
+    assert main(["simulate", "--vehicle", str(vehicle), "--out", str(out), "--duration-s", seconds,
                  "--seed", seed, *extra]) == 0  # fmt: skip
     return out
 

@@ -432,7 +432,7 @@ def test_the_page_has_no_inline_script_or_style() -> None:
     assert "<style" not in page and " style=" not in page
 
 
-def test_the_docs_page_allows_swagger_ui_and_its_own_inline_script_by_hash(server: LiveServer) -> None:
+def test_the_docs_page_allows_its_own_swagger_ui_and_inline_script_by_hash(server: LiveServer) -> None:
     docs = httpx.get(f"{server.url}/docs")
     assert docs.status_code == 200
     policy = docs.headers["content-security-policy"]
@@ -442,7 +442,8 @@ def test_the_docs_page_allows_swagger_ui_and_its_own_inline_script_by_hash(serve
     inline = re.findall(r"<script>(.*?)</script>", docs.text, flags=re.DOTALL)
     assert len(inline) == 1
     digest = base64.b64encode(hashlib.sha256(inline[0].encode()).digest()).decode()
-    assert directives["script-src"] == f"https://cdn.jsdelivr.net 'sha256-{digest}'"
-    assert 'src="https://cdn.jsdelivr.net/' in docs.text  # what the policy allows is what the page loads
+    assert directives["script-src"] == f"'self' 'sha256-{digest}'"
+    # what the policy allows is what the page loads: the package's own copy, no CDN (offline lanes)
+    assert 'src="/docs/assets/swagger-ui-bundle.js"' in docs.text and "https://" not in docs.text
     assert directives["frame-ancestors"] == "'none'" and directives["connect-src"] == "'self'"
     assert "/api/v1/openapi.json" in inline[0]

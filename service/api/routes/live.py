@@ -8,26 +8,31 @@ but the view's one decimated copy. When the service stops, the stream ends with 
 
 EventSource cannot send an Authorization header: a page reads this stream with fetch and a
 ReadableStream (service/web/app.js).
+
+The events are encoded by FastAPI (fastapi.sse: `response_class=EventSourceResponse` on a generator); the
+checks that may refuse the stream (503 without a bench, 429) run in a dependency, before the response
+starts.
 """
 
 from __future__ import annotations
 
 import asyncio
-import json
+import itertools
 import math
 import time
 from collections.abc import AsyncIterator
+from typing import Annotated
 
-from fastapi import APIRouter, Request
-from fastapi.responses import StreamingResponse
+from fastapi import APIRouter, Depends, Request
+from fastapi.sse import EventSourceResponse, ServerSentEvent
+from pydantic import BaseModel
 
 from daq.live_view import LiveRows
 from service.api.auth import Viewer
-from service.api.contract import event_stream
-from service.api.errors import responses
+from service.api.contract import event_stream, stream_errors
 from service.api.routes.bench import bench_out, require_bench
-from service.api.schemas import LIVE_EVENTS, LiveSamplesEvent, LiveStateEvent
-from service.api.stream_limit import HeldStreamingResponse
+from service.api.schemas import LIVE_EVENTS, LiveClosingEvent, LiveSamplesEvent, LiveStateEvent
+from service.bench_control import BenchController
 
 TICK_S = 0.05
 """Time between two looks at the bench: up to 20 `samples` events a second."""
@@ -45,10 +50,6 @@ LIVE_SUMMARY = (
 router = APIRouter(tags=["bench"])
 
 
-def _sse(event: str, data: str, event_id: int) -> str:
-    return f"id: {event_id}\nevent: {event}\ndata: {data}\n\n"
-
-
 def _rounded(values: list[float]) -> list[float | None]:
     return [round(v, DECIMALS) if math.isfinite(v) else None for v in values]
 
@@ -62,49 +63,48 @@ def samples_event(rows: LiveRows) -> LiveSamplesEvent:
     )
 
 
+async def open_live_stream(request: Request, principal: Viewer) -> AsyncIterator[BenchController]:
+    """503 without a bench, 429 when the key has its most streams open; both before the response starts.
+    The place is given back once the stream ended, however it ended."""
+    bench = require_bench(request)
+    with request.app.state.services.streams.held(principal.key_id):
+        yield bench
+
+
 @router.get(
     "/bench/live",
-    response_class=StreamingResponse,
+    response_class=EventSourceResponse,
     operation_id="bench_live",
-    responses=event_stream(LIVE_EVENTS, LIVE_SUMMARY) | responses(401, 403, 429, 503),
+    responses=event_stream(LIVE_EVENTS, LIVE_SUMMARY) | stream_errors(401, 403, 429, 503),
 )
-async def bench_live(request: Request, principal: Viewer) -> StreamingResponse:
+async def bench_live(
+    bench: Annotated[BenchController, Depends(open_live_stream)],
+) -> AsyncIterator[ServerSentEvent]:
     """The bench's state and the running sweep's channels, live (see the module text for the events)."""
-    bench = require_bench(request)
-    streams = request.app.state.services.streams
-    streams.acquire(principal.key_id)  # 429 when this key has its most streams open
+    numbers = itertools.count(1)
 
-    async def stream() -> AsyncIterator[str]:
-        sequence = 0
-        cursor, run = 0, None
-        last_phase: tuple[int | None, str | None] | None = None
-        last_sent = -math.inf
-        while True:
-            if bench.stopping:
-                sequence += 1
-                yield _sse("closing", json.dumps({"reason": "the service is stopping"}), sequence)
-                return
-            state = bench_out(bench)
-            phase = (state.sweep_id, state.progress.phase if state.progress else None)
-            now = time.monotonic()
-            if phase != last_phase or now - last_sent >= STATE_EVERY_S:
-                # built only when sent: the devices' states cost a lock and a pass over their statistics
-                data = LiveStateEvent(
-                    busy=state.busy, sweep_id=state.sweep_id, progress=state.progress, devices=bench.devices()
-                )
-                sequence += 1
-                yield _sse("state", data.model_dump_json(), sequence)
-                last_phase, last_sent = phase, now
-            rows = bench.live.since(cursor, run)
-            cursor, run = rows.cursor, rows.run
-            if rows.time_s.size or rows.missed:
-                sequence += 1
-                yield _sse("samples", samples_event(rows).model_dump_json(), sequence)
-            await asyncio.sleep(TICK_S)
+    def event(name: str, data: BaseModel) -> ServerSentEvent:
+        return ServerSentEvent(event=name, data=data, id=str(next(numbers)))
 
-    return HeldStreamingResponse(
-        stream(),
-        media_type="text/event-stream",
-        headers={"Cache-Control": "no-cache", "X-Accel-Buffering": "no"},
-        on_close=lambda: streams.release(principal.key_id),
-    )
+    cursor, run = 0, None
+    last_phase: tuple[int | None, str | None] | None = None
+    last_sent = -math.inf
+    while True:
+        if bench.stopping:
+            yield event("closing", LiveClosingEvent(reason="the service is stopping"))
+            return
+        state = bench_out(bench)
+        phase = (state.sweep_id, state.progress.phase if state.progress else None)
+        now = time.monotonic()
+        if phase != last_phase or now - last_sent >= STATE_EVERY_S:
+            # built only when sent: the devices' states cost a lock and a pass over their statistics
+            data = LiveStateEvent(
+                busy=state.busy, sweep_id=state.sweep_id, progress=state.progress, devices=bench.devices()
+            )
+            yield event("state", data)
+            last_phase, last_sent = phase, now
+        rows = bench.live.since(cursor, run)
+        cursor, run = rows.cursor, rows.run
+        if rows.time_s.size or rows.missed:
+            yield event("samples", samples_event(rows))
+        await asyncio.sleep(TICK_S)

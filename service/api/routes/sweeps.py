@@ -13,7 +13,7 @@ import shutil
 import tempfile
 from datetime import datetime
 from pathlib import Path as FilePath
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 from fastapi import APIRouter, Body, Path, Query, Request, Response
 from fastapi.responses import FileResponse
@@ -44,6 +44,9 @@ from service.jobs.identify_job import IdentifyJobOptions
 from service.store.models import JobKind, SweepStatus
 from service.store.sweeps import SweepRecord, SweepStore
 
+if TYPE_CHECKING:
+    from service.report import ReportInput
+
 router = APIRouter(tags=["sweeps"])
 
 SweepId = Annotated[int, Path(ge=1, le=2**62, description="sweep id")]
@@ -55,6 +58,8 @@ class SweepLinks(BaseModel):
     recording_csv: str
     recording_h5: str
     jobs: str
+    report_pdf: str = Field(description="the test's report (PDF) once an identification succeeded")
+    report_html: str = Field(description="the same report as one self-contained HTML page")
 
 
 class SweepTestOut(BaseModel):
@@ -115,6 +120,8 @@ class SweepOut(BaseModel):
                 recording_csv=f"{base}/recording.csv",
                 recording_h5=f"{base}/recording.h5",
                 jobs=f"{base}/jobs",
+                report_pdf=f"{base}/report.pdf",
+                report_html=f"{base}/report.html",
             ),
         )
 
@@ -292,6 +299,62 @@ async def sweep_recording_h5(request: Request, sweep_id: SweepId, _principal: Vi
     the metadata). 409 until the sweep has ended."""
     h5 = recording_path(await load_sweep(request, sweep_id))
     return FileResponse(h5, media_type="application/octet-stream", filename=f"sweep-{sweep_id}.h5")
+
+
+async def report_input(request: Request, sweep_id: int) -> ReportInput:
+    """What the sweep's report is made from: 404 without the sweep, or before an identification of it
+    succeeded. (service.report is imported here, when a report is asked for: it loads matplotlib, which the
+    service's start-up need not wait for.)"""
+    from service.report.source import stored_input, stored_test
+
+    services = request.app.state.services
+    test = await asyncio.to_thread(stored_test, services.database, sweep_id)
+    if test is None:
+        raise ApiError(404, f"no sweep {sweep_id}")
+    if test.identification is None:
+        raise ApiError(
+            404,
+            f"sweep {sweep_id} has no identification result yet; its report follows once one succeeded "
+            f"(POST {API_PREFIX}/sweeps/{sweep_id}/jobs runs one)",
+        )
+    return await asyncio.to_thread(stored_input, test, services.version)
+
+
+@router.get(
+    "/sweeps/{sweep_id}/report.pdf",
+    response_class=Response,
+    operation_id="get_sweep_report_pdf",
+    responses=download("application/pdf", "the test's report, from the sweep's newest identification")
+    | responses(401, 403, 404, 422),
+)
+async def sweep_report_pdf(request: Request, sweep_id: SweepId, _principal: Viewer) -> Response:
+    """The test's report as a PDF (service.report): the vehicle and test record, the verdict per corner
+    with its thresholds, the lane figures, the damper curve, the sweep over time and frequency, masses and
+    stiffnesses with their intervals, the model doctor's summary and the result's hash-chain record. From
+    the sweep's newest succeeded identification; 404 while it has none."""
+    from service.report import report_pdf
+
+    pdf = await asyncio.to_thread(report_pdf, await report_input(request, sweep_id))
+    disposition = f'inline; filename="sweep-{sweep_id}-report.pdf"'
+    return Response(pdf, media_type="application/pdf", headers={"Content-Disposition": disposition})
+
+
+@router.get(
+    "/sweeps/{sweep_id}/report.html",
+    response_class=Response,
+    operation_id="get_sweep_report_html",
+    responses=download("text/html", "the test's report as one self-contained HTML page")
+    | responses(401, 403, 404, 422),
+)
+async def sweep_report_html(request: Request, sweep_id: SweepId, _principal: Viewer) -> Response:
+    """The report of GET .../report.pdf as one HTML page that loads nothing (its plots inside it): sent
+    with a policy that lets it load nothing either."""
+    from service.report import policy, report_html
+
+    page = await asyncio.to_thread(report_html, await report_input(request, sweep_id))
+    return Response(
+        page, media_type="text/html; charset=utf-8", headers={"Content-Security-Policy": policy()}
+    )
 
 
 @router.post(
