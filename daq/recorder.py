@@ -8,7 +8,7 @@ origin. How each channel is interpolated and when a grid instant is a gap: daq/a
 A row is written once every channel's value at its instant is final (each source has a sample beyond it),
 so rows go to disk in order, a block per `step`, without ever being rewritten. A silent source holds the
 rows back; `finish(end_s)` then writes every remaining row up to end_s, as gaps where a channel has no data.
-The recording file flushes every second of rows (daq/storage/hdf5_recording.py), so a crash loses at most
+The recording file flushes every second of rows (daq/storage/hdf5_writer.py), so a crash loses at most
 the last second.
 
 Overruns: a recorder that fell more than a ring buffer behind loses samples; its readers count them

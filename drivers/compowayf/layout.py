@@ -12,7 +12,7 @@ Sources (OMRON's CompoWay/F command references; the ZX-L amplifier's own map cou
   0503, 0601, 0801, 3005; OMRON AST1-01X055 "ZX-SF11 CompoWay/F message communication command
   specifications"), but its unit/data number table was not available. ASSUMPTION: the ZX-L measured value
   sits where the ZS series keeps it. Check it against the ZX-SF11 table and set `value_area`,
-  `value_type`, `value_address`, `value_unit` in BENCH.toml (daq/bench_config.py) where it differs.
+  `value_type`, `value_address`, `value_unit` in BENCH.toml (daq/bench_config/) where it differs.
 * Abnormal measured values are "7FFFFFFXh" ("X" varies with the case; ZFV-C Z243 section 2): every count
   from 7FFFFFF0 to 7FFFFFFF means out of range. For word (4 hex character) areas the same top sixteen
   values 7FF0..7FFF are taken to be markers (an assumption, no OMRON text says so).

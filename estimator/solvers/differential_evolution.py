@@ -11,6 +11,8 @@ plain DE.
 Other choices, as scipy.optimize.differential_evolution makes them: trial genes that leave the bounds are
 re-drawn uniformly inside them; selection keeps the trial when it is at least as good; the whole
 generation's trials are made from the previous generation (scipy's "deferred" updating).
+
+The settings (DESettings, re-exported here) are declared in estimator.solvers.de_settings, without numpy.
 """
 
 from __future__ import annotations
@@ -21,29 +23,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from estimator.errors import InvalidValueError
+from estimator.solvers.de_settings import DESettings
 
-
-@dataclass(frozen=True)
-class DESettings:
-    """Every setting of the run; defaults are the paper's Table 1."""
-
-    mutation_factor: float = 1.0  # F, the paper's "disturbance factor"
-    crossover_probability: float = 0.3  # CR ("CP" in Table 1)
-    mutation_probability: float = 0.1  # MP, read as described in the module docstring
-    population_size: int = 70  # NP
-    generations: int = 3000
-    seed: int | None = 0
-    relative_tolerance: float = 0.0
-    """Stop early when the population's objective spread falls below this fraction of its mean (0: never)."""
-
-    def __post_init__(self) -> None:
-        if self.population_size < 4:
-            raise InvalidValueError("DE/rand/1 needs a population of at least 4")
-        if not 0.0 <= self.crossover_probability <= 1.0 or not 0.0 <= self.mutation_probability <= 1.0:
-            raise InvalidValueError("probabilities must lie in [0, 1]")
-        if self.generations < 1:
-            raise InvalidValueError("generations must be >= 1")
+__all__ = ["DEProgress", "DEResult", "DESettings", "DifferentialEvolution", "sorted_columns"]
 
 
 @dataclass(frozen=True)
@@ -67,6 +49,9 @@ class DEResult:
     """Best objective after each generation."""
 
 
+DEFAULT_SETTINGS = DESettings()
+"""The paper's Table 1."""
+
 PopulationObjective = Callable[[np.ndarray], np.ndarray]
 """Maps a population (P, p) to objective values (P,)."""
 
@@ -83,7 +68,7 @@ class DifferentialEvolution:
         self,
         objective: PopulationObjective,
         bounds: np.ndarray,
-        settings: DESettings = DESettings(),
+        settings: DESettings = DEFAULT_SETTINGS,
         callback: Callable[[DEProgress], bool | None] | None = None,
         cancel: threading.Event | None = None,
         initial: np.ndarray | None = None,

@@ -16,9 +16,10 @@ from pydantic import AfterValidator, BaseModel, Field, create_model
 from pydantic_core import PydanticCustomError
 
 from daq.sweep.model import SweepProgress
-from estimator.sweep import SweepLaw
+from estimator.sweep import SETTING_NAMES, SweepSettings
 from service import free_text
 from service.api.results import DiagnoseResult, IdentifyResult, ValidateResult
+from service.declarations import echo_fields
 from service.jobs.diagnose_job import DiagnoseJobOptions
 from service.jobs.identify_job import IdentifyJobOptions
 from service.jobs.messages import Progress
@@ -273,16 +274,14 @@ class BenchOut(BaseModel):
     progress: SweepProgressOut | None = Field(None, description="the running sweep's latest progress")
 
 
-class SweepSettingsOut(BaseModel):
-    """A sweep's settings as submitted (POST /sweeps without the vehicle file). A setting the record
-    does not hold (a sweep stored by other means) is null."""
-
-    start_Hz: float | None = Field(None, description="sweep start (Hz)")
-    stop_Hz: float | None = Field(None, description="sweep end (Hz)")
-    amplitude_m: float | None = Field(None, description="plate amplitude, zero to peak (m)")
-    duration_s: float | None = Field(None, description="the sweep itself, without settling (s)")
-    law: SweepLaw | None = Field(None, description="linear or logarithmic")
-    settle_s: float | None = Field(None, description="recorded after the sweep (s)")
+SweepSettingsOut: type[BaseModel] = create_model(
+    "SweepSettingsOut",
+    __doc__="A sweep's settings as submitted (POST /sweeps without the vehicle file). A setting the record "
+    "does not hold (a sweep stored by other means) is null.",
+    **echo_fields(SweepSettings, SETTING_NAMES),
+    settle_s=(float | None, Field(None, description="recorded after the sweep (s)")),
+)
+"""The plate's settings as SweepSettings declares them (estimator.sweep), without their bounds."""
 
 
 class LiveStateEvent(BaseModel):

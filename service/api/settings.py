@@ -1,5 +1,5 @@
 """Everything the service is started with, in one object that `shockbench serve` (or a test) builds and
-`create_app` takes."""
+`create_app` takes. The limits' defaults, bounds and help are declared once in service.service_limits."""
 
 from __future__ import annotations
 
@@ -13,38 +13,23 @@ from typing import Literal, get_args
 from estimator.verdict import VerdictThresholds
 from service.access import KeyRing
 from service.jobs.manager import WorkerSettings
+from service.service_limits import LIMITS
 from service.store.database import default_database_url
-from service.store.retention import DEFAULT_RETAIN_DAYS
 
-DEFAULT_MAX_STREAMS_PER_KEY = 8
-DEFAULT_BODY_TIMEOUT_S = 30.0
-"""Longest pause within a request body (s): generous for a slow link, short enough that clients which
-declare more than they send cannot hold connections for ever."""
-DEFAULT_MAX_UPLOAD_BYTES = 64 * 1024 * 1024
-"""64 MiB: a 20 s quarter-car recording at 1 kHz is about 1 MB of CSV, a 10-minute axle recording ~40 MB."""
-DEFAULT_MAX_JSON_BYTES = 2**20 + 2**16
-"""1 MiB + 64 KiB for the JSON bodies (every route but the uploads): the largest field, the vehicle text, is
-at most 1,000,000 characters; the rest covers its escaping and the other fields."""
-DEFAULT_HEADER_TIMEOUT_S = 10.0
-"""Longest time for a request's headers (a few hundred bytes: a fraction of a second on any link)."""
-DEFAULT_BODY_MIN_RATE_BYTES_S = 1024.0
-DEFAULT_BODY_RATE_GRACE_S = 5.0
-"""After 5 s a body must have arrived at 1 KiB/s on average: any real link (a 2G modem gives 5 KiB/s) keeps
-to it; a trickle of a byte every few seconds is cut after ~6 s."""
-DEFAULT_BODY_TOTAL_TIMEOUT_S = 300.0
-"""A whole body within 5 minutes: a 64 MiB upload (the upload limit) needs 1.8 Mbit/s on average, which a
-poor workshop Wi-Fi still gives."""
-DEFAULT_MAX_CONNECTIONS_PER_ADDRESS = 64
-"""Open connections per client address: ten times what a browser opens to one site (6) and room for a
-script's pool, small enough that one address cannot hold the service's sockets."""
-DEFAULT_MAX_QUEUED_JOBS_PER_KEY = 20
-"""A key's queued and running jobs at once: an operator re-running a day's few tests, or a script
-re-analysing a batch, stays well below; a runaway client (931 jobs in five minutes) is stopped at 20."""
-DEFAULT_MAX_SCHEDULED_TESTS_PER_KEY = 100
-"""A key's waiting and running scheduled tests: about two days of a busy inspection line."""
-DEFAULT_MIN_FREE_BYTES = 1 << 30
-"""1 GiB kept free on the data directory's file system: room for the recordings of the sweeps under way
-and for the database and logs to grow, whatever uploads arrive."""
+DEFAULT_MAX_STREAMS_PER_KEY = LIMITS.max_streams_per_key
+DEFAULT_BODY_TIMEOUT_S = LIMITS.body_timeout_s
+DEFAULT_MAX_UPLOAD_BYTES = LIMITS.max_upload_bytes
+DEFAULT_MAX_JSON_BYTES = LIMITS.max_json_bytes
+DEFAULT_HEADER_TIMEOUT_S = LIMITS.header_timeout_s
+DEFAULT_BODY_MIN_RATE_BYTES_S = LIMITS.body_min_rate_bytes_s
+DEFAULT_BODY_RATE_GRACE_S = LIMITS.body_rate_grace_s
+DEFAULT_BODY_TOTAL_TIMEOUT_S = LIMITS.body_total_timeout_s
+DEFAULT_MAX_CONNECTIONS_PER_ADDRESS = LIMITS.max_connections_per_address
+DEFAULT_MAX_QUEUED_JOBS_PER_KEY = LIMITS.max_queued_jobs_per_key
+DEFAULT_MAX_SCHEDULED_TESTS_PER_KEY = LIMITS.max_scheduled_tests_per_key
+DEFAULT_MIN_FREE_BYTES = LIMITS.min_free_bytes
+"""The limits' defaults, each declared once with its unit, bounds, help and reason in
+service.service_limits (which `shockbench serve`'s options come from too)."""
 
 
 MetricsAccess = Literal["admin", "key", "open"]
@@ -98,7 +83,7 @@ class ServiceSettings:
     """Scheduled tests one key may have waiting or running at once; one more is answered 429."""
     min_free_bytes: int = DEFAULT_MIN_FREE_BYTES
     """An upload that would leave less free on the data directory's file system is answered 507."""
-    retain_days: float | None = DEFAULT_RETAIN_DAYS
+    retain_days: float | None = LIMITS.retain_days
     """Uploaded inputs of finished jobs and sweep recordings older than this are deleted
     (service.store.retention); None: kept for ever."""
     disk_free_bytes: Callable[[Path], int] = field(default=disk_free_bytes, repr=False, compare=False)

@@ -16,14 +16,15 @@ import secrets
 from collections.abc import Callable
 from pathlib import Path
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, create_model
 
 from daq.sweep.model import DEFAULT_SETTLE_S, StopKind, SweepError, SweepOutcome, SweepRequest
 from daq.sweep.plan import SweepPlan
-from estimator.sweep import SweepLaw, SweepSettings
+from estimator.sweep import SETTING_NAMES, SweepSettings
 from service.api.intake import parse_vehicle_field
 from service.api.schemas import FreeText
 from service.bench_control import BenchBusyError, BenchController, SweepDone
+from service.declarations import pydantic_fields
 from service.jobs.bounds import check_vehicle_bounds
 from service.jobs.context import InputError
 from service.store.models import SweepStatus
@@ -31,29 +32,20 @@ from service.store.sweeps import SweepRecord, SweepStore
 
 log = logging.getLogger("shockbench.api")
 
-SETTINGS_FIELDS = ("start_Hz", "stop_Hz", "amplitude_m", "duration_s", "law")
-MIN_SWEEP_DURATION_S = 1.0
-"""A shorter sweep records nothing to identify (and a drive may refuse its START)."""
-MAX_SWEEP_DURATION_S = 3600.0
+SETTINGS_FIELDS = SETTING_NAMES
+"""The plate's settings (estimator.sweep.SweepSettings), each declared there once with its bounds."""
+
+PlateSettingsIn: type[BaseModel] = create_model(
+    "PlateSettingsIn",
+    __config__=ConfigDict(extra="forbid"),
+    **pydantic_fields(SweepSettings, SETTINGS_FIELDS),
+)
+"""The plate's settings as a request takes them: SweepSettings' declarations (estimator.sweep)."""
 
 
-class SweepSettingsIn(BaseModel):
+class SweepSettingsIn(PlateSettingsIn):  # type: ignore[valid-type,misc]
     """The plate's settings and the settling time (as a sweep and a scheduled test take them)."""
 
-    model_config = ConfigDict(extra="forbid")
-
-    start_Hz: float = Field(0.0, ge=0, le=1000, description="sweep start (Hz)")
-    stop_Hz: float = Field(20.0, ge=0, le=1000, description="sweep end (Hz)")
-    amplitude_m: float = Field(
-        0.004, ge=0, le=1, description="plate amplitude, zero to peak (m); the bench envelope limits it"
-    )
-    duration_s: float = Field(
-        20.0,
-        ge=MIN_SWEEP_DURATION_S,
-        le=MAX_SWEEP_DURATION_S,
-        description="the sweep itself, without settling (s)",
-    )
-    law: SweepLaw = Field(SweepLaw.LINEAR, description="linear or logarithmic")
     settle_s: float = Field(DEFAULT_SETTLE_S, ge=0, le=600, description="recorded after the sweep (s)")
 
     def sweep_settings(self) -> SweepSettings:

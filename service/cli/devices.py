@@ -6,7 +6,7 @@ every device of a bench configuration answers.
     shockbench probe --config bench.toml [--json] [--timeout-s 0.5]
 
 sim-devices serves a simulated vehicle bench (service/simulated_bench.py) on a clock that follows the
-wall clock, writes the bench configuration naming its devices (format: daq/bench_config.py) and runs until
+wall clock, writes the bench configuration naming its devices (format: daq/bench_config/) and runs until
 Ctrl-C or SIGTERM, then closes every device and exits 0. probe prints model/state, status and one reading
 per device (or, with --json, {"devices": [{"name", "kind", "url", "ok", "reading" | "error"}]}) and exits
 1 if any device failed.

@@ -9,13 +9,18 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from estimator.solvers.de_settings import DESettings
 from estimator.vehicle import TyreModel, VehicleConstant, VehicleParameters
+from service.cli.declared import add_options, options, values
 from service.cli.errors import CliError
 from service.cli.recording_input import RECORDING_HELP, VEHICLE_HELP, read_recording_and_vehicle
 
 SOLVERS = ("exact", "de")
 """estimator.identify.Solver's values, named here so that `shockbench --help` does not import the estimator
 (tests/service/test_cli_lazy_imports.py checks they are the same)."""
+
+DE_OPTIONS = options(DESettings, ("generations", "seed"))
+"""--generations and --seed: DESettings' declarations (estimator.solvers.de_settings)."""
 
 if TYPE_CHECKING:
     import numpy as np
@@ -167,10 +172,9 @@ def parse_free(text: str | None, vehicle: VehicleParameters, tyre: TyreModel) ->
 
 def options_from_args(args: argparse.Namespace, vehicle: VehicleParameters) -> IdentifyOptions:
     from estimator.identify import IdentifyOptions, Solver, check_curve_points
-    from estimator.solvers.differential_evolution import DESettings
 
     check_curve_points(args.points, "--points")
-    de = DESettings(generations=args.generations, seed=args.seed)
+    de = DESettings(**values(args, DE_OPTIONS))
     tyre = TyreModel(args.tyre)
     return IdentifyOptions(
         tyre=tyre,
@@ -270,8 +274,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--tyre", choices=[t.value for t in TyreModel], default="maxwell")
     p.add_argument("--points", type=int, default=None, help="curve points (default 20, axle 10 per side)")
     p.add_argument("--solver", choices=SOLVERS, default="exact")
-    p.add_argument("--generations", type=int, default=3000, help="DE generations (default 3000)")
-    p.add_argument("--seed", type=int, default=0, help="DE seed (default 0)")
+    add_options(p, DE_OPTIONS)
     p.add_argument("--refine", action="store_true", help="refine the curve by DE on the output-error gap")
     p.add_argument(
         "--free",

@@ -26,6 +26,7 @@ COMMAND_MODULES: dict[str, str] = {
     "validate": "validate",
     "sim-devices": "devices",
     "probe": "devices",
+    "config": "config",
     "sweep": "sweep",
     "export": "export",
     "report": "report",

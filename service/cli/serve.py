@@ -28,11 +28,13 @@ import contextlib
 import os
 import sys
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from service.cli.declared import Shown, add_options, options, values
 from service.cli.errors import EXIT_FAILED, CliError, run_command
+from service.service_limits import SERVE_UNITS, ServiceLimits
 
 if TYPE_CHECKING:
     from estimator.verdict import VerdictThresholds
@@ -44,6 +46,13 @@ ENV_NAMES = {"database": "SHOCKBENCH_DATABASE_URL"}
 TRUE_WORDS = ("1", "true", "yes", "on")
 FALSE_WORDS = ("0", "false", "no", "off")
 TYPE_WORDS = {int: "a whole number", float: "a number"}
+LIMIT_OPTIONS = options(
+    ServiceLimits,
+    tuple(f.name for f in fields(ServiceLimits)),
+    {name: Shown(*shown) for name, shown in SERVE_UNITS.items()},
+)
+"""--max-upload-mb ... --retain-days: the service's limits as service.service_limits declares them (sizes
+in MiB and KiB here, bytes in the service)."""
 
 
 def env_name(dest: str) -> str:
@@ -121,23 +130,8 @@ def run_serve(args: argparse.Namespace) -> int:
         raise CliError(f"{args.config}: no such bench configuration")
     if not 0.5 <= args.job_lease_s <= 3600:
         raise CliError("--job-lease-s must lie in [0.5, 3600]")
-    if not args.max_upload_mb > 0:
-        raise CliError("--max-upload-mb must be > 0")
-    if args.max_streams_per_key is not None and not args.max_streams_per_key >= 1:
-        raise CliError("--max-streams-per-key must be at least 1")
-    if args.body_timeout_s is not None and not 0 < args.body_timeout_s <= 3600:
-        raise CliError("--body-timeout-s must lie in (0, 3600]")
-    check_connection_limits(args)
-    for flag, count in (
-        ("--max-queued-jobs-per-key", args.max_queued_jobs_per_key),
-        ("--max-scheduled-tests-per-key", args.max_scheduled_tests_per_key),
-    ):
-        if count is not None and not count >= 1:
-            raise CliError(f"{flag} must be at least 1")
-    if args.min_free_mb is not None and not args.min_free_mb >= 0:
-        raise CliError("--min-free-mb must be >= 0")
-    if args.retain_days is not None and not args.retain_days >= 0:
-        raise CliError("--retain-days must be >= 0 (0: keep everything)")
+    limits = values(args, LIMIT_OPTIONS)  # each in its declared range (CliError naming the option)
+    limits["retain_days"] = limits["retain_days"] or None  # 0: retention off
     for flag, given in (("--shared-queue", args.shared_queue), ("--require-database", args.require_database)):
         if given and args.database is None:
             raise CliError(f"{flag} needs --database URL (the central database)")
@@ -161,25 +155,6 @@ def run_serve(args: argparse.Namespace) -> int:
     from service.jobs.manager import WorkerSettings
     from service.store.database import Database
 
-    limits = {  # those given; the others keep the service's defaults (service.api.settings)
-        name: value
-        for name, value in (
-            ("max_streams_per_key", args.max_streams_per_key),
-            ("body_timeout_s", args.body_timeout_s),
-            ("max_json_bytes", None if args.max_json_kb is None else args.max_json_kb * 1024),
-            ("header_timeout_s", args.header_timeout_s),
-            ("body_min_rate_bytes_s", args.body_min_rate_bytes_s),
-            ("body_rate_grace_s", args.body_rate_grace_s),
-            ("body_total_timeout_s", args.body_total_timeout_s),
-            ("max_connections_per_address", args.max_connections_per_address),
-            ("max_queued_jobs_per_key", args.max_queued_jobs_per_key),
-            ("max_scheduled_tests_per_key", args.max_scheduled_tests_per_key),
-            ("min_free_bytes", None if args.min_free_mb is None else int(args.min_free_mb * 2**20)),
-        )
-        if value is not None
-    }
-    if args.retain_days is not None:
-        limits["retain_days"] = args.retain_days or None  # 0: retention off
     settings = ServiceSettings(
         data_dir=Path(args.data).resolve(),
         keys=keys,
@@ -187,8 +162,7 @@ def run_serve(args: argparse.Namespace) -> int:
         local_store=args.database is not None and not args.shared_queue,
         bench_config=Path(args.config).resolve() if args.config else None,
         simulated=args.simulated,
-        max_upload_bytes=int(args.max_upload_mb * 2**20),
-        **limits,  # type: ignore[arg-type]
+        **limits,
         worker=WorkerSettings(nice=args.worker_nice, lease_s=args.job_lease_s),
         metrics_access=args.metrics_access,
         **({"verdict": verdict} if verdict is not None else {}),  # type: ignore[arg-type]
@@ -231,21 +205,6 @@ def announcer(log_format: str) -> Callable[[str], None]:
 
         return logging.getLogger("shockbench.serve").info
     return lambda message: print(f"shockbench serve: {message}", flush=True)
-
-
-def check_connection_limits(args: argparse.Namespace) -> None:
-    """The request and connection limits given (None: the default), each in its range (CliError)."""
-    ranges = (
-        ("--max-json-kb", args.max_json_kb, 1, 2**20),
-        ("--header-timeout-s", args.header_timeout_s, 0.01, 3600),
-        ("--body-min-rate-bytes-s", args.body_min_rate_bytes_s, 0, 2**30),
-        ("--body-rate-grace-s", args.body_rate_grace_s, 0, 3600),
-        ("--body-total-timeout-s", args.body_total_timeout_s, 0.01, 86400),
-        ("--max-connections-per-address", args.max_connections_per_address, 1, 100_000),
-    )
-    for flag, value, low, high in ranges:
-        if value is not None and not low <= value <= high:
-            raise CliError(f"{flag} must lie in [{low:g}, {high:g}]")
 
 
 def reach_central(url: str | None, required: bool) -> str | None:
@@ -345,86 +304,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         action="store_true",
         help="refuse to start (exit 2) when the --database cannot be reached",
     )
-    p.add_argument("--max-upload-mb", type=float, default=64.0, help="upload size limit in MiB (default 64)")
-    p.add_argument(
-        "--max-streams-per-key",
-        type=int,
-        default=None,
-        help="event streams one key may hold open at once; one more is answered 429 (default 8)",
-    )
-    p.add_argument(
-        "--body-timeout-s",
-        type=float,
-        default=None,
-        help="a request body that brings nothing for this long before it is complete is answered 408 "
-        "(default 30)",
-    )
-    p.add_argument(
-        "--max-json-kb",
-        type=int,
-        default=None,
-        help="size limit (KiB) of a request body on every route but the uploads, all JSON (default 1088: "
-        "1 MiB + 64 KiB)",
-    )
-    p.add_argument(
-        "--header-timeout-s",
-        type=float,
-        default=None,
-        help="a connection whose request headers are not complete within this long is closed (default 10)",
-    )
-    p.add_argument(
-        "--body-min-rate-bytes-s",
-        type=float,
-        default=None,
-        help="after --body-rate-grace-s, a request body slower than this on average is answered 408 "
-        "(default 1024; 0: no minimum)",
-    )
-    p.add_argument(
-        "--body-rate-grace-s",
-        type=float,
-        default=None,
-        help="time a request body has before its minimum rate applies (default 5)",
-    )
-    p.add_argument(
-        "--body-total-timeout-s",
-        type=float,
-        default=None,
-        help="a request body not complete within this long is answered 408 (default 300)",
-    )
-    p.add_argument(
-        "--max-connections-per-address",
-        type=int,
-        default=None,
-        help="open connections one client address may hold; one more is closed at once (default 64; "
-        "behind a reverse proxy all clients share its address)",
-    )
-    p.add_argument(
-        "--max-queued-jobs-per-key",
-        type=int,
-        default=None,
-        help="jobs one key may have queued or running at once; one more submit is answered 429 (default 20)",
-    )
-    p.add_argument(
-        "--max-scheduled-tests-per-key",
-        type=int,
-        default=None,
-        help="scheduled tests one key may have waiting or running at once; one more is answered 429 "
-        "(default 100)",
-    )
-    p.add_argument(
-        "--min-free-mb",
-        type=float,
-        default=None,
-        help="free disk (MiB) kept on the data directory's file system: an upload that would leave less "
-        "is answered 507 (default 1024)",
-    )
-    p.add_argument(
-        "--retain-days",
-        type=float,
-        default=None,
-        help="uploaded inputs of finished jobs and sweep recordings older than this are deleted, at start "
-        "and every 6 h, each logged; 0 keeps everything (default 90)",
-    )
+    add_options(p, LIMIT_OPTIONS)
     p.add_argument("--worker-nice", type=int, default=5, help="nice increment of the worker (default 5)")
     p.add_argument(
         "--job-lease-s",

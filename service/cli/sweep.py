@@ -20,8 +20,13 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from estimator.sweep import SweepLaw, SweepSettings
+from estimator.sweep import SETTING_NAMES, SweepSettings
+from service.cli.declared import Shown, add_options, options, values
 from service.cli.errors import EXIT_FAILED, CliError
+
+SWEEP_OPTIONS = options(SweepSettings, SETTING_NAMES, {"amplitude_m": Shown("mm", 1e3)})
+"""--start-hz, --stop-hz, --amplitude-mm, --duration-s and --law: SweepSettings' declarations
+(estimator.sweep), the amplitude shown in mm."""
 
 SETTLE_S, REST_S = 2.0, 1.0
 """daq.sweep.model's DEFAULT_SETTLE_S and DEFAULT_REST_S, named here so that `shockbench --help` does not
@@ -48,14 +53,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         action="store_true",
         help="without --config: start a simulated bench in this process and sweep it",
     )
-    defaults = SweepSettings()
-    parser.add_argument("--start-hz", type=float, default=defaults.start_Hz, help="sweep start (Hz)")
-    parser.add_argument("--stop-hz", type=float, default=defaults.stop_Hz, help="sweep end (Hz)")
-    parser.add_argument(
-        "--amplitude-mm", type=float, default=defaults.amplitude_m * 1e3, help="plate amplitude, 0-peak (mm)"
-    )
-    parser.add_argument("--duration-s", type=float, default=defaults.duration_s, help="sweep duration (s)")
-    parser.add_argument("--law", choices=[law.value for law in SweepLaw], default=defaults.law.value)
+    add_options(parser, SWEEP_OPTIONS)
     parser.add_argument("--settle-s", type=float, default=SETTLE_S, help="recorded after the sweep")
     parser.add_argument("--rest-s", type=float, default=REST_S, help="read at rest before (zeroing)")
     parser.add_argument(
@@ -83,13 +81,7 @@ def operator_name(text: str) -> str:
 def _request(args: argparse.Namespace, vehicle: VehicleFile) -> SweepRequest:
     from daq.sweep.model import SweepRequest
 
-    sweep = SweepSettings(
-        start_Hz=args.start_hz,
-        stop_Hz=args.stop_hz,
-        amplitude_m=args.amplitude_mm * 1e-3,
-        duration_s=args.duration_s,
-        law=SweepLaw(args.law),
-    )
+    sweep = SweepSettings(**values(args, SWEEP_OPTIONS))
     return SweepRequest(
         sweep, vehicle=vehicle, operator=args.operator, settle_s=args.settle_s, rest_s=args.rest_s
     )

@@ -9,8 +9,9 @@ from pydantic import BaseModel, BeforeValidator, Field
 
 from estimator.identify import IdentifyOptions, Solver
 from estimator.recording import Recording
-from estimator.solvers.differential_evolution import DESettings
+from estimator.solvers.de_settings import DESettings
 from estimator.vehicle import ModelKind, TyreModel, VehicleParameters
+from service.declarations import pydantic_field
 from service.jobs.bounds import check_physical_bounds, check_recording_fits
 from service.jobs.context import (
     InputError,
@@ -39,7 +40,7 @@ Flag = Annotated[bool, BeforeValidator(_true_or_false)]
 
 class IdentifyJobOptions(BaseModel):
     """Options of an identification job (the same as `shockbench identify`). Unknown fields are refused
-    by the submit endpoint."""
+    by the submit endpoint. generations and seed are DESettings' (estimator.solvers.de_settings)."""
 
     model: ModelKind | None = Field(
         None, description="quarter-car or axle; when given it must be what the vehicle file says"
@@ -53,8 +54,8 @@ class IdentifyJobOptions(BaseModel):
         description="damper curve points (default 20; axle 10 per side); the tanh fit needs at least "
         f"{IdentifyOptions.MIN_POINTS}",
     )
-    generations: int = Field(3000, ge=1, le=200_000, description="DE generations (solver de)")
-    seed: int = Field(0, ge=0, le=2**31 - 1, description="DE seed (solver de)")
+    generations: int = pydantic_field(DESettings, "generations")
+    seed: int = pydantic_field(DESettings, "seed")
     refine: Flag = Field(False, description="refine the curve by DE on the output-error gap (true|false)")
     output_error: Flag = Field(
         True,
