@@ -12,8 +12,8 @@ Two kinds of family:
     covers a wrong stated rate, a progressive spring and a bump or rebound stop with or without clearance.
     An axle has one curve for both springs (the vehicle file states one rate for both);
   - low_speed_friction: a force step at zero suspension velocity (the sliding level) plus a static peak
-    above it that decays over STRIBECK_VELOCITY_M_S (Stribeck), beside the damper curve's own slope (the
-    curve has knots at 0, ±5 and ±10 mm/s, estimator.doctor.model.low_speed_grids);
+    above it that decays over a Stribeck velocity (one variant per STRIBECK_VELOCITIES_M_S), beside the
+    damper curve's own slope (the curve has knots at 0 and ±10 mm/s, estimator.doctor.model.low_speed_grids);
   - tyre_stiffness, tyre_damping (a dashpot beside the tyre), anti_roll_bar (an axle without a stated bar);
   - tyre_liftoff has no unknown: where the tyre would pull on the plate its force is the static load.
 - *channel* families correct one sensor channel before the equations are built (estimator.doctor.sensors):
@@ -68,9 +68,17 @@ class EffectInstance:
 HINGE_FRACTIONS = (0.4, 0.7)
 """Basis size of spring_curve: hinge knots at these fractions of the largest deflection (its 0.1% / 99.9%
 quantile) on either side, so the curve has two knots per side besides the rate change at zero deflection."""
-STRIBECK_VELOCITY_M_S = 0.005
-"""Basis size of low_speed_friction: the velocity over which the static peak decays to the sliding level
-(exp(−(v/v_s)²)); about the first low-speed knot of the damper curve."""
+STRIBECK_VELOCITIES_M_S = (0.0025, 0.005, 0.01, 0.02, 0.04)
+"""Basis size of low_speed_friction: the velocities v_s over which the static peak may decay to the sliding
+level (exp(−(v/v_s)²)), one variant of the family each: octaves from 2.5 to 40 mm/s (strut and seal friction
+decays over a few to a few tens of mm/s); a round tests each, and Bonferroni counts them."""
+
+
+def stribeck_velocity_m_s(effect: EffectInstance) -> float:
+    """v_s of a low_speed_friction variant ("5 mm/s")."""
+    return float(str(effect.variant).removesuffix(" mm/s")) / 1000.0
+
+
 MAX_DELAY_S = 0.02
 """Search limit of a channel's delay, lag and averaging window (s)."""
 
@@ -132,6 +140,8 @@ class Effect:
         if self.name is EffectName.ANTI_ROLL_BAR:
             known = vehicle.anti_roll_bar_stiffness_N_per_m > 0
             return [EffectInstance(self.name)] if vehicle.is_axle and not known else []
+        if self.name is EffectName.LOW_SPEED_FRICTION:
+            return [EffectInstance(self.name, None, f"{v * 1e3:g} mm/s") for v in STRIBECK_VELOCITIES_M_S]
         if self.channel_kind is None:
             return [EffectInstance(self.name)]
         names = sorted(recording.channels)
@@ -144,6 +154,7 @@ class Effect:
 
     def columns(
         self,
+        effect: EffectInstance,
         signals: EquationSignals,
         airborne: list[np.ndarray],
         knots_m: tuple[float, ...],
@@ -166,7 +177,7 @@ class Effect:
         if self.name is EffectName.LOW_SPEED_FRICTION:
 
             def peak(v: np.ndarray) -> np.ndarray:
-                return coulomb_sign(v) * np.exp(-np.square(v / STRIBECK_VELOCITY_M_S))
+                return coulomb_sign(v) * np.exp(-np.square(v / stribeck_velocity_m_s(effect)))
 
             # each step's share of the sample interval, not its value at the sample instant
             sliding = [interval_mean(coulomb_sign, c.velocity_m_s) for c in corners]

@@ -21,7 +21,7 @@
   normal prediction intervals), the two p-values combined by Bonferroni.
 
 The doctor's decision constants are ALPHA and the bases' sizes (estimator.doctor.catalog: HINGE_FRACTIONS,
-STRIBECK_VELOCITY_M_S) and the bootstrap's size (DiagnoseOptions.draws).
+STRIBECK_VELOCITIES_M_S) and the bootstrap's size (DiagnoseOptions.draws).
 """
 
 from __future__ import annotations

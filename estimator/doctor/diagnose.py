@@ -145,16 +145,15 @@ class _Doctor:
             self.progress(DiagnoseProgress(step, stage))
 
     def candidates(self, structure: ModelStructure) -> list[EffectInstance]:
-        """The families the model lacks (one variant of sensor_dynamics per channel)."""
-        present = set(structure.effects)
-        dynamic = {e.channel for e in present if e.name is EffectName.SENSOR_DYNAMICS}
+        """The families the model lacks (a family with variants, sensor_dynamics per channel or
+        low_speed_friction, is added in one variant only)."""
+        present = {(e.name, e.channel) for e in structure.effects}
         vehicle, reference = self.reference.vehicle, self.reference
         return [
             instance
             for effect in CATALOG.values()
             for instance in effect.instances(vehicle, self.recording, reference.identified)
-            if instance not in present
-            and not (instance.name is EffectName.SENSOR_DYNAMICS and instance.channel in dynamic)
+            if (instance.name, instance.channel) not in present
         ]
 
     def run(self) -> DiagnosisResult:
@@ -289,12 +288,16 @@ class _Doctor:
             final_model=final,
         )
 
-    def synthetic(self, model: FittedModel, simulated: Simulated) -> list[Recording]:
+    def synthetic(self, model: FittedModel, simulated: Simulated, plausible: bool = True) -> list[Recording]:
         """`draws` synthetic recordings of the model's smooth response (its plausible truth) read with the
         recording's own noise, measured on the model's output residual (estimator.doctor.expected,
         estimator.doctor.noise); none when the truth diverges."""
         recording, dt = self.recording, self.recording.sample_time_s
-        truth = plausible_truth(model, recording, self.reference.settings, self.reference.identified)
+        truth = (
+            plausible_truth(model, recording, self.reference.settings, self.reference.identified)
+            if plausible
+            else model
+        )
         (response,) = _simulate([truth], recording)
         if not np.isfinite(response.gap_m):
             return []
@@ -317,7 +320,7 @@ class _Doctor:
         synthetic recording, as on the measurement) over their degrees of freedom, at least 1 (a scaled χ²:
         the model's own approximation and the noise's colour inflate both statistics alike on the
         measurement and on the draws)."""
-        synthetic = self.synthetic(current, simulated)
+        synthetic = self.synthetic(current, simulated, plausible=False)
         if not synthetic:
             return {c: (1.0, 1.0) for c in candidates}
 

@@ -37,6 +37,7 @@ from estimator.doctor.catalog import (
     EffectName,
     hinge_knots_m,
     hinge_unknowns,
+    stribeck_velocity_m_s,
 )
 from estimator.doctor.columns import EquationSignals, restrict, with_columns
 from estimator.doctor.sensors import ChannelCorrections
@@ -188,6 +189,12 @@ class FittedModel:
         return np.array([self.value(n) for n in hinge_unknowns(self.knots_m)])
 
     @property
+    def stribeck_velocity_m_s(self) -> float:
+        """v_s of the model's low_speed_friction variant (0 without the family)."""
+        friction = [e for e in self.structure.effects if e.name is EffectName.LOW_SPEED_FRICTION]
+        return stribeck_velocity_m_s(friction[0]) if friction else 0.0
+
+    @property
     def airborne_fraction(self) -> float:
         return float(np.mean([a.mean() for a in self.airborne])) if self.airborne else 0.0
 
@@ -238,7 +245,7 @@ class Reference:
         )
 
 
-LOW_SPEED_KNOTS_M_S = (0.0, 0.005, 0.01)
+LOW_SPEED_KNOTS_M_S = (0.0, 0.01)
 """Suspension velocities (m/s) at which a grid with low-speed knots gets a knot (at ± each)."""
 LOW_SPEED_CLEARANCE = 0.5
 """A uniform knot closer to a low-speed knot than this share of the low-speed knots' spacing gives way."""
@@ -387,8 +394,8 @@ def _build(
             reference.columns,
             reference.lock,
             (key, effect, where),
-            lambda entry=entry: (
-                entry.columns(signals, airborne, reference.knots_m, reference.identified),
+            lambda entry=entry, effect=effect: (
+                entry.columns(effect, signals, airborne, reference.knots_m, reference.identified),
                 entry.offset_change(signals, airborne),
             ),
             COLUMN_CACHE_ENTRIES,

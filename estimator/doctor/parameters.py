@@ -9,7 +9,6 @@ import numpy as np
 from estimator.doctor.catalog import (
     FRICTION_UNKNOWNS,
     SPRING_RATE_UNKNOWN,
-    STRIBECK_VELOCITY_M_S,
     TYRE_RATE_UNKNOWN,
     EffectInstance,
     EffectName,
@@ -49,7 +48,7 @@ def report(effect: EffectInstance, model: FittedModel) -> dict[str, float | str]
         return {
             "sliding_friction_N": sliding,
             "static_friction_N": sliding + excess,
-            "stribeck_velocity_m_s": STRIBECK_VELOCITY_M_S,
+            "stribeck_velocity_m_s": model.stribeck_velocity_m_s,
         }
     if name is EffectName.TYRE_STIFFNESS:
         stated = float(model.vehicle.tyre_stiffness_N_per_m or 0.0)

@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from estimator.doctor.catalog import FRICTION_UNKNOWNS, STRIBECK_VELOCITY_M_S, EffectName
+from estimator.doctor.catalog import FRICTION_UNKNOWNS, EffectName
 from estimator.doctor.residuals import Localisation
 from estimator.vehicle import TyreModel
 
@@ -19,6 +19,40 @@ if TYPE_CHECKING:
 
 def _finite_or_none(value: float) -> float | None:
     return float(value) if value is not None and np.isfinite(value) else None
+
+
+def _range(low: float, high: float) -> list[float | None]:
+    return [_finite_or_none(low), _finite_or_none(high)]
+
+
+def localisation_json(located: Localisation | None) -> dict[str, object] | None:
+    """Where a model's disagreement is largest, as numbers (Localisation.describe says it in words): the
+    channel and its output-error RMS, the band of the sweep and the time window, the equation and its
+    band, and the ranges of suspension velocity and deflection whose equation residual is largest; None
+    when there is no localisation or the model diverged."""
+    if located is None or not np.isfinite(located.gap_m) or not located.channel_rms_m:
+        return None
+    channel = located.worst_channel()
+    equation = max(located.equation_rms_N, key=lambda e: located.equation_rms_N[e])
+    ranges: dict[str, list[float | None]] = {}
+    for profile, key in zip(located.by_variable[:2], ("velocity_m_s", "deflection_m"), strict=False):
+        values = profile.values[equation]
+        if np.any(np.isfinite(values)):
+            k = int(np.nanargmax(values))
+            ranges[key] = _range(profile.edges[k], profile.edges[k + 1])
+    has_band = channel in located.output_bands.values
+    return {
+        "channel": channel,
+        "channel_rms_m": _finite_or_none(located.channel_rms_m[channel]),
+        "band_Hz": _range(*located.worst_band(located.output_bands, channel)) if has_band else None,
+        "time_s": _range(*located.worst_time_s),
+        "equation": equation,
+        "equation_rms_N": _finite_or_none(located.equation_rms_N[equation]),
+        "equation_band_Hz": _range(*located.worst_band(located.equation_bands, equation)),
+        "velocity_m_s": ranges.get("velocity_m_s"),
+        "deflection_m": ranges.get("deflection_m"),
+        "white": sorted(c for c, w in located.whiteness.items() if w.white),
+    }
 
 
 @dataclass(frozen=True)
@@ -94,7 +128,8 @@ class DiagnosisResult:
     after (the tyre option counts: maxwell = tyre_viscoelastic); expected_gap_m: the mean gap of the final
     structure re-identified on bootstrap draws of itself (estimator.doctor.criteria.GoodnessOfFit);
     p_value: the goodness-of-fit test's; unexplained: p_value < alpha;
-    where: the localisation of what is left, when unexplained."""
+    where: the localisation of what is left, when unexplained (in words; `located` in to_json: as
+    numbers, localisation_json)."""
 
     starting_effects: list[str]
     final_effects: list[str]
@@ -136,7 +171,8 @@ class DiagnosisResult:
     def to_json(self) -> dict[str, object]:
         """The stable JSON shape: gap_before_m, steps [{effect, gap_before_m, gap_after_m, parameters,
         evidence}], gap_after_m, unexplained; plus the starting and final effects, the expected gap, the
-        conclusion in words, every candidate's score per round and `model`: the final model in the form of
+        conclusion in words, the goodness of fit's p_value and alpha, where (words) and located (numbers,
+        when unexplained), every candidate's score per round and `model`: the final model in the form of
         identify --json's (model_json), which `shockbench validate --model` takes."""
         return {
             "gap_before_m": _finite_or_none(self.gap_before_m),
@@ -151,6 +187,7 @@ class DiagnosisResult:
             "p_value": self.p_value,
             "alpha": self.alpha,
             "where": self.where,
+            "located": localisation_json(self.located_after) if self.unexplained else None,
             "noise_floor_m": self.noise_floor_m,
             "candidates": [[c.to_json() for c in round_] for round_ in self.rounds],
             "model": model_json(self.final_model) if self.final_model is not None else None,
@@ -190,7 +227,7 @@ def model_json(model: FittedModel) -> dict[str, object]:
             effects[key] = value
     if model.value(FRICTION_UNKNOWNS[1]):
         effects["stribeck_peak_N"] = model.value(FRICTION_UNKNOWNS[1])
-        effects["stribeck_velocity_m_s"] = STRIBECK_VELOCITY_M_S
+        effects["stribeck_velocity_m_s"] = model.stribeck_velocity_m_s
     hinges = [
         {"knot_m": float(k), "rate_N_per_m": float(r)}
         for k, r in zip(model.knots_m, model.hinge_rates_N_per_m, strict=True)

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from estimator.damper import CurveBatch
-from estimator.doctor.catalog import FRICTION_UNKNOWNS, STRIBECK_VELOCITY_M_S, EffectName
+from estimator.doctor.catalog import FRICTION_UNKNOWNS, EffectName
 from estimator.doctor.model import FittedModel
 from estimator.dynamics import (
     AxlePhysics,
@@ -108,7 +108,7 @@ def _corner(models: list[FittedModel], side: int, sample_time_s: float) -> Corne
         maxwell_time_constant_s=vehicle.maxwell_time_constant_s(sample_time_s),
         coulomb_friction_N=each(FRICTION_UNKNOWNS[0]),
         stribeck_peak_N=each(FRICTION_UNKNOWNS[1]),
-        stribeck_velocity_m_s=STRIBECK_VELOCITY_M_S,
+        stribeck_velocity_m_s=np.array([m.stribeck_velocity_m_s for m in models]),
         spring_hinge_knots_m=np.stack([np.asarray(m.knots_m) for m in models], axis=1),
         spring_hinge_rates_N_per_m=np.stack([m.hinge_rates_N_per_m for m in models], axis=1),
         tyre_liftoff=np.array([m.structure.has(EffectName.TYRE_LIFTOFF) for m in models]),
