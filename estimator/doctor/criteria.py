@@ -121,15 +121,17 @@ def intersection_union(*results: TestResult) -> float:
 
 @dataclass(frozen=True)
 class Selection:
-    """Bonferroni over a round's candidates: the smallest p-value wins if it is at most α/m."""
+    """Bonferroni over a round's candidates: the smallest p-value wins if it is at most α/m. The p-values
+    are given as logarithms (residuals.log_chi_square_survival): large effects have p-values that would
+    underflow to 0 together, and which of them is the most significant must still be decided."""
 
     alpha: float = ALPHA
 
-    def choose(self, p_values: dict) -> object | None:
-        if not p_values:
+    def choose(self, log_p_values: dict) -> object | None:
+        if not log_p_values:
             return None
-        best = min(p_values, key=lambda k: (p_values[k], str(k)))
-        return best if p_values[best] <= self.alpha / len(p_values) else None
+        best = min(log_p_values, key=lambda k: (log_p_values[k], str(k)))
+        return best if log_p_values[best] <= math.log(self.alpha / len(log_p_values)) else None
 
 
 def normal_upper_tail(z: float) -> float:

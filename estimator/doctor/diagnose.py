@@ -20,6 +20,7 @@ leaves more than its own noise would.
 
 from __future__ import annotations
 
+import math
 import threading
 from collections.abc import Callable, Iterable
 from concurrent.futures import ThreadPoolExecutor
@@ -49,7 +50,13 @@ from estimator.doctor.model import (
 )
 from estimator.doctor.noise import measure_noise
 from estimator.doctor.parameters import implausible, report
-from estimator.doctor.residuals import chi_square_survival, effective_samples, locate, sweep_frequency_Hz
+from estimator.doctor.residuals import (
+    chi_square_survival,
+    effective_samples,
+    locate,
+    log_chi_square_survival,
+    sweep_frequency_Hz,
+)
 from estimator.doctor.result import CandidateScore, DiagnosisResult, DiagnosisStep
 from estimator.doctor.screening import one_step
 from estimator.doctor.simulation import diverged, simulate_models
@@ -182,24 +189,24 @@ class _Doctor:
                 break
             stepped = self.map(lambda c, warm=current: one_step(reference, warm, c), candidates)
             outcomes = _simulate([m for m, _ in stepped], self.recording)
-            scores, p_values = [], {}
+            scores, log_p = [], {}
             for candidate, (model, equations), outcome in zip(candidates, stepped, outcomes, strict=True):
                 score = self.score(candidate, current, simulated, model, equations, outcome)
                 scores.append(score)
                 if score.verdict == "tested":
-                    p_values[candidate] = score.p_value
-            bound = options.alpha / max(len(p_values), 1)
+                    log_p[candidate] = _log_p(score)
+            bound = options.alpha / max(len(log_p), 1)
             # calibration can only raise a p-value (its scales are at least 1): only the candidates that
             # are significant uncalibrated need the bootstrap
-            significant = [c for c in p_values if p_values[c] <= bound]
+            significant = [c for c in log_p if log_p[c] <= math.log(bound)]
             if significant:
                 self.report(step, "calibrating the significant candidates by a bootstrap of the model")
                 scales = self.calibrate(current, simulated, significant)
                 for candidate in significant:
                     k = candidates.index(candidate)
                     scores[k] = _calibrated(scores[k], *scales[candidate])
-                    p_values[candidate] = scores[k].p_value
-            chosen = Selection(options.alpha).choose(p_values)
+                    log_p[candidate] = _log_p(scores[k], *scales[candidate])
+            chosen = Selection(options.alpha).choose(log_p)
             scores = [_verdict(s, chosen, bound) for s in scores]
             rounds.append(scores)
             if chosen is None:
@@ -394,6 +401,18 @@ def score_candidate(
         parameters=report(candidate, model),
         verdict=reason or "tested",
     )
+
+
+def _log_p(score: CandidateScore, wald_scale: float = 1.0, ratio_scale: float = 1.0) -> float:
+    """ln of the candidate's p-value (the larger of its two tests', the statistics divided by their
+    calibration scales), without the underflow of score.p_value (Selection)."""
+    q = max(score.unknowns, 1)
+    if score.effect.startswith(EffectName.TYRE_LIFTOFF.value):  # no unknown: not a Wald test
+        equation = math.log(score.equation_p) if score.equation_p > 0 else -math.inf
+    else:
+        equation = log_chi_square_survival(score.equation_statistic / wald_scale, q)
+    simulation = log_chi_square_survival(max(score.simulation_statistic, 0.0) / ratio_scale, q)
+    return max(equation, simulation)
 
 
 def _calibrated(score: CandidateScore, wald_scale: float, ratio_scale: float) -> CandidateScore:

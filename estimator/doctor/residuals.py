@@ -147,22 +147,35 @@ def ljung_box(residual: np.ndarray, sample_time_s: float, bandwidth_Hz: float) -
 
 
 def chi_square_survival(statistic: float, degrees: int) -> float:
-    """P(χ² > statistic) with `degrees` degrees of freedom (scipy.special.chdtrc): for even degrees the
-    Poisson sum e^(−s/2)·Σ_{k<degrees/2} (s/2)^k / k!, for odd ones erfc(√(s/2)) plus
-    e^(−s/2)·Σ_{k=1}^{(degrees−1)/2} (s/2)^(k−1/2) / Γ(k + 1/2); each term taken in logarithms so that large
-    statistics underflow to 0 instead of overflowing. Why not scipy: importing scipy.special costs a
-    diagnosis some 0.1 s for this one tail."""
+    """P(χ² > statistic) with `degrees` degrees of freedom (log_chi_square_survival)."""
+    return min(1.0, math.exp(log_chi_square_survival(statistic, degrees)))
+
+
+def log_chi_square_survival(statistic: float, degrees: int) -> float:
+    """ln P(χ² > statistic) with `degrees` degrees of freedom (scipy.special.chdtrc's tail, in logarithms so
+    that two very significant statistics still compare: their p-values would both underflow to 0). Even
+    degrees: the Poisson sum e^(−s/2)·Σ_{k<degrees/2} (s/2)^k / k!; odd: erfc(√(s/2)) plus
+    e^(−s/2)·Σ_{k=1}^{(degrees−1)/2} (s/2)^(k−1/2) / Γ(k + 1/2), erfc(x) by its asymptotic
+    e^(−x²)/(x√π) beyond x = 25 (relative error below 0.1%). Why not scipy: importing scipy.special
+    costs a diagnosis some 0.1 s for this one tail."""
     if degrees <= 0:
         raise ValueError(f"chi_square_survival takes a positive number of degrees, not {degrees}")
     if statistic <= 0:
-        return 1.0
+        return 0.0
+    if not math.isfinite(statistic):
+        return -math.inf
     half = statistic / 2.0
     log_half = math.log(half)
     if degrees % 2 == 0:
         terms = [k * log_half - half - math.lgamma(k + 1) for k in range(degrees // 2)]
-        return min(1.0, sum(math.exp(t) for t in terms))
-    terms = [(k - 0.5) * log_half - half - math.lgamma(k + 0.5) for k in range(1, (degrees + 1) // 2)]
-    return min(1.0, math.erfc(math.sqrt(half)) + sum(math.exp(t) for t in terms))
+    else:
+        root = math.sqrt(half)
+        tail = math.log(math.erfc(root)) if root < 25.0 else -half - math.log(root * math.sqrt(math.pi))
+        terms = [tail] + [
+            (k - 0.5) * log_half - half - math.lgamma(k + 0.5) for k in range(1, (degrees + 1) // 2)
+        ]
+    top = max(terms)
+    return min(0.0, top + math.log(sum(math.exp(t - top) for t in terms)))
 
 
 def effective_samples(residual: np.ndarray) -> float:
