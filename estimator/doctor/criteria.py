@@ -134,8 +134,24 @@ class Selection:
         return best if log_p_values[best] <= math.log(self.alpha / len(log_p_values)) else None
 
 
-def normal_upper_tail(z: float) -> float:
-    return 0.5 * math.erfc(z / math.sqrt(2.0))
+def student_upper_tail(t: float, degrees: int) -> float:
+    """P(T > t) for Student's t with a whole number of degrees of freedom (the closed forms of Abramowitz
+    and Stegun 26.7.3-4: a finite sum in cos θ, θ = atan(t/√ν)), without importing scipy.stats."""
+    theta = math.atan2(t, math.sqrt(degrees))
+    c2, s = math.cos(theta) ** 2, math.sin(theta)
+    if degrees % 2 == 1:
+        term, total = math.cos(theta), 0.0
+        for k in range(1, (degrees - 1) // 2 + 1):
+            total += term
+            term *= c2 * (2 * k) / (2 * k + 1)
+        central = (2.0 / math.pi) * (theta + s * total) if degrees > 1 else (2.0 / math.pi) * theta
+    else:
+        term, total = 1.0, 0.0
+        for k in range(degrees // 2):
+            total += term
+            term *= c2 * (2 * k + 1) / (2 * k + 2)
+        central = s * total
+    return 0.5 * (1.0 - central)
 
 
 @dataclass(frozen=True)
@@ -150,14 +166,18 @@ class GoodnessOfFit:
     alpha: float = ALPHA
 
     def p_value(self, gap_m: float, draw_gaps_m: list[float]) -> float:
-        """p of a gap at least this large if the final model were the truth; a model that diverges has 0."""
+        """p of a gap at least this large if the final model were the truth: Student's t prediction
+        interval of the gap's logarithm from the draws' (n − 1 degrees of freedom: their mean and spread
+        are estimated from a few draws). A model that diverges has 0; so has one whose own
+        re-identifications diverge (fewer than two finite draws: nothing shows it could be the truth)."""
         if not np.isfinite(gap_m):
             return 0.0
         finite = np.log([d for d in draw_gaps_m if np.isfinite(d) and d > 0])
         if finite.size < 2:
-            return 1.0  # nothing to compare with: no evidence against the model
+            return 0.0
         spread = float(np.std(finite, ddof=1)) * math.sqrt(1.0 + 1.0 / finite.size)
-        return normal_upper_tail((math.log(gap_m) - float(np.mean(finite))) / max(spread, 1e-12))
+        z = (math.log(gap_m) - float(np.mean(finite))) / max(spread, 1e-12)
+        return student_upper_tail(z, finite.size - 1)
 
     def unexplained(self, p: float) -> bool:
         return p < self.alpha

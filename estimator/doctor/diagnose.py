@@ -214,6 +214,8 @@ class _Doctor:
             index = candidates.index(chosen)
             self.report(step, f"fitting {chosen.label}")
             model = fit(reference, structure.with_effect(chosen), warm=stepped[index][0])
+            if model.objective > current.objective:  # a larger model cannot fit worse: start afresh
+                model = fit(reference, structure.with_effect(chosen), warm=current)
             (outcome,) = _simulate([model], self.recording)
             steps.append(
                 DiagnosisStep(

@@ -51,6 +51,8 @@ from estimator.vehicle import TyreModel, VehicleConstant, VehicleParameters
 __all__ = ["ChannelCorrections", "FitSettings", "FittedModel", "ModelStructure", "Reference", "fit"]
 
 GAUSS_NEWTON_ITERATIONS = 4
+HALVINGS = 3
+"""A Gauss-Newton step that raises the objective is halved at most this many times."""
 GAUSS_NEWTON_STEP = {"delay": 5e-4, "lag": 5e-4, "average": 1e-3, "gain": 1e-3, "offset": 1e-4}
 """Finite-difference step of each kind of channel parameter (s, s, s, relative, m)."""
 GAUSS_NEWTON_TOLERANCE = {"delay": 2e-6, "lag": 2e-6, "average": 4e-6, "gain": 1e-5, "offset": 1e-7}
@@ -494,22 +496,23 @@ def fit(
     """Identify `structure` on the reference recording, using only the selected samples where `rows` is
     True (all when None). warm: a fitted model of a similar structure to start from (its unknowns and
     channel parameters, matched by family and kind; new ones start at zero). iterations: Gauss-Newton steps
-    at most (channel families)."""
+    at most (channel families). A step that raises the objective is halved (at most HALVINGS times, then
+    the fit keeps its best point): a delay and a lag of one channel are nearly collinear, and a full step
+    clipped at zero can overshoot."""
     parameters = structure.channel_parameters
     kinds = [kind for _, kind in parameters]
     start = dict(zip(warm.structure.channel_parameters, warm.channel_values, strict=True)) if warm else {}
     values = np.array([start.get(p, 0.0) for p in parameters], dtype=float)
     liftoff = structure.has(EffectName.TYRE_LIFTOFF)
     tyre = (0.0, 0.0, 0.0)
-    previous = warm
-    final_pass = False
-    for iteration in range(iterations + 1):
+    previous, best, step = warm, None, np.zeros(len(parameters))
+    final_pass, steps, halvings = False, 0, 0
+    while True:
         system, signals, airborne = _build(
             reference, structure, corrections_of(parameters, values), None, tyre
         )
         used = restrict(system, rows) if rows is not None else system
         theta, objective = minimise(used, start_from(used, previous) if previous else None)
-        tyre = _tyre_coefficients(system, theta)
         model = FittedModel(
             structure,
             reference.vehicle,
@@ -521,9 +524,17 @@ def fit(
             objective,
             reference.knots_m,
         )
-        previous = model
-        if final_pass or (not parameters and not (liftoff and iteration == 0)):
-            break
+        if parameters and best is not None and objective > best.objective:
+            if halvings == HALVINGS:
+                return best
+            halvings, step = halvings + 1, step / 2.0
+            values = feasible(kinds, best.channel_values + step)
+            continue
+        best, previous, halvings = model, model, 0
+        tyre = _tyre_coefficients(system, theta)
+        if final_pass or (not parameters and not (liftoff and steps == 0)):
+            return model
+        steps += 1
         if not parameters:
             continue  # once more with the airborne samples of the fitted tyre force
         jacobian = channel_jacobian(reference, model, rows)
@@ -531,8 +542,8 @@ def fit(
         increment = minimise(augmented, np.concatenate([theta, np.zeros(len(jacobian))]), 1e-8)[0][
             used.n_params :
         ]
-        values = feasible(kinds, values + increment)
-        small = all(abs(d) < GAUSS_NEWTON_TOLERANCE[k] for d, k in zip(increment, kinds, strict=True))
+        moved = feasible(kinds, values + increment)
+        step, values = moved - values, moved
+        small = all(abs(d) < GAUSS_NEWTON_TOLERANCE[k] for d, k in zip(step, kinds, strict=True))
         affine = all(k == "offset" for k in kinds) and not liftoff
-        final_pass = small or affine or iteration == iterations - 1
-    return model
+        final_pass = small or affine or steps == iterations
