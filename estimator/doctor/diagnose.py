@@ -46,6 +46,7 @@ from estimator.doctor.model import (
     ModelStructure,
     Reference,
     fit,
+    fit_added,
     starting_structure,
 )
 from estimator.doctor.noise import measure_noise
@@ -213,9 +214,7 @@ class _Doctor:
                 break
             index = candidates.index(chosen)
             self.report(step, f"fitting {chosen.label}")
-            model = fit(reference, structure.with_effect(chosen), warm=stepped[index][0])
-            if model.objective > current.objective:  # a larger model cannot fit worse: start afresh
-                model = fit(reference, structure.with_effect(chosen), warm=current)
+            model = fit_added(reference, current, chosen, stepped[index][0])
             (outcome,) = _simulate([model], self.recording)
             steps.append(
                 DiagnosisStep(

@@ -547,3 +547,14 @@ def fit(
         small = all(abs(d) < GAUSS_NEWTON_TOLERANCE[k] for d, k in zip(step, kinds, strict=True))
         affine = all(k == "offset" for k in kinds) and not liftoff
         final_pass = small or affine or steps == iterations
+
+
+def fit_added(
+    reference: Reference, current: FittedModel, family: EffectInstance, start: FittedModel
+) -> FittedModel:
+    """The current model with `family` added, identified from `start` (its one-step model), or from the
+    current model when that ends worse than the current model: a larger model cannot fit worse, and a
+    one step of nearly collinear channel parameters (a delay and a lag) can start far off."""
+    structure = current.structure.with_effect(family)
+    model = fit(reference, structure, warm=start)
+    return model if model.objective <= current.objective else fit(reference, structure, warm=current)

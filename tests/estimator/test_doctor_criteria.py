@@ -188,5 +188,5 @@ def test_the_goodness_of_fit_finds_a_gap_beyond_its_draws() -> None:
     assert test.unexplained(test.p_value(90e-6, draws))  # three times the draws' gap
     assert not test.unexplained(test.p_value(30e-6, draws))
     assert test.p_value(math.inf, draws) == 0.0  # the final model diverges
-    assert test.p_value(30e-6, [math.inf, 25e-6]) == 1.0  # nothing to compare with
+    assert test.p_value(30e-6, [math.inf, 25e-6]) == 0.0  # its own re-identifications diverge
     assert test.p_value(20e-6, draws) > test.p_value(40e-6, draws)
