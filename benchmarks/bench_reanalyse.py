@@ -46,8 +46,12 @@ assert not failed, failed
 """
 
 
-def make_archive(folder: Path, recordings: int, distinct: int, seconds: float) -> None:
-    """The archive described in the module docstring (made once; reused when it is complete)."""
+def make_archive(
+    folder: Path, recordings: int, distinct: int, seconds: float, unique_copies: bool = False
+) -> None:
+    """The archive described in the module docstring (made once; reused when it is complete).
+    unique_copies: each copy starts with a comment line of its own, so that no two files share their bytes
+    (an archive in a database keeps one recording per content hash)."""
     from daq.formats.recording_csv import write_recording_csv
     from daq.formats.vehicle_file import write_vehicle
     from estimator.sweep import SweepSettings
@@ -64,7 +68,10 @@ def make_archive(folder: Path, recordings: int, distinct: int, seconds: float) -
         settings = SimulationSettings(sweep=SweepSettings(duration_s=seconds), seed=seed)
         write_recording_csv(names[seed], simulate(vehicle, settings).recording)
     for index in range(distinct, recordings):
-        shutil.copy(names[index % distinct], names[index])
+        if unique_copies:
+            names[index].write_text(f"# copy: {index}\n{names[index % distinct].read_text()}")
+        else:
+            shutil.copy(names[index % distinct], names[index])
     print(f"simulated {distinct} sweeps of {seconds:g} s in {time.perf_counter() - start:.0f} s", flush=True)
 
 

@@ -89,6 +89,25 @@ class ServiceLimits:
 LIMITS = ServiceLimits()
 """The defaults."""
 
+
+@dataclass(frozen=True)
+class WorkerLimits:
+    """The worker process's settings a lane chooses (service.jobs.manager.WorkerSettings and the shared job
+    queue take their defaults from here, `serve` its --worker-nice and --job-lease-s)."""
+
+    worker_nice: int = setting(
+        5, "nice increment of the worker: the event loop keeps priority over the estimator", ge=0, le=19
+    )
+    job_lease_s: float = setting(
+        30.0,
+        "a job's claim in the shared queue lasts this long unless renewed; another instance runs the job "
+        "again after it if this one dies",
+        unit="s",
+        ge=0.5,
+        le=3600,
+    )
+
+
 SERVE_UNITS: dict[str, tuple[str, float, type, str]] = {
     "max_upload_bytes": ("MiB", 1 / MiB, float, "mb"),
     "max_json_bytes": ("KiB", 1 / KiB, int, "kb"),

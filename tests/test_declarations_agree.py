@@ -29,6 +29,7 @@ SWEEP = {  # API field -> (CLI option, scale from the API's unit to the option's
     "amplitude_m": ("--amplitude-mm", 1e3),
     "duration_s": ("--duration-s", 1.0),
     "law": ("--law", 1.0),
+    "settle_s": ("--settle-s", 1.0),
 }
 DE = {"generations": ("--generations", 1.0), "seed": ("--seed", 1.0)}
 HELP = re.compile(

@@ -41,7 +41,7 @@ def run_py() -> ModuleType:
 def test_the_core_is_a_single_bench_and_the_rest_are_extras() -> None:
     assert {"psycopg", "dask", "pytest", "hypothesis", "selenium", "httpx"}.isdisjoint(CORE)
     assert EXTRAS["postgres"] == {"psycopg"}
-    assert EXTRAS["cluster"] == {"dask"}
+    assert EXTRAS["cluster"] == {"dask", "threadpoolctl"}
     assert {"pytest", "hypothesis", "ruff", "selenium"} <= EXTRAS["test"]
     assert {"numpy", "scipy", "fastapi", "uvicorn", "sqlalchemy", "h5py", "matplotlib"} <= CORE
 

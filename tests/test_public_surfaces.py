@@ -31,17 +31,6 @@ MAX_LINES = 500
 LINE_LIMIT_EXEMPT = ("estimator/doctor/",)
 """The model doctor's modules (diagnose.py, model.py) are redesigned by issue 29 (issue 19 took them);
 they follow the limit when that lands."""
-LINE_LIMIT_PENDING: frozenset[str] = frozenset()
-"""Modules split by work running beside this test's (none left)."""
-
-DOCSTRING_PENDING: frozenset[str] = frozenset(
-    {
-        "service/reanalyse/__init__.py",  # issue 33 rewrites these two now
-        "service/store/__init__.py",
-    }
-)
-"""Package docstrings that other work in progress is rewriting: each gets its "Must not import" line
-there, and leaves this set."""
 
 
 def _package_of(root: Path, path: Path) -> str:
@@ -137,7 +126,7 @@ def test_no_module_imports_another_packages_underscore_names() -> None:
 
 
 def test_every_package_docstring_says_what_it_is_for_and_what_it_must_not_import() -> None:
-    problems = [p for p in docstring_problems(ROOT) if p.split(":")[0] not in DOCSTRING_PENDING]
+    problems = docstring_problems(ROOT)
     assert problems == []
 
 
@@ -145,7 +134,7 @@ def test_no_module_is_over_500_lines() -> None:
     exempt = [m for m in long_modules(ROOT) if m.startswith(LINE_LIMIT_EXEMPT)]
     assert all(m.startswith("estimator/doctor/") for m in exempt)
     over = [m for m in long_modules(ROOT) if not m.startswith(LINE_LIMIT_EXEMPT)]
-    assert [m for m in over if m.split(":")[0] not in LINE_LIMIT_PENDING] == []
+    assert over == []
 
 
 def test_the_estimator_exports_identify_diagnose_validate_and_their_results() -> None:

@@ -9,14 +9,16 @@ from pathlib import Path
 
 from daq.formats.vehicle_file import VehicleFile
 from daq.sources.laser_source import SourceStatistics
+from daq.sweep.timing import TIMING_NAMES, SweepTiming
+from estimator.declared import declared
 from estimator.errors import InvalidValueError, UserError
 from estimator.sweep import SweepSettings
 
 SAMPLE_TIME_S = 0.001
 """The recording's grid: 1 ms."""
-DEFAULT_SETTLE_S = 2.0
-"""Recorded after the sweep's end, while the vehicle comes to rest."""
-DEFAULT_REST_S = 1.0
+DEFAULT_SETTLE_S: float = SweepTiming.settle_s
+"""Recorded after the sweep's end, while the vehicle comes to rest (declared in daq.sweep.timing)."""
+DEFAULT_REST_S: float = SweepTiming.rest_s
 """Sensors read at rest before the sweep: their mean is the channel's zero; the clocks are mapped."""
 
 
@@ -42,12 +44,11 @@ class SweepRequest:
     rest_s: float = DEFAULT_REST_S
 
     def __post_init__(self) -> None:
-        for name in ("settle_s", "rest_s"):
+        for name in TIMING_NAMES:
             value = getattr(self, name)
-            if not (math.isfinite(value) and 0 <= value <= 600):
-                raise InvalidValueError(f"{name} must be within 0..600 s, got {value}")
-        if self.rest_s < 0.1:
-            raise InvalidValueError(f"rest_s must be at least 0.1 s to zero the sensors, got {self.rest_s}")
+            (found,) = (d.declared for d in declared(SweepTiming, (name,)))
+            if not (math.isfinite(value) and found.admits(value)):
+                raise InvalidValueError(f"{name} must be within {found.range_text()} s, got {value}")
 
     @property
     def recorded_s(self) -> float:

@@ -18,13 +18,14 @@ from pathlib import Path
 
 from pydantic import BaseModel, ConfigDict, Field, create_model
 
-from daq.sweep.model import DEFAULT_SETTLE_S, StopKind, SweepError, SweepOutcome, SweepRequest
+from daq.sweep.model import StopKind, SweepError, SweepOutcome, SweepRequest
 from daq.sweep.plan import SweepPlan
+from daq.sweep.timing import SweepTiming
 from estimator.sweep import SETTING_NAMES, SweepSettings
 from service.api.intake import parse_vehicle_field
 from service.api.schemas import FreeText
 from service.bench_control import BenchBusyError, BenchController, SweepDone
-from service.declarations import pydantic_fields
+from service.declarations import pydantic_field, pydantic_fields
 from service.jobs.bounds import check_vehicle_bounds
 from service.jobs.context import InputError
 from service.store.models import SweepStatus
@@ -46,7 +47,7 @@ PlateSettingsIn: type[BaseModel] = create_model(
 class SweepSettingsIn(PlateSettingsIn):  # type: ignore[valid-type,misc]
     """The plate's settings and the settling time (as a sweep and a scheduled test take them)."""
 
-    settle_s: float = Field(DEFAULT_SETTLE_S, ge=0, le=600, description="recorded after the sweep (s)")
+    settle_s: float = pydantic_field(SweepTiming, "settle_s")
 
     def sweep_settings(self) -> SweepSettings:
         try:

@@ -35,6 +35,7 @@ COMMAND_MODULES: dict[str, str] = {
     "history": "history",
     "verify": "verify",
     "reanalyse": "reanalyse",
+    "archive": "archive",
     "retention": "retention",
 }
 """Each command and the module under service/cli that registers it, in `--help`'s order. A command line

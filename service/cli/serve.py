@@ -34,7 +34,7 @@ from typing import TYPE_CHECKING
 
 from service.cli.declared import Shown, add_options, options, values
 from service.cli.errors import EXIT_FAILED, CliError, run_command
-from service.service_limits import SERVE_UNITS, ServiceLimits
+from service.service_limits import SERVE_UNITS, ServiceLimits, WorkerLimits
 
 if TYPE_CHECKING:
     from estimator.verdict import VerdictThresholds
@@ -53,6 +53,8 @@ LIMIT_OPTIONS = options(
 )
 """--max-upload-mb ... --retain-days: the service's limits as service.service_limits declares them (sizes
 in MiB and KiB here, bytes in the service)."""
+WORKER_OPTIONS = options(WorkerLimits, ("worker_nice", "job_lease_s"))
+"""--worker-nice and --job-lease-s, as service.service_limits declares them."""
 
 
 def env_name(dest: str) -> str:
@@ -128,9 +130,8 @@ def run_serve(args: argparse.Namespace) -> int:
         )
     if args.config is not None and not Path(args.config).is_file():
         raise CliError(f"{args.config}: no such bench configuration")
-    if not 0.5 <= args.job_lease_s <= 3600:
-        raise CliError("--job-lease-s must lie in [0.5, 3600]")
     limits = values(args, LIMIT_OPTIONS)  # each in its declared range (CliError naming the option)
+    worker = values(args, WORKER_OPTIONS)
     limits["retain_days"] = limits["retain_days"] or None  # 0: retention off
     for flag, given in (("--shared-queue", args.shared_queue), ("--require-database", args.require_database)):
         if given and args.database is None:
@@ -163,7 +164,7 @@ def run_serve(args: argparse.Namespace) -> int:
         bench_config=Path(args.config).resolve() if args.config else None,
         simulated=args.simulated,
         **limits,
-        worker=WorkerSettings(nice=args.worker_nice, lease_s=args.job_lease_s),
+        worker=WorkerSettings(nice=worker["worker_nice"], lease_s=worker["job_lease_s"]),
         metrics_access=args.metrics_access,
         **({"verdict": verdict} if verdict is not None else {}),  # type: ignore[arg-type]
         **({"lane": args.lane} if args.lane else {}),  # type: ignore[arg-type]
@@ -305,14 +306,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="refuse to start (exit 2) when the --database cannot be reached",
     )
     add_options(p, LIMIT_OPTIONS)
-    p.add_argument("--worker-nice", type=int, default=5, help="nice increment of the worker (default 5)")
-    p.add_argument(
-        "--job-lease-s",
-        type=float,
-        default=30.0,
-        help="a job's claim in the shared queue lasts this long unless renewed; another instance runs "
-        "the job again after it if this one dies (default 30)",
-    )
+    add_options(p, WORKER_OPTIONS)
     p.add_argument(
         "--metrics-access",
         default="admin",

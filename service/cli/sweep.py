@@ -20,6 +20,7 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from daq.sweep.timing import TIMING_NAMES, SweepTiming
 from estimator.sweep import SETTING_NAMES, SweepSettings
 from service.cli.declared import Shown, add_options, options, values
 from service.cli.errors import EXIT_FAILED, CliError
@@ -28,9 +29,8 @@ SWEEP_OPTIONS = options(SweepSettings, SETTING_NAMES, {"amplitude_m": Shown("mm"
 """--start-hz, --stop-hz, --amplitude-mm, --duration-s and --law: SweepSettings' declarations
 (estimator.sweep), the amplitude shown in mm."""
 
-SETTLE_S, REST_S = 2.0, 1.0
-"""daq.sweep.model's DEFAULT_SETTLE_S and DEFAULT_REST_S, named here so that `shockbench --help` does not
-import the acquisition stack (tests/service/test_cli_lazy_imports.py checks they are the same)."""
+TIMING_OPTIONS = options(SweepTiming, TIMING_NAMES)
+"""--settle-s and --rest-s: daq.sweep.timing's declarations (standard library only: `--help` stays light)."""
 
 if TYPE_CHECKING:
     from daq.formats.vehicle_file import VehicleFile
@@ -54,8 +54,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="without --config: start a simulated bench in this process and sweep it",
     )
     add_options(parser, SWEEP_OPTIONS)
-    parser.add_argument("--settle-s", type=float, default=SETTLE_S, help="recorded after the sweep")
-    parser.add_argument("--rest-s", type=float, default=REST_S, help="read at rest before (zeroing)")
+    add_options(parser, TIMING_OPTIONS)
     parser.add_argument(
         "--operator",
         type=operator_name,
@@ -82,9 +81,7 @@ def _request(args: argparse.Namespace, vehicle: VehicleFile) -> SweepRequest:
     from daq.sweep.model import SweepRequest
 
     sweep = SweepSettings(**values(args, SWEEP_OPTIONS))
-    return SweepRequest(
-        sweep, vehicle=vehicle, operator=args.operator, settle_s=args.settle_s, rest_s=args.rest_s
-    )
+    return SweepRequest(sweep, vehicle=vehicle, operator=args.operator, **values(args, TIMING_OPTIONS))
 
 
 def run_sweep_command(args: argparse.Namespace) -> int:

@@ -42,6 +42,7 @@ from service.jobs.messages import (
     WorkerReady,
 )
 from service.jobs.process import WorkerProcess, describe_exit
+from service.service_limits import WorkerLimits
 from service.store.job_queue import DEFAULT_LEASE_S, JobQueue
 from service.store.jobs import RESTART_REASON, JobRecord, JobStore
 from service.store.models import JobStatus
@@ -55,8 +56,9 @@ MAX_BACKOFF_S = 30.0
 
 @dataclass(frozen=True)
 class WorkerSettings:
-    nice: int = 5
-    """Added to the worker's nice value: the event loop keeps priority over the estimator."""
+    nice: int = WorkerLimits.worker_nice
+    """Added to the worker's nice value: the event loop keeps priority over the estimator (declared in
+    service.service_limits)."""
     progress_interval_s: float = 0.2
     """The worker sends DE progress at most this often."""
     persist_interval_s: float = 2.0
@@ -81,6 +83,10 @@ class _Current:
     started: bool = False
     progress: Progress | None = None
     cancel_requested: bool = False
+    finishing: bool = False
+    """Its end is being written: /status no longer shows it (the database may already say it ended, and a
+    client that read that must not find it still running), while a cancel still finds it (and changes
+    nothing)."""
     persisted_at: float = -math.inf
     dispatched_at: float = field(default_factory=time.monotonic)
     """When it left the queue (time.monotonic()): its run time, for the metrics, is counted from here."""
@@ -241,6 +247,7 @@ class JobManager:
     def status(self) -> ManagerStatus:
         """In memory only: cheap enough for a status endpoint polled while a job runs."""
         worker, current = self._worker, self._current
+        current = None if current is None or current.finishing else current
         return ManagerStatus(
             worker_alive=worker is not None and worker.process.alive,
             worker_ready=worker is not None and worker.ready,
@@ -418,6 +425,7 @@ class JobManager:
         happens to the writing, the dispatcher moves on to the next job."""
         progress = current.progress.as_dict() if current.progress is not None else None
         job_id = current.job_id
+        current.finishing = True
         if self._kill_timer is not None:
             self._kill_timer.cancel()
             self._kill_timer = None
@@ -441,7 +449,6 @@ class JobManager:
                     progress=progress,
                     owner=self.queue.instance,
                 )
-            self._current = None  # written: /status no longer shows it while it is read back
             ran_s = time.monotonic() - current.dispatched_at
             if not written:  # its end is the new owner's to write and to log (once, there)
                 log.warning(

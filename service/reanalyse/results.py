@@ -70,13 +70,14 @@ def stored(out: Path, item: Item, analysis: Analysis, digest: str, options: Anal
     return Done(document)
 
 
-def save(out: Path, outcome: Outcome, digest: str) -> Done:
+def save(out: Path | None, outcome: Outcome, digest: str) -> Done:
     """Store a finished analysis: its result file when it succeeded; when it failed, any older result of
-    this recording is removed (it belongs to another input or options)."""
+    this recording is removed (it belongs to another input or options). Without `out` (a run stored in the
+    database only), nothing is written."""
     task = outcome.task
-    path = result_path(out, task.item.name, task.analysis)
+    if out is not None and not outcome.ok:
+        result_path(out, task.item.name, task.analysis).unlink(missing_ok=True)
     if not outcome.ok:
-        path.unlink(missing_ok=True)
         return Done(None, outcome.reason)
     document = {
         "name": task.item.name,
@@ -88,7 +89,9 @@ def save(out: Path, outcome: Outcome, digest: str) -> Done:
         "seconds": round(outcome.seconds, 3),
         "result": outcome.result,
     }
-    with atomic_write(path) as handle:
+    if out is None:
+        return Done(document)
+    with atomic_write(result_path(out, task.item.name, task.analysis)) as handle:
         json.dump(document, handle, allow_nan=False)
         handle.write("\n")
     return Done(document)

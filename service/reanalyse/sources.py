@@ -11,8 +11,8 @@ vehicle file of REC.ext is the first of:
 
 A file beside the recording wins over the text inside, so a wrong vehicle file can be corrected.
 
-A recording without one is listed with its problem and fails alone. A stored sweep brings its recording
-path and vehicle file (SweepStore); when the vehicle file is gone its HDF5 recording's own text is used.
+A recording without one is listed with its problem and fails alone. A database brings the recordings it
+stores (service.store.recordings: bytes, sha256, vehicle text), with no path a worker would have to see.
 """
 
 from __future__ import annotations
@@ -31,8 +31,6 @@ RECORDING_SUFFIXES = (".csv", ".h5", ".hdf5")
 HDF5_SUFFIXES = (".h5", ".hdf5")
 """daq.formats.recording_file's, named here so that listing a folder imports neither h5py nor numpy."""
 FOLDER_VEHICLE_FILE = "vehicle.toml"
-SWEEP_PAGE = 500
-"""Sweeps read from the database per query."""
 
 
 class SourceError(UserError, ValueError):
@@ -49,6 +47,11 @@ class Item:
     recording: Path
     vehicle: Path | None
     problem: str | None = None
+    sha256: str | None = None
+    """A recording stored in the database: its sha256 (its bytes come from there); `recording` is then
+    only its file name, for messages."""
+    vehicle_id: str | None = None
+    """A stored recording's vehicle (what `reanalyse --compare` groups by)."""
 
 
 def _vehicle_for(recording: Path) -> tuple[Path | None, str | None]:
@@ -105,15 +108,12 @@ def _check_schema(database: Database) -> None:
         raise SourceError(f"database {database.safe_url}: {exc}") from None
 
 
-def items_in_database(url: str) -> list[Item]:
-    """Every complete sweep stored in the database at `url`, oldest first, named sweep-<id>."""
+def open_archive(url: str) -> Database:
+    """The database at `url`, its schema checked (SourceError, one line, when it cannot be read)."""
     from sqlalchemy.engine import make_url
-    from sqlalchemy.exc import ArgumentError, SQLAlchemyError
+    from sqlalchemy.exc import ArgumentError
 
-    from estimator.errors import one_line
     from service.store.database import Database
-    from service.store.models import SweepStatus
-    from service.store.sweeps import SweepStore
 
     try:
         parsed = make_url(url)
@@ -122,38 +122,65 @@ def items_in_database(url: str) -> list[Item]:
     if parsed.get_backend_name() == "sqlite" and not Path(parsed.database or "").is_file():
         raise SourceError(f"database {url}: no such SQLite file")  # opening it would create an empty one
     database = Database(url)
-    store = SweepStore(database)
-    sweeps = []
     try:
         _check_schema(database)
-        while True:
-            page, total = store.list_sweeps(status=SweepStatus.COMPLETE, limit=SWEEP_PAGE, offset=len(sweeps))
-            sweeps += page
-            if not page or len(sweeps) >= total:
-                break
+    except BaseException:
+        database.dispose()
+        raise
+    return database
+
+
+def items_in_database(database: Database) -> list[Item]:
+    """Every recording stored in the database (service.store.recordings) that is not a sweep's unfinished
+    or incomplete one, oldest first, named by its stored name; and, failing alone, every complete sweep
+    whose recording is not stored (its file missing when it ended, or a sweep from before revision 0007)."""
+    from sqlalchemy import select
+    from sqlalchemy.exc import SQLAlchemyError
+
+    from estimator.errors import one_line
+    from service.store.models import RecordingRow, SweepRow, SweepStatus
+    from service.store.recordings import RecordingStore
+
+    try:
+        recordings = RecordingStore(database).listing()
+        with database.sessions() as session:
+            sweeps = session.execute(
+                select(SweepRow.id, SweepRow.uid, SweepRow.status, SweepRow.recording_path).order_by(
+                    SweepRow.id
+                )
+            ).all()
+            stored = set(session.scalars(select(RecordingRow.sweep_uid)).all())
     except SQLAlchemyError as exc:
         cause = one_line(getattr(exc, "orig", None) or exc)  # the driver's words, without SQLAlchemy's prefix
-        raise SourceError(f"database {database.safe_url}: cannot list the sweeps ({cause})") from None
-    finally:
-        database.dispose()
-    items = []
-    for sweep in sorted(sweeps, key=lambda s: s.id):
-        name = f"sweep-{sweep.id}"
-        if not sweep.recording_path:
-            items.append(Item(name, Path(""), None, f"sweep {sweep.id}: no recording path stored"))
-            continue
-        vehicle = Path(sweep.vehicle_file) if sweep.vehicle_file else None
-        if vehicle is not None and not vehicle.is_file():
-            vehicle = None  # the vehicle text inside the sweep's HDF5 recording
-        items.append(Item(name, Path(sweep.recording_path), vehicle))
+        raise SourceError(f"database {database.safe_url}: cannot list the recordings ({cause})") from None
+    complete = {sweep.uid for sweep in sweeps if sweep.status == SweepStatus.COMPLETE.value}
+    items = [
+        Item(
+            recording.name.replace("/", "__"),
+            Path(recording.file_name),
+            None,
+            sha256=recording.sha256,
+            vehicle_id=recording.vehicle_id or recording.name,
+        )
+        for recording in recordings
+        if recording.sweep_uid is None or recording.sweep_uid in complete
+    ]
+    for sweep in sweeps:
+        if sweep.status == SweepStatus.COMPLETE.value and sweep.uid not in stored:
+            where = sweep.recording_path or "no file"
+            problem = f"sweep {sweep.id}: its recording ({where}) is not stored in the database"
+            items.append(Item(f"sweep-{sweep.id}", Path(sweep.recording_path or ""), None, problem))
     if not items:
-        raise SourceError(f"database {database.safe_url}: no complete sweeps")
+        raise SourceError(f"database {database.safe_url}: no recordings stored (shockbench archive import)")
     return items
 
 
 def input_digest(item: Item) -> str:
     """sha256 (hex) of the recording's bytes and the vehicle file's (an HDF5 recording's own vehicle text
-    is among its bytes). OSError when a file cannot be read."""
+    is among its bytes); of a stored recording, its sha256 (its vehicle text is stored with it, once). OSError
+    when a file cannot be read."""
+    if item.sha256 is not None:
+        return item.sha256
     digest = hashlib.sha256()
     for path in (item.recording, item.vehicle):
         if path is None:

@@ -1,26 +1,36 @@
-"""What a Dask worker runs for one recording and one analysis: read the recording (CSV or HDF5) and its
-vehicle file, run the identification or the model doctor as `shockbench identify`/`diagnose` do
-(service.analysis), and hand back the result's JSON or the one-line reason it failed. It never raises for
-a bad recording: one bad file fails alone.
+"""What a Dask worker runs: a batch of recordings, each with the analyses asked for it. The client ships
+each recording's bytes and its vehicle file's text with the task (a `Payload`: from the database's
+recordings or read from the source folder), so the workers need no shared folder and no database
+connection (issue 33). A worker writes the bytes to a file in its own temporary folder, reads it as
+`shockbench identify`/`diagnose` do (service.analysis), and hands back each result's JSON or the one-line
+reason it failed, naming the recording as the client knows it. It never raises for a bad recording: one bad
+file fails alone.
 
-The worker reads the files by path: with a scheduler elsewhere, the workers must see SOURCE (and a
-database's recording paths) at the same paths as the client (a shared file system); the client writes the
-results.
+Batching (several recordings per task) keeps Dask's per-task cost (about 5-10 ms of scheduling and
+serialisation) off each recording; `WorkerSetup` gives every worker one BLAS thread (two workers of two
+threads each on two cores made small matrix products many times slower) and loads the estimator and its
+compiled kernel once, when the worker joins, not in the first task.
 """
 
 from __future__ import annotations
 
+import atexit
+import os
+import shutil
+import tempfile
 import time
+import zlib
+from collections.abc import Sequence
 from dataclasses import dataclass
 from enum import StrEnum
-from typing import TYPE_CHECKING, Any
+from pathlib import Path, PurePath
+from typing import Any
 
 from estimator.errors import UserError, one_line
 from service.reanalyse.sources import Item
 
-if TYPE_CHECKING:
-    from estimator.recording import Recording
-    from estimator.vehicle import VehicleParameters
+BLAS_THREADS = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
+"""The environment of a worker process the local cluster starts: one BLAS thread from the first import."""
 
 
 class Analysis(StrEnum):
@@ -62,34 +72,74 @@ class Outcome:
         return self.reason is None
 
 
+@dataclass(frozen=True)
+class Payload:
+    """A recording as shipped to a worker: its file's bytes (zlib-compressed when `compressed`), the file
+    name to read it under (its suffix tells nothing: the content does), its vehicle file's text (None: the
+    HDF5 recording's own) and the vehicle file's name for messages."""
+
+    file_name: str
+    data: bytes
+    compressed: bool
+    vehicle_text: str | None
+    vehicle_source: str | None
+
+
+@dataclass(frozen=True)
+class Work:
+    """One recording of a batch and the analyses to run on it."""
+
+    payload: Payload
+    tasks: tuple[Task, ...]
+
+
 class NoVehicleError(UserError, ValueError):
     """A recording with neither a vehicle file nor a vehicle text inside."""
 
 
-def read_inputs(item: Item) -> tuple[Recording, VehicleParameters]:
-    """The recording and its vehicle parameters (UserError/OSError, one line, on bad input)."""
+def payload_of(item: Item) -> Payload:
+    """The payload of a recording in a folder: its file and vehicle file read here (OSError, UserError:
+    one line naming the file)."""
+    from daq.formats.vehicle_file import load_vehicle_file
+
+    if item.problem is not None:
+        raise NoVehicleError(item.problem)
+    vehicle_text = load_vehicle_file(item.vehicle).text if item.vehicle is not None else None
+    data = item.recording.read_bytes()
+    return Payload(
+        item.recording.name, data, False, vehicle_text, str(item.vehicle) if item.vehicle else None
+    )
+
+
+_FOLDER: list[Path] = []
+
+
+def _scratch() -> Path:
+    """This process's folder for the recordings it reads (removed when the process ends normally)."""
+    if not _FOLDER:
+        folder = Path(tempfile.mkdtemp(prefix="shockbench-reanalyse-"))
+        atexit.register(shutil.rmtree, folder, True)
+        _FOLDER.append(folder)
+    return _FOLDER[0]
+
+
+def analyse(task: Task, path: Path, payload: Payload) -> dict[str, Any]:
+    """The JSON `shockbench identify --json` (or `diagnose --json`) prints for the recording at `path`,
+    with NaN and ±inf as null. Raises on bad input."""
     from daq.formats.recording_file import read_recording_file
-    from daq.formats.vehicle_file import parse_vehicle, read_vehicle
-
-    recording = read_recording_file(item.recording)
-    if item.vehicle is not None:
-        return recording, read_vehicle(item.vehicle)
-    text = recording.metadata.get("vehicle_text")
-    if not text:
-        raise NoVehicleError(f"{item.recording}: no vehicle file, and the recording carries no vehicle text")
-    return recording, parse_vehicle(text, f"{item.recording} (its vehicle text)")
-
-
-def analyse(task: Task) -> dict[str, Any]:
-    """The JSON `shockbench identify --json` (or `diagnose --json`) prints for this recording, with NaN
-    and ±inf as null. Raises on bad input."""
+    from daq.formats.vehicle_file import parse_vehicle
     from estimator.vehicle import TyreModel
     from service.analysis import diagnose_recording, identify_recording
     from service.jobs.context import finite_json
 
-    if task.item.problem is not None:
-        raise NoVehicleError(task.item.problem)
-    recording, vehicle = read_inputs(task.item)
+    recording = read_recording_file(path)
+    text = payload.vehicle_text
+    source = payload.vehicle_source or f"{path} (its vehicle text)"
+    if text is None:
+        text = recording.metadata.get("vehicle_text")
+        if not text:
+            raise NoVehicleError(f"{path}: no vehicle file, and the recording carries no vehicle text")
+    vehicle = parse_vehicle(text, source)
     tyre, points = TyreModel(task.options.tyre), task.options.points
     if task.analysis is Analysis.IDENTIFY:
         from estimator.identify import IdentifyOptions
@@ -102,15 +152,64 @@ def analyse(task: Task) -> dict[str, Any]:
     return finite_json(result)
 
 
+def _reason(exc: BaseException, path: Path, label: str) -> str:
+    """The exception in one line, the worker's scratch file named as the client knows the recording."""
+    text = one_line(exc).replace(str(path), label)
+    return text if isinstance(exc, UserError | OSError) else f"internal error: {type(exc).__name__}: {text}"
+
+
+def _run_work(work: Work) -> list[Outcome]:
+    start = time.perf_counter()
+    label = str(work.tasks[0].item.recording)
+    path = _scratch() / PurePath(work.payload.file_name).name
+    try:
+        data = zlib.decompress(work.payload.data) if work.payload.compressed else work.payload.data
+        path.write_bytes(data)
+    except (OSError, zlib.error) as exc:
+        reason = _reason(exc, path, label)
+        return [Outcome(task, None, reason, time.perf_counter() - start) for task in work.tasks]
+    outcomes = []
+    try:
+        for task in work.tasks:
+            begun = time.perf_counter()
+            try:
+                result = analyse(task, path, work.payload)
+            except Exception as exc:  # a bug on this recording must not stop the archive
+                outcomes.append(Outcome(task, None, _reason(exc, path, label), time.perf_counter() - begun))
+                continue
+            outcomes.append(Outcome(task, result, None, time.perf_counter() - begun))
+    finally:
+        path.unlink(missing_ok=True)
+    return outcomes
+
+
+def run_batch(batch: Sequence[Work]) -> list[Outcome]:
+    """Runs on a Dask worker: every analysis of every recording of the batch, in order."""
+    return [outcome for work in batch for outcome in _run_work(work)]
+
+
 def run_task(task: Task) -> Outcome:
-    """Runs on a Dask worker: the analysis, or the one-line reason it failed (bad input as the command
-    says it; anything else named by its exception type, as an internal error)."""
+    """One analysis of a recording in a folder, in this process (the in-process reference the benchmark
+    compares a worker with): the result, or the one-line reason it failed."""
     start = time.perf_counter()
     try:
-        result = analyse(task)
+        payload = payload_of(task.item)
     except (UserError, OSError) as exc:
         return Outcome(task, None, one_line(exc), time.perf_counter() - start)
-    except Exception as exc:  # a bug on this recording must not stop the archive
-        reason = f"internal error: {type(exc).__name__}: {one_line(exc)}"
-        return Outcome(task, None, reason, time.perf_counter() - start)
-    return Outcome(task, result, None, time.perf_counter() - start)
+    (outcome,) = run_batch([Work(payload, (task,))])
+    return outcome
+
+
+def warm_up() -> None:
+    """Load what an analysis needs (numpy, scipy, the estimator, its compiled kernel) and keep BLAS to one
+    thread in this process: what a worker does once when it joins (run.WorkerSetup)."""
+    os.environ.update(BLAS_THREADS)  # for any process it starts
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:  # without it, the environment above (set before numpy loads) is what holds
+        pass
+    else:
+        threadpool_limits(1)
+    import estimator.identify
+    import estimator.simulation_kernel  # noqa: F401
+    import service.analysis  # noqa: F401

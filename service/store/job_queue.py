@@ -24,13 +24,15 @@ from datetime import timedelta
 
 from sqlalchemy import func, or_, select, update
 
+from service.service_limits import WorkerLimits
 from service.store.database import Database
 from service.store.jobs import RESTART_REASON, JobRecord
 from service.store.models import JobRow, JobStatus, utcnow
 from service.store.outbox import JOB, queue_finished
 
-DEFAULT_LEASE_S = 30.0
-"""A claim not renewed for this long is taken to be dead (the renewal comes every third of it)."""
+DEFAULT_LEASE_S: float = WorkerLimits.job_lease_s
+"""A claim not renewed for this long is taken to be dead (the renewal comes every third of it); declared in
+service.service_limits."""
 DEFAULT_MAX_ATTEMPTS = 3
 
 

@@ -1,5 +1,5 @@
 """The tables: jobs (identification and diagnosis), sweeps, scheduled tests, the result chain and its
-checkpoints.
+checkpoints, and the archive: stored recordings and re-analysis runs with their results (issue 33).
 
 SQLAlchemy 2.x declarative models with portable column types only (strings, integers, floats, booleans,
 JSON, timestamps), so the same models work on SQLite and PostgreSQL. Statuses are stored as their string
@@ -17,9 +17,11 @@ from sqlalchemy import (
     JSON,
     Boolean,
     DateTime,
+    Float,
     ForeignKey,
     Index,
     Integer,
+    LargeBinary,
     String,
     Text,
     UniqueConstraint,
@@ -103,7 +105,8 @@ class Base(DeclarativeBase):
 
 
 class SweepRow(Base):
-    """A sweep on the bench (filled in by the acquisition layer). The recording stays in its file."""
+    """A sweep on the bench (filled in by the acquisition layer). Its recording is written to its file, and
+    kept in `recordings` too when the sweep ends (service.store.sweeps)."""
 
     __tablename__ = "sweeps"
     __table_args__ = (
@@ -286,4 +289,81 @@ class SyncOutboxRow(Base):
     """"sweep" or "job"."""
     row_id: Mapped[int] = mapped_column(Integer)
     """The row's id in the local store."""
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+
+
+class RecordingRow(Base):
+    """A recording kept in the database (service.store.recordings, issue 33): its file's bytes, compressed
+    when that saves space, named by the sha256 of the file's bytes (the same hash a sweep's and a job's
+    `recording_sha256` hold, which their chain links cover), with its vehicle file's text. Stored once per
+    content: the archive's identity is the hash, not the name."""
+
+    __tablename__ = "recordings"
+    __table_args__ = (
+        UniqueConstraint("sha256", name="uq_recordings_sha256"),
+        {"sqlite_autoincrement": True},
+    )
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=True)
+    sha256: Mapped[str] = mapped_column(String(64))
+    """sha256 (hex) of the recording file's bytes as they were (before compression)."""
+    name: Mapped[str] = mapped_column(Text)
+    """Its name: the path it was imported from relative to the archive folder, or sweep-<id>.h5."""
+    format: Mapped[str] = mapped_column(String(8))
+    """The file's suffix without the dot (csv, h5, hdf5): how `archive export` names it."""
+    compression: Mapped[str] = mapped_column(String(8))
+    """"zlib" or "none" (an HDF5 recording compresses its data inside; zlib would gain little)."""
+    size_bytes: Mapped[int] = mapped_column(Integer)
+    """The file's size."""
+    data: Mapped[bytes] = mapped_column(LargeBinary)
+    """The file's bytes, compressed as `compression` says."""
+    vehicle_text: Mapped[str | None] = mapped_column(Text, default=None)
+    """Its vehicle file's text; None for an HDF5 recording that carries its own."""
+    vehicle_id: Mapped[str | None] = mapped_column(String(200), default=None)
+    """Which vehicle it tested (a sweep's settings["vehicle_id"], an imported one's vehicle file's name):
+    what `reanalyse --compare` groups by."""
+    sweep_uid: Mapped[str | None] = mapped_column(String(36), default=None)
+    """The sweep it was recorded by (its global uid); None for an imported recording."""
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+
+
+class ReanalysisRunRow(Base):
+    """One re-analysis of the stored recordings (`shockbench reanalyse --database`): which software with
+    which options, when, and how it went."""
+
+    __tablename__ = "reanalysis_runs"
+    __table_args__ = ({"sqlite_autoincrement": True},)
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=True)
+    software_version: Mapped[str] = mapped_column(String(64))
+    options: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
+    """The analyses and their options ({"analyses": [...], "tyre", "points"})."""
+    started_at: Mapped[datetime] = mapped_column(default=utcnow)
+    finished_at: Mapped[datetime | None] = mapped_column(default=None)
+    """None while it runs (or when it was interrupted)."""
+    recordings: Mapped[int] = mapped_column(Integer, default=0)
+    succeeded: Mapped[int] = mapped_column(Integer, default=0)
+    failed: Mapped[int] = mapped_column(Integer, default=0)
+
+
+class ReanalysisResultRow(Base):
+    """One analysis of one recording in a run: the command's JSON, or why it failed. At most one per run,
+    recording and analysis: a retried task's second write is refused by the constraint and ignored."""
+
+    __tablename__ = "reanalysis_results"
+    __table_args__ = (
+        UniqueConstraint("run_id", "recording_sha256", "analysis", name="uq_reanalysis_results_once"),
+        {"sqlite_autoincrement": True},
+    )
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=True)
+    run_id: Mapped[int] = mapped_column(ForeignKey("reanalysis_runs.id"))
+    recording_sha256: Mapped[str] = mapped_column(String(64))
+    analysis: Mapped[str] = mapped_column(String(16))
+    """identify or diagnose."""
+    result: Mapped[dict[str, Any] | None] = mapped_column(JSON, default=None)
+    reason: Mapped[str | None] = mapped_column(Text, default=None)
+    """Why it failed (one line); None when it succeeded."""
+    seconds: Mapped[float] = mapped_column(Float, default=0.0)
+    """Worker wall time, reading included."""
     created_at: Mapped[datetime] = mapped_column(default=utcnow)

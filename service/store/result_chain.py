@@ -37,6 +37,10 @@ Version 1 (links written before revision 0006, which keep verifying by it): the 
 JSON of {"previous_hash", "job_id", "lane", "kind", "options", "result", "finished_at"}, the values as
 above (`link_hash`).
 
+A recording kept in the database (service.store.recordings, issue 33) is named by that same sha256 of its
+file's bytes: `verify_chain` also recomputes it from the stored bytes, so a stored recording changed after
+its sweep's results were chained fails too, naming the recording.
+
 Removing a link breaks the chain; rewriting every later link to hide a change needs write access to the
 whole chain. Its end is pinned by the lane's checkpoints of its head (service.store.chain_anchor, which also
 states the threat model): `verify` compares the chain with the heads log and the central checkpoints.
@@ -64,6 +68,7 @@ from sqlalchemy.orm import Session
 from service.store.chain_anchor import Checkpoint, Checkpoints, Head, stored_checkpoints
 from service.store.database import Database
 from service.store.models import JobRow, JobStatus, ResultChainRow, SweepRow
+from service.store.recordings import altered_recordings
 
 GENESIS = "0" * 64
 """previous_hash of a lane's first link."""
@@ -314,7 +319,9 @@ def verify_chain(
 ) -> ChainReport:
     """Walk every lane's chain (or only `lane`'s), recomputing each hash and comparing it with the
     `checkpoints` (a heads log's, the central database's) and the database's own; stop at the first
-    problem. A lane known only from a checkpoint is walked too (all its results were removed)."""
+    problem. A lane known only from a checkpoint is walked too (all its results were removed). Without
+    `lane`, the stored recordings' bytes are checked against their sha256, which the links of the results
+    on them cover (service.store.recordings.altered_recordings)."""
     results = 0
     with database.sessions() as session:
         own = stored_checkpoints(session, lane, "this database's checkpoint")
@@ -327,6 +334,10 @@ def verify_chain(
             results += verified
             if problem is not None:
                 return ChainReport(results, len(lanes), problem, marks.count)
+        if lane is None:
+            altered = altered_recordings(session)
+            if altered:
+                return ChainReport(results, len(lanes), altered[0], marks.count)
     return ChainReport(results, len(lanes), checkpoints=marks.count)
 
 

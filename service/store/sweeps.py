@@ -7,6 +7,7 @@ it ends). SweepRecord is a detached snapshot of a row.
 
 from __future__ import annotations
 
+import hashlib
 from collections.abc import Callable
 from dataclasses import dataclass
 from datetime import datetime
@@ -18,10 +19,20 @@ from sqlalchemy import ColumnElement, func, select, update
 from service.store.database import Database
 from service.store.models import SweepRow, SweepStatus, utcnow
 from service.store.outbox import SWEEP, queue_finished
-from service.store.result_chain import recording_sha256
+from service.store.recordings import store_sweep_recording
 
 RESTART_REASON = "service restarted while the sweep ran"
 UNFINISHED = (SweepStatus.REQUESTED, SweepStatus.RUNNING)
+
+
+def _file_bytes(path: str | None) -> bytes | None:
+    """The recording file's bytes; None when the sweep left no file (or it cannot be read)."""
+    if not path or not Path(path).is_file():
+        return None
+    try:
+        return Path(path).read_bytes()
+    except OSError:
+        return None
 
 
 def finished(status: SweepStatus) -> bool:
@@ -136,7 +147,15 @@ class SweepStore:
             rows = session.scalars(query.order_by(SweepRow.id.desc()).limit(limit).offset(offset)).all()
             return [SweepRecord.of(r) for r in rows], int(session.scalar(count) or 0)
 
-    def _transition(self, sweep_id: int, from_status: tuple[SweepStatus, ...], **values: Any) -> bool:
+    def _transition(
+        self,
+        sweep_id: int,
+        from_status: tuple[SweepStatus, ...],
+        recording: bytes | None = None,
+        **values: Any,
+    ) -> bool:
+        """One conditional UPDATE; when it ended the sweep, the sweep queued for the central database and
+        `recording` (its file's bytes) stored with it, in the same transaction."""
         with self.db.transaction() as session:
             done = session.execute(
                 update(SweepRow)
@@ -144,6 +163,10 @@ class SweepStore:
                 .values(**values)
             )
             if done.rowcount == 1 and finished(SweepStatus(values.get("status", SweepStatus.RUNNING))):
+                if recording is not None:
+                    row = session.get(SweepRow, sweep_id)
+                    assert row is not None
+                    store_sweep_recording(session, row, recording)
                 queue_finished(self.db, session, SWEEP, [sweep_id])
             return done.rowcount == 1
 
@@ -155,19 +178,22 @@ class SweepStore:
 
     def finish(self, sweep_id: int, status: SweepStatus, *, complete: bool, reason: str | None) -> bool:
         """requested/running -> complete, failed or aborted (once: a later call changes nothing), with the
-        sha256 of its recording file as it is now (the chain links of the results on it cover it)."""
+        sha256 of its recording file as it is now (the chain links of the results on it cover it), and the
+        file's bytes with its vehicle file's text kept in the database (service.store.recordings)."""
         if not finished(status):
             raise ValueError(f"{status.value} is not a final sweep status")
         with self.db.sessions() as session:
             path = session.scalar(select(SweepRow.recording_path).where(SweepRow.id == sweep_id))
+        content = _file_bytes(path)
         return self._transition(
             sweep_id,
             UNFINISHED,
+            content,
             status=status.value,
             complete=complete,
             reason=reason,
             finished_at=utcnow(),
-            recording_sha256=recording_sha256(path),
+            recording_sha256=hashlib.sha256(content).hexdigest() if content is not None else None,
         )
 
     def recover_interrupted(self, reason: str = RESTART_REASON) -> list[int]:

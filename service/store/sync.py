@@ -27,9 +27,11 @@ Design (README "A lane keeps testing when the central database is away"):
   the push stops with that error in the sync status instead). In the same transaction the lane checkpoints
   its chain's new head there (`chain_checkpoints`, service.store.chain_anchor), so that removing the
   lane's newest results, locally or centrally, fails `verify`.
-- Files stay on the lane: the central rows carry the paths of recordings, vehicle files and job artefacts
-  as they are on the lane's machine, under its data root (readable from elsewhere when the data root is a
-  shared mount, as item 4 asks); nothing is copied.
+- A sweep's recording goes with it: the bytes, sha256 and vehicle text its lane's store keeps
+  (service.store.recordings, issue 33) are inserted on the central database unless a recording of the same
+  sha256 is there already (idempotent by content), in the transaction that pushes the sweep. Other files
+  stay on the lane: the central rows carry the paths of vehicle files and job artefacts as they are on the
+  lane's machine.
 """
 
 from __future__ import annotations
@@ -46,7 +48,7 @@ from sqlalchemy.orm import Session
 from estimator.errors import one_line
 from service.store.chain_anchor import Head, checkpoint_central
 from service.store.database import Database
-from service.store.models import JobRow, ResultChainRow, SweepRow, SyncOutboxRow
+from service.store.models import JobRow, RecordingRow, ResultChainRow, SweepRow, SyncOutboxRow
 from service.store.outbox import JOB, SWEEP
 from service.store.result_chain import chained_job_id, locked_head
 
@@ -68,7 +70,7 @@ def _local_store() -> Iterator[None]:
         raise LocalStoreError(f"local store: {one_line(exc)}") from exc
 
 
-def _values(row: SweepRow | JobRow, leave_out: set[str]) -> dict[str, Any]:
+def _values(row: SweepRow | JobRow | RecordingRow, leave_out: set[str]) -> dict[str, Any]:
     return {c.name: getattr(row, c.key) for c in row.__table__.columns if c.name not in leave_out}
 
 
@@ -118,6 +120,8 @@ class CentralSync:
         with _local_store(), self.local.sessions() as local:
             found = _Rows.read(local, entry)
         with self.central.transaction() as central:
+            if found.recording is not None:
+                _push_recording(central, found.recording)
             if found.job is None:
                 assert found.sweep is not None
                 return Pushed(SWEEP, found.sweep.id, _push_sweep(central, found.sweep))
@@ -132,11 +136,18 @@ class CentralSync:
 @dataclass(frozen=True)
 class _Rows:
     """What one outbox entry pushes, read from the local store: a sweep, or a job with its sweep (if it
-    ran on one) and its chain link (if it succeeded)."""
+    ran on one) and its chain link (if it succeeded); the sweep's stored recording, if there is one."""
 
     sweep: SweepRow | None
     job: JobRow | None = None
     link: ResultChainRow | None = None
+    recording: RecordingRow | None = None
+
+    @staticmethod
+    def recording_of(local: Session, sweep: SweepRow | None) -> RecordingRow | None:
+        if sweep is None or sweep.recording_sha256 is None:
+            return None
+        return local.scalar(select(RecordingRow).where(RecordingRow.sha256 == sweep.recording_sha256))
 
     @classmethod
     def read(cls, local: Session, entry: SyncOutboxRow) -> _Rows:
@@ -144,7 +155,7 @@ class _Rows:
             sweep = local.get(SweepRow, entry.row_id)
             if sweep is None:
                 raise SyncError(f"sweep {entry.row_id} of the outbox is not in the local store")
-            return cls(sweep)
+            return cls(sweep, recording=cls.recording_of(local, sweep))
         if entry.kind != JOB:
             raise SyncError(f"outbox entry {entry.seq} has an unknown kind {entry.kind!r}")
         job = local.get(JobRow, entry.row_id)
@@ -156,7 +167,13 @@ class _Rows:
             if sweep is None:
                 raise SyncError(f"job {job.id}'s sweep {job.sweep_id} is not in the local store")
         link = local.scalar(select(ResultChainRow).where(ResultChainRow.job_id == job.id))
-        return cls(sweep, job, link)
+        return cls(sweep, job, link, cls.recording_of(local, sweep))
+
+
+def _push_recording(central: Session, recording: RecordingRow) -> None:
+    """The recording on the central database, unless its sha256 is there (idempotent by content)."""
+    if central.scalar(select(RecordingRow.id).where(RecordingRow.sha256 == recording.sha256)) is None:
+        central.execute(insert(RecordingRow).values(**_values(recording, {"id"})))
 
 
 def _push_sweep(central: Session, sweep: SweepRow) -> int:

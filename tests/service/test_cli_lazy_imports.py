@@ -94,7 +94,7 @@ def test_a_command_still_imports_what_it_needs() -> None:
 def test_the_names_the_parsers_use_equal_the_libraries() -> None:
     """The few choices and defaults the CLI names itself (to stay light) are the libraries' own."""
     from daq.probe import DEFAULT_TIMEOUT_S
-    from daq.sweep.model import DEFAULT_REST_S, DEFAULT_SETTLE_S
+    from daq.sweep.model import SweepRequest
     from estimator.identify import Solver
     from service.cli import devices, identify, sweep
     from service.simulated_bench import VEHICLE_PRESETS
@@ -102,7 +102,8 @@ def test_the_names_the_parsers_use_equal_the_libraries() -> None:
     assert tuple(solver.value for solver in Solver) == identify.SOLVERS
     assert tuple(VEHICLE_PRESETS) == devices.VEHICLE_PRESET_NAMES
     assert devices.PROBE_TIMEOUT_S == DEFAULT_TIMEOUT_S
-    assert (sweep.SETTLE_S, sweep.REST_S) == (DEFAULT_SETTLE_S, DEFAULT_REST_S)
+    request = SweepRequest()
+    assert [o.default() for o in sweep.TIMING_OPTIONS] == [request.settle_s, request.rest_s]
 
 
 def _simulated_sweep(folder: Path) -> tuple[Path, Path]:

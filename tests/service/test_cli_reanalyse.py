@@ -125,7 +125,7 @@ def test_a_recording_without_vehicle_file_fails_without_a_worker(tmp_path: Path)
 def test_a_bug_on_one_recording_is_its_reason_not_a_crash(
     monkeypatch: pytest.MonkeyPatch, archive: Path
 ) -> None:
-    def bug(task: Task) -> dict:
+    def bug(*_: object) -> dict:
         raise RuntimeError("index 7 is out of bounds\nsecond line")
 
     monkeypatch.setattr(task_module, "analyse", bug)
@@ -262,6 +262,8 @@ def test_bad_input_is_one_line(archive: Path, tmp_path: Path) -> None:
     for args, says in (
         ([str(tmp_path / "nowhere"), "--out", out], "nowhere: no such folder"),
         (["--out", out], "give either SOURCE"),
+        ([str(archive)], "--out is needed with SOURCE"),
+        (["--database", f"sqlite:///{tmp_path / 'none.sqlite3'}", "--compare", "1"], "expected 2 arguments"),
         ([str(archive), "--out", out, "--scheduler", "foo"], "--scheduler foo: missing port number"),
         (["--database", f"sqlite:///{tmp_path / 'none.sqlite3'}", "--out", out], "no such SQLite file"),
     ):
