@@ -537,16 +537,42 @@ def fit(
         steps += 1
         if not parameters:
             continue  # once more with the airborne samples of the fitted tyre force
-        jacobian = channel_jacobian(reference, model, rows)
-        augmented = with_columns(used, jacobian, used.offset)
-        increment = minimise(augmented, np.concatenate([theta, np.zeros(len(jacobian))]), 1e-8)[0][
-            used.n_params :
-        ]
-        moved = feasible(kinds, values + increment)
+        moved = bounded_step(used, theta, channel_jacobian(reference, model, rows), kinds, values)
         step, values = moved - values, moved
         small = all(abs(d) < GAUSS_NEWTON_TOLERANCE[k] for d, k in zip(step, kinds, strict=True))
         affine = all(k == "offset" for k in kinds) and not liftoff
         final_pass = small or affine or steps == iterations
+
+
+def bounded_step(
+    used: LinearResiduals,
+    theta: np.ndarray,
+    jacobian: dict[str, np.ndarray],
+    kinds: list[str],
+    values: np.ndarray,
+) -> np.ndarray:
+    """The channel values after one Gauss-Newton step, θ solved with them, under the bounds of `feasible`
+    (an active-set step): a parameter the step would push past its bound is held at the bound and the
+    others are solved again with its change in the offset. Clipping afterwards instead would keep the
+    others' share of a combined move: a delay and an averaging window of one channel fitted to a pure
+    3 ms delay step to +10 ms and −7 ms, and clipping the window at zero left the delay at 10 ms."""
+    names = list(jacobian)
+    fixed: dict[int, float] = {}
+    while True:
+        free = [j for j in range(len(names)) if j not in fixed]
+        offset = used.offset + sum((jacobian[names[j]] * change for j, change in fixed.items()), 0.0)
+        augmented = with_columns(used, {names[j]: jacobian[names[j]] for j in free}, offset)
+        solved = minimise(augmented, np.concatenate([theta, np.zeros(len(free))]), 1e-8)[0]
+        increment = np.zeros(len(names))
+        increment[free] = solved[used.n_params :]
+        for j, change in fixed.items():
+            increment[j] = change
+        moved = feasible(kinds, values + increment)
+        clipped = [j for j in free if moved[j] != values[j] + increment[j]]
+        if not clipped or len(free) == 1:
+            return moved
+        for j in clipped:
+            fixed[j] = moved[j] - values[j]
 
 
 def fit_added(

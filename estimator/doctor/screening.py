@@ -20,6 +20,7 @@ from estimator.doctor.criteria import EquationTest, TestResult
 from estimator.doctor.model import (
     FittedModel,
     Reference,
+    bounded_step,
     build_at,
     channel_jacobian,
     feasible,
@@ -55,8 +56,15 @@ def one_step(
     augmented = with_columns(system, jacobian, system.offset) if jacobian else system
     solution, objective = minimise(augmented, np.concatenate([start, np.zeros(len(jacobian))]))
     theta, steps = solution[: system.n_params], solution[system.n_params :]
-    values[own] = values[own] + steps
-    values = feasible([kind for _, kind in parameters], values)  # the test keeps the unclipped step
+    kinds = [kind for _, kind in parameters]
+    own_kinds = [kinds[k] for k in own]
+    if np.any(feasible(own_kinds, values[own] + steps) != values[own] + steps):
+        # the test keeps the unbounded step; the model moves by the step within the bounds
+        values[own] = bounded_step(system, start, jacobian, own_kinds, values[own])
+        system, signals, airborne = build_at(reference, current, structure, values)
+        theta, objective = minimise(system, start)
+    else:
+        values[own] = values[own] + steps
     added = [n for n in system.parameter_names if n not in current.system.parameter_names]
     index = [system.parameter_names.index(n) for n in added] + list(
         range(system.n_params, system.n_params + len(own))
