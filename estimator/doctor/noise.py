@@ -12,10 +12,14 @@ residual at a fifth of what the coloured noise gives.
 
 How it is measured: the output residual of the final model (simulated from the measured plate minus the
 measured reading) holds the noise plus the model's own error; the model's error lies in the band the
-vehicle responds in, the noise everywhere. Above NOISE_BAND_FROM × the excitation's top frequency the
-residual's Welch density is fitted, per channel, with an AR(1) density plus a white floor (sensor white noise
-and the reading's quantisation), S(f) = a/(1 − 2ρ·cos ω + ρ²) + b, a, b ≥ 0, ρ on a grid, least squares on
-the density relative to the measured one. The fitted law is extrapolated to the whole band.
+vehicle responds in, the noise everywhere. The noise's density is at most the residual's (misfit and noise
+are independent) and at most the measured reading's (response and noise are too), so per frequency the
+smaller of the two bounds it: a model whose simulated wheel rings at 30-80 Hz, where the measured wheel
+does not move, makes the residual's density there twenty times the reading's, and that ringing is not the
+sensor's noise. Above NOISE_BAND_FROM × the excitation's top frequency that bound is fitted, per channel,
+with an AR(1) density plus a white floor (sensor white noise and the reading's quantisation),
+S(f) = a/(1 − 2ρ·cos ω + ρ²) + b, a, b ≥ 0, ρ on a grid, least squares on the density relative to the
+measured one. The fitted law is extrapolated to the whole band.
 """
 
 from __future__ import annotations
@@ -128,13 +132,20 @@ def small_nnls(design: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, floa
 
 
 def measure_channel_noise(
-    residual_m: np.ndarray, sample_time_s: float, band_from_Hz: float, quantum_m: float = 0.0
+    residual_m: np.ndarray,
+    sample_time_s: float,
+    band_from_Hz: float,
+    quantum_m: float = 0.0,
+    measured_m: np.ndarray | None = None,
 ) -> ChannelNoise:
-    """The AR(1)-plus-white law fitted to the residual's density above band_from_Hz (module docstring)."""
+    """The AR(1)-plus-white law fitted to the residual's density above band_from_Hz, bounded per frequency
+    by the measured reading's own density when given (module docstring)."""
     fs = 1.0 / sample_time_s
     x = residual_m - np.mean(residual_m)
     nperseg = int(min(x.size, max(256, 2 ** int(np.log2(fs)))))
     frequency, density = welch_density(x, fs, nperseg)
+    if measured_m is not None:
+        density = np.minimum(density, welch_density(measured_m - np.mean(measured_m), fs, nperseg)[1])
     band = (frequency >= band_from_Hz) & (density > 0.0)
     if np.count_nonzero(band) < MIN_BINS:
         band = (frequency > 0.0) & (density > 0.0)
@@ -170,6 +181,8 @@ def measure_noise(
     channel's measured readings."""
     band_from = NOISE_BAND_FROM * excitation_top_Hz
     return {
-        name: measure_channel_noise(r, sample_time_s, band_from, reading_quantum_m(measured_m[name]))
+        name: measure_channel_noise(
+            r, sample_time_s, band_from, reading_quantum_m(measured_m[name]), measured_m[name]
+        )
         for name, r in residual_m.items()
     }
