@@ -25,7 +25,7 @@ empty: none) and simulated by estimator.validation, nothing left out:
 the Stribeck peak and its velocity come together; at most HINGES spring hinges. A delayed channel reads
 the true motion `delay` later, an offset channel reads it plus the offset, a lagging one through a
 first-order lag of that time constant, an averaging one its mean over that window, one with a gain error
-ε reads (1 + ε) times it: estimator.doctor.model.ChannelCorrections). An effect name this module does not
+ε reads (1 + ε) times it: estimator.laser_channels.ChannelCorrections). An effect name this module does not
 know is refused, never ignored, so a model is never simulated without part of itself.
 """
 
@@ -34,13 +34,14 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field, replace
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from estimator.damper import PiecewiseLinearCurve
 from estimator.dynamics import HINGES, AxlePhysics, CornerPhysics, QuarterCarPhysics
 from estimator.errors import UserError
+from estimator.laser_channels import ChannelCorrections
 from estimator.output_error import IdentifiedModel
 from estimator.recording import AXLE_CHANNELS, QUARTER_CAR_CHANNELS
 from estimator.vehicle import (
@@ -50,9 +51,6 @@ from estimator.vehicle import (
     VehicleParameters,
     relaxation_time_from_coefficient,
 )
-
-if TYPE_CHECKING:
-    from estimator.doctor.model import ChannelCorrections
 
 
 class ModelFormatError(UserError, ValueError):
@@ -142,10 +140,8 @@ class ModelEffects:
         )
 
     def channel_corrections(self) -> ChannelCorrections:
-        """The channel effects as the doctor's ChannelCorrections, which validate applies around the
-        simulation (estimator.validation)."""
-        from estimator.doctor.model import ChannelCorrections  # the doctor only where a model is validated
-
+        """The channel effects as ChannelCorrections, which validate applies around the simulation
+        (estimator.validation)."""
         return ChannelCorrections(
             dict(self.channel_delay_s),
             dict(self.sensor_offset_m),

@@ -21,8 +21,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from estimator.doctor.model import ChannelCorrections
 from estimator.errors import InvalidValueError
+from estimator.laser_channels import ChannelCorrections
 from estimator.model_io import ModelWithEffects
 from estimator.output_error import DIVERGED_GAP_M, IdentifiedModel, simulate_identified
 from estimator.recording import Recording

@@ -40,9 +40,9 @@ from estimator.doctor.catalog import (
     stribeck_velocity_m_s,
 )
 from estimator.doctor.columns import EquationSignals, restrict, with_columns
-from estimator.doctor.sensors import ChannelCorrections
 from estimator.equations import LinearResiduals, build
 from estimator.errors import InvalidValueError
+from estimator.laser_channels import ChannelCorrections
 from estimator.recording import Recording
 from estimator.signals import FilterChoice
 from estimator.solvers.exact import solve_exact

@@ -57,8 +57,7 @@ MAX_BACKOFF_S = 30.0
 @dataclass(frozen=True)
 class WorkerSettings:
     nice: int = WorkerLimits.worker_nice
-    """Added to the worker's nice value: the event loop keeps priority over the estimator (declared in
-    service.service_limits)."""
+    """Added to the worker's nice value (service.service_limits): the loop keeps priority over estimation."""
     progress_interval_s: float = 0.2
     """The worker sends DE progress at most this often."""
     persist_interval_s: float = 2.0
@@ -84,9 +83,7 @@ class _Current:
     progress: Progress | None = None
     cancel_requested: bool = False
     finishing: bool = False
-    """Its end is being written: /status no longer shows it (the database may already say it ended, and a
-    client that read that must not find it still running), while a cancel still finds it (and changes
-    nothing)."""
+    """Its end is being written (perhaps already in the database): /status no longer shows it."""
     persisted_at: float = -math.inf
     dispatched_at: float = field(default_factory=time.monotonic)
     """When it left the queue (time.monotonic()): its run time, for the metrics, is counted from here."""

@@ -1,4 +1,4 @@
-"""estimator.doctor.sensors: the laser channel's delay, first-order lag, averaging, gain and offset.
+"""estimator.laser_channels: the laser channel's delay, first-order lag, averaging, gain and offset.
 
 distort is checked against independent references (scipy.signal.lfilter of the same first-order filter,
 the analytic response to a ramp, a direct trapezoid moving average, a piecewise-linear signal refined 16
@@ -16,17 +16,16 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.signal import butter, lfilter, lfilter_zi, sosfiltfilt
 
-from estimator.doctor import model, sensors
-from estimator.doctor.sensors import (
+from estimator.errors import InvalidValueError
+from estimator.laser_channels import (
     MIN_INVERTED_GAIN,
     ChannelCorrections,
     first_order_lag,
     sensor_response,
     window_average,
 )
-from estimator.doctor.spline_shift import shift_signal
-from estimator.errors import InvalidValueError
 from estimator.recording import Recording
+from estimator.spline_shift import shift_signal
 
 SWEEP_S = 12.0
 EDGE_S = 0.5
@@ -248,8 +247,3 @@ def test_apply_corrects_every_channel() -> None:
 def test_bad_values_are_one_line_errors(kwargs: dict, message: str) -> None:
     with pytest.raises(InvalidValueError, match=message):
         ChannelCorrections(**kwargs)
-
-
-def test_model_reexports_channel_corrections() -> None:
-    """estimator.validation and estimator.model_io import it from estimator.doctor.model."""
-    assert model.ChannelCorrections is sensors.ChannelCorrections

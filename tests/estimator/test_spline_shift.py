@@ -10,7 +10,7 @@ from scipy import ndimage
 from scipy.special import chdtrc
 
 from estimator.doctor.residuals import chi_square_survival
-from estimator.doctor.spline_shift import shift_signal
+from estimator.spline_shift import shift_signal
 
 
 @pytest.mark.parametrize("seed", range(5))

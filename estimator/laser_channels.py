@@ -1,4 +1,5 @@
-"""What a laser channel does to the displacement it measures, and how the doctor undoes it.
+"""What a laser channel does to the displacement it measures, and how it is undone: the channel model
+validate applies around a simulation (estimator.validation) and the model doctor fits (estimator.doctor).
 
 A channel reads y = (1 + ε)·(H_delay·H_lag·H_average)(x) + offset of the true displacement x:
 - H_average, the amplifier's averaging (the ZX amplifier's averaging setting): the mean of x over the
@@ -19,7 +20,7 @@ distort, the forward model, causal and as a real amplifier does it, for a signal
   transform: that is exact for no input, warps frequency and, for τ < h/2, has a negative pole that rings
   at the Nyquist rate; this one is exact for the signal model the average uses too, its pole is in (0, 1)
   and it is what the foreign test world's amplifier does (simulators/foreign/sensors.py);
-- the delay is the sub-sample cubic-spline shift (estimator.doctor.spline_shift).
+- the delay is the sub-sample cubic-spline shift (estimator.spline_shift).
 
 correct, the inverse, in the frequency domain: the measured signal less its offset, over (1 + ε), is
 extended to damp its ends (below) and divided by the discrete frequency response of the lag and average
@@ -47,9 +48,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from estimator.digital_filters import first_order_filter
-from estimator.doctor.spline_shift import shift_signal
 from estimator.errors import InvalidValueError
 from estimator.recording import Recording
+from estimator.spline_shift import shift_signal
 
 MIN_INVERTED_GAIN = 0.25
 """correct inverts the sensor exactly where its response keeps at least this share of a frequency."""
