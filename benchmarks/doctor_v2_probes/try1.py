@@ -12,7 +12,7 @@ r = diagnose(rec, veh, DiagnoseOptions())
 print(label, index, [e["effect"] for e in truth["effects"]], [round(float(e["size"]),3) for e in truth["effects"]], f"{time.perf_counter()-t:.1f}s")
 print(r.conclusion)
 for rnd in r.rounds:
-    for c in sorted(rnd, key=lambda c: c.p_value)[:5]:
+    for c in sorted(rnd, key=lambda c: c.p_value)[:30]:
         print(f"   {c.effect:32s} W={c.equation_statistic:9.1f} LR={c.simulation_statistic:9.1f} q={c.unknowns} p_eq={c.equation_p:.2g} p_sim={c.simulation_p:.2g} gap={c.gap_ratio} {c.verdict}")
     print("   --")
-print("GOF", r.p_value, r.p_objective, r.p_gap, r.expected_gap_m, r.gap_after_m)
+print("GOF", r.p_value, r.gap_after_m)

@@ -16,7 +16,7 @@ Two kinds of family:
     damper curve's own slope (the curve has knots at 0 and ±10 mm/s, estimator.doctor.model.low_speed_grids);
   - tyre_stiffness, tyre_damping (a dashpot beside the tyre), anti_roll_bar (an axle without a stated bar);
   - tyre_liftoff has no unknown: where the tyre would pull on the plate its force is the static load.
-- *channel* families correct one sensor channel before the equations are built (estimator.doctor.sensors):
+- *channel* families correct one sensor channel before the equations are built (estimator.laser_channels):
   sensor_dynamics (a delay plus a first-order lag, or a delay plus a moving average: the ZX amplifier's
   averaging), sensor_gain (a scale error: a wrong head range or calibration) and sensor_offset. Their
   unknowns are found by Gauss-Newton steps (estimator.doctor.model).
@@ -91,7 +91,7 @@ CHANNEL_PARAMETERS = {
     (EffectName.SENSOR_GAIN, None): ("gain",),
     (EffectName.SENSOR_OFFSET, None): ("offset",),
 }
-"""The Gauss-Newton parameters (estimator.doctor.sensors.ChannelCorrections' kinds) of each channel family."""
+"""The Gauss-Newton parameters (estimator.laser_channels.ChannelCorrections' kinds) of each channel family."""
 
 
 def hinge_knots_m(recording: Recording, vehicle: VehicleParameters) -> tuple[float, ...]:

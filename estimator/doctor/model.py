@@ -3,7 +3,7 @@
 ModelStructure says which families a model has beyond the vehicle file's constants (the starting tyre model
 counts: kelvin-voigt starts with tyre_damping, maxwell with tyre_viscoelastic). fit() identifies it:
 
-1. the recording is corrected for the model's channel families (estimator.doctor.sensors);
+1. the recording is corrected for the model's channel families (estimator.laser_channels);
 2. the paper's equations are built on it (estimator.equations, with the damper grid and filters of the
    uncorrected recording, so every candidate shares its unknowns; the grid has knots at 0, ±5 and ±10 mm/s,
    low_speed_grids, so that the curve follows a damper's low-speed rise and a friction step is only what
