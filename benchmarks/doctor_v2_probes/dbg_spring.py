@@ -1,15 +1,18 @@
 import sys
+
 sys.path.insert(0, '/work/doctor-v2')
-import numpy as np
 from dataclasses import replace
-from simulators.foreign.manifest import draw_files, namespace_entropy
+
 from daq.formats.recording_csv import read_recording_csv
 from daq.formats.vehicle_file import read_vehicle
-from estimator.doctor.model import FitSettings, Reference, fit, starting_structure
 from estimator.doctor.catalog import EffectInstance, EffectName
+from estimator.doctor.fitting import fit
+from estimator.doctor.model import FitSettings, Reference, starting_structure
 from estimator.doctor.parameters import report
 from estimator.doctor.simulation import simulate_models
 from estimator.vehicle import TyreModel
+from simulators.foreign.manifest import draw_files, namespace_entropy
+
 label, index = sys.argv[1], int(sys.argv[2])
 truth = draw_files("dev", namespace_entropy("dev"), label, index, "/tmp/foreign-dev-cache")
 rec, veh = read_recording_csv(truth["csv"]), read_vehicle(truth["toml"])

@@ -1,4 +1,5 @@
-import sys, time
+import sys
+
 sys.path.insert(0, '/work/doctor-v2')
 from simulators.foreign.manifest import draw_files, namespace_entropy
 from daq.formats.recording_csv import read_recording_csv

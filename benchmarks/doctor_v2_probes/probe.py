@@ -1,21 +1,24 @@
 """Probe: Wald statistics of today's force candidates on dev draws of the foreign world."""
-import sys, json
-import numpy as np
+import json
+import sys
 from concurrent.futures import ProcessPoolExecutor
+
+import numpy as np
 
 CACHE = "/tmp/foreign-dev-cache"
 
 def one(args):
     label, index = args
-    from simulators.foreign.manifest import draw_files, namespace_entropy
     from daq.formats.recording_csv import read_recording_csv
     from daq.formats.vehicle_file import read_vehicle
-    from estimator.doctor.model import FitSettings, Reference, fit, starting_structure
-    from estimator.doctor.catalog import CATALOG, EffectInstance, EffectName
+    from estimator.doctor.catalog import EffectInstance, EffectName
+    from estimator.doctor.fitting import fit
+    from estimator.doctor.model import FitSettings, Reference, starting_structure
     from estimator.doctor.simulation import simulate_models
+    from estimator.identify import IdentifyOptions, identify
     from estimator.uncertainty import confidence_intervals
     from estimator.vehicle import TyreModel
-    from estimator.identify import identify, IdentifyOptions
+    from simulators.foreign.manifest import draw_files, namespace_entropy
     truth = draw_files("dev", namespace_entropy("dev"), label, index, CACHE)
     rec, veh = read_recording_csv(truth["csv"]), read_vehicle(truth["toml"])
     if veh.unknown:

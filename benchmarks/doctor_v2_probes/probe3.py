@@ -1,22 +1,25 @@
 """Probe 3: first forward-selection step of force families by HAC Wald tests, base curve with low-speed knots."""
-import sys, json
-import numpy as np
+import json
+import sys
 from concurrent.futures import ProcessPoolExecutor
+
+import numpy as np
 from scipy.stats import chi2
+
 CACHE = "/tmp/foreign-dev-cache"
 ALPHA = 0.05
 
 def one(args):
     label, index = args
-    from simulators.foreign.manifest import draw_files, namespace_entropy
     from daq.formats.recording_csv import read_recording_csv
     from daq.formats.vehicle_file import read_vehicle
     from estimator.doctor import model as M
     from estimator.doctor.columns import interval_mean, with_columns
     from estimator.dynamics import coulomb_sign
+    from estimator.identify import IdentifyOptions, identify
     from estimator.uncertainty import confidence_intervals
     from estimator.vehicle import TyreModel
-    from estimator.identify import identify, IdentifyOptions
+    from simulators.foreign.manifest import draw_files, namespace_entropy
     truth = draw_files("dev", namespace_entropy("dev"), label, index, CACHE)
     rec, veh = read_recording_csv(truth["csv"]), read_vehicle(truth["toml"])
     if veh.unknown:

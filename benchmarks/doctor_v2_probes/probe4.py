@@ -1,8 +1,11 @@
 """Probe 4: Wald statistics scaled by their parametric-bootstrap mean (a calibrated chi-square)."""
-import sys, json
-import numpy as np
+import json
+import sys
 from concurrent.futures import ProcessPoolExecutor
+
+import numpy as np
 from scipy.stats import chi2
+
 CACHE = "/tmp/foreign-dev-cache"
 ALPHA = 0.05
 B = 6
@@ -40,13 +43,13 @@ def walds(rec, veh, pts, warm=None):
 
 def one(args):
     label, index = args
-    from simulators.foreign.manifest import draw_files, namespace_entropy
     from daq.formats.recording_csv import read_recording_csv
     from daq.formats.vehicle_file import read_vehicle
     from estimator.doctor.expected import plausible_truth, synthetic_recording
     from estimator.doctor.noise import measure_noise
-    from estimator.doctor.simulation import simulate_models, diverged
-    from estimator.identify import identify, IdentifyOptions
+    from estimator.doctor.simulation import simulate_models
+    from estimator.identify import IdentifyOptions, identify
+    from simulators.foreign.manifest import draw_files, namespace_entropy
     truth = draw_files("dev", namespace_entropy("dev"), label, index, CACHE)
     rec, veh = read_recording_csv(truth["csv"]), read_vehicle(truth["toml"])
     if veh.unknown:

@@ -1,14 +1,19 @@
 """Diagnose DEV draws with the v2 doctor; one line per draw."""
-import sys, time, json
+import json
+import sys
+import time
+
 sys.path.insert(0, '/work/doctor-v2')
 from concurrent.futures import ProcessPoolExecutor
+
+
 def one(args):
     label, index, points = args
     sys.path.insert(0, '/work/doctor-v2')
-    from simulators.foreign.manifest import draw_files, namespace_entropy
     from daq.formats.recording_csv import read_recording_csv
     from daq.formats.vehicle_file import read_vehicle
     from estimator.doctor import DiagnoseOptions, diagnose
+    from simulators.foreign.manifest import draw_files, namespace_entropy
     truth = draw_files("dev", namespace_entropy("dev"), label, index, "/tmp/foreign-dev-cache")
     rec, veh = read_recording_csv(truth["csv"]), read_vehicle(truth["toml"])
     t = time.perf_counter()

@@ -1,9 +1,12 @@
-import sys, time, json
+import sys
+import time
+
 sys.path.insert(0, '/work/doctor-v2')
-from simulators.foreign.manifest import draw_files, namespace_entropy
 from daq.formats.recording_csv import read_recording_csv
 from daq.formats.vehicle_file import read_vehicle
 from estimator.doctor import DiagnoseOptions, diagnose
+from simulators.foreign.manifest import draw_files, namespace_entropy
+
 label, index = sys.argv[1], int(sys.argv[2])
 truth = draw_files("dev", namespace_entropy("dev"), label, index, "/tmp/foreign-dev-cache")
 rec, veh = read_recording_csv(truth["csv"]), read_vehicle(truth["toml"])

@@ -4,7 +4,8 @@ when the final model leaves more than its own noise would (a goodness-of-fit tes
 
 - catalog.py: the effect families, each a shape with a bounded number of unknowns;
 - columns.py: the signals families are made of and how a force enters the equations of motion;
-- model.py: a model with families added (ModelStructure) and its identification (fit);
+- model.py: a model with families added (ModelStructure) and the equations it is fitted on;
+- fitting.py: its identification (fit), channel parameters by bounded Gauss-Newton steps;
 - screening.py: a candidate moved by one linearised step from the current model, and its Wald test;
 - criteria.py: the tests (equations, free simulation, selection, goodness of fit), one object each;
 - simulation.py: output error of many fitted models in one Runge-Kutta run;

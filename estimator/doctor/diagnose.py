@@ -40,15 +40,8 @@ from estimator.doctor.criteria import (
     intersection_union,
 )
 from estimator.doctor.expected import plausible_truth, refit_on, synthetic_recording
-from estimator.doctor.model import (
-    FitSettings,
-    FittedModel,
-    ModelStructure,
-    Reference,
-    fit,
-    fit_added,
-    starting_structure,
-)
+from estimator.doctor.fitting import fit, fit_added
+from estimator.doctor.model import FitSettings, FittedModel, ModelStructure, Reference, starting_structure
 from estimator.doctor.noise import measure_noise
 from estimator.doctor.parameters import implausible, report
 from estimator.doctor.residuals import (

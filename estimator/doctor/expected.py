@@ -29,7 +29,8 @@ from dataclasses import replace
 import numpy as np
 
 from estimator.damper import PiecewiseLinearCurve
-from estimator.doctor.model import FitSettings, FittedModel, Reference, fit
+from estimator.doctor.fitting import fit
+from estimator.doctor.model import FitSettings, FittedModel, Reference
 from estimator.doctor.noise import ChannelNoise
 from estimator.doctor.pchip import Pchip
 from estimator.recording import Recording

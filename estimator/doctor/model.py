@@ -1,17 +1,14 @@
-"""A model with effect families added, and how it is fitted.
+"""A model with effect families added, and the equations it is identified on (estimator.doctor.fitting
+fits it).
 
 ModelStructure says which families a model has beyond the vehicle file's constants (the starting tyre model
-counts: kelvin-voigt starts with tyre_damping, maxwell with tyre_viscoelastic). fit() identifies it:
+counts: kelvin-voigt starts with tyre_damping, maxwell with tyre_viscoelastic). Its equations:
 
 1. the recording is corrected for the model's channel families (estimator.laser_channels);
 2. the paper's equations are built on it (estimator.equations, with the damper grid and filters of the
-   uncorrected recording, so every candidate shares its unknowns; the grid has knots at 0, ±5 and ±10 mm/s,
+   uncorrected recording, so every candidate shares its unknowns; the grid has knots at 0 and ±10 mm/s,
    low_speed_grids, so that the curve follows a damper's low-speed rise and a friction step is only what
-   the curve cannot make) and each force family appends its columns (estimator.doctor.catalog);
-3. the paper's objective is minimised exactly (estimator.solvers.exact). Channel parameters are found by
-   Gauss-Newton steps: the residual's change per unit of each parameter is taken by finite differences at
-   the current solution (channel_jacobian), appended as columns, solved jointly, repeated. With
-   tyre_liftoff the airborne samples come from the fitted tyre force and are re-determined once.
+   the curve cannot make) and each force family appends its columns (estimator.doctor.catalog).
 
 Speed: a diagnosis fits many models of one recording, most on the same corrected recording, so the
 equations built on it and the families' columns are kept per Reference (a small least-recently-used cache).
@@ -30,7 +27,6 @@ from estimator.damper import PiecewiseLinearCurve
 from estimator.doctor.catalog import (
     CATALOG,
     CHANNEL_PARAMETERS,
-    MAX_DELAY_S,
     SPRING_RATE_UNKNOWN,
     TYRE_RATE_UNKNOWN,
     EffectInstance,
@@ -39,25 +35,15 @@ from estimator.doctor.catalog import (
     hinge_unknowns,
     stribeck_velocity_m_s,
 )
-from estimator.doctor.columns import EquationSignals, restrict, with_columns
+from estimator.doctor.columns import EquationSignals, with_columns
 from estimator.equations import LinearResiduals, build
 from estimator.errors import InvalidValueError
 from estimator.laser_channels import ChannelCorrections
 from estimator.recording import Recording
 from estimator.signals import FilterChoice
-from estimator.solvers.exact import solve_exact
 from estimator.vehicle import TyreModel, VehicleConstant, VehicleParameters
 
-__all__ = ["ChannelCorrections", "FitSettings", "FittedModel", "ModelStructure", "Reference", "fit"]
-
-GAUSS_NEWTON_ITERATIONS = 4
-HALVINGS = 3
-"""A Gauss-Newton step that raises the objective is halved at most this many times."""
-GAUSS_NEWTON_STEP = {"delay": 5e-4, "lag": 5e-4, "average": 1e-3, "gain": 1e-3, "offset": 1e-4}
-"""Finite-difference step of each kind of channel parameter (s, s, s, relative, m)."""
-GAUSS_NEWTON_TOLERANCE = {"delay": 2e-6, "lag": 2e-6, "average": 4e-6, "gain": 1e-5, "offset": 1e-7}
-NONNEGATIVE = frozenset({"delay", "lag", "average"})
-"""Channel parameters that cannot be negative (a sensor lags, it does not lead), kept in [0, MAX_DELAY_S]."""
+__all__ = ["ChannelCorrections", "FitSettings", "FittedModel", "ModelStructure", "Reference"]
 
 
 @dataclass(frozen=True)
@@ -370,7 +356,7 @@ def _base_system(
     return key, base, signals
 
 
-def _build(
+def build_extended(
     reference: Reference,
     structure: ModelStructure,
     corrections: ChannelCorrections,
@@ -408,7 +394,7 @@ def _build(
     return with_columns(base, columns, offset), signals, airborne
 
 
-def _tyre_coefficients(system: LinearResiduals, theta: np.ndarray) -> tuple[float, float, float]:
+def tyre_coefficients(system: LinearResiduals, theta: np.ndarray) -> tuple[float, float, float]:
     """The fitted tyre's dashpot, Maxwell damping and stiffness correction (0 where the model lacks one)."""
     names = system.parameter_names
 
@@ -418,169 +404,13 @@ def _tyre_coefficients(system: LinearResiduals, theta: np.ndarray) -> tuple[floa
     return value("tyre_dashpot_Ns_per_m"), value("maxwell_damping_Ns_per_m"), value(TYRE_RATE_UNKNOWN)
 
 
-def feasible(kinds: list[str], values: np.ndarray) -> np.ndarray:
-    """Channel parameter values moved into what a sensor can be: delays, lags and averaging windows in
-    [0, MAX_DELAY_S], gain errors above −50%."""
-    values = np.array(values, dtype=float)
-    for j, kind in enumerate(kinds):
-        if kind in NONNEGATIVE:
-            values[j] = float(np.clip(values[j], 0.0, MAX_DELAY_S))
-        elif kind == "gain":
-            values[j] = max(values[j], -0.5)
-    return values
-
-
-def start_from(system: LinearResiduals, warm: FittedModel) -> np.ndarray:
-    """θ of a similar model, matched by unknown name (new unknowns start at zero)."""
-    known = dict(zip(warm.system.parameter_names, warm.theta, strict=True))
-    return np.array([known.get(name, 0.0) for name in system.parameter_names])
-
-
 def build_at(
     reference: Reference, current: FittedModel, structure: ModelStructure, values: np.ndarray
 ) -> tuple[LinearResiduals, EquationSignals, list[np.ndarray]]:
     """The extended system of `structure` with channel parameters `values`, its airborne samples (with
     tyre_liftoff) decided by the current model's tyre; airborne is [] without tyre_liftoff."""
-    tyre = _tyre_coefficients(current.system, current.theta)
-    system, signals, airborne = _build(
+    tyre = tyre_coefficients(current.system, current.theta)
+    system, signals, airborne = build_extended(
         reference, structure, corrections_of(structure.channel_parameters, values), None, tyre
     )
     return system, signals, airborne if structure.has(EffectName.TYRE_LIFTOFF) else []
-
-
-def minimise(
-    system: LinearResiduals, initial: np.ndarray | None, tolerance: float = 1e-10
-) -> tuple[np.ndarray, float]:
-    """θ minimising the paper's objective, and the objective: estimator.solvers.exact's IRLS handing over to
-    Newton steps, to `tolerance`, as identify does."""
-    solution = solve_exact(system, tolerance, initial=initial, certify=False)
-    return solution.theta, solution.objective
-
-
-def channel_jacobian(
-    reference: Reference,
-    model: FittedModel,
-    rows: np.ndarray | None = None,
-    which: list[int] | None = None,
-) -> dict[str, np.ndarray]:
-    """Per Gauss-Newton parameter of the model (those at the indices `which`, when given), the change of its
-    equation residual per unit of the parameter at the fitted θ (finite differences of GAUSS_NEWTON_STEP; the
-    airborne samples held), restricted to `rows` when given. Also what the Wald test of a channel family
-    treats as the family's columns."""
-    parameters = model.structure.channel_parameters
-    tyre = _tyre_coefficients(model.system, model.theta)
-    airborne = model.airborne or None
-    base = restrict(model.system, rows) if rows is not None else model.system
-    base_residual = base.residuals(model.theta)
-    jacobian = {}
-    for j, (effect, kind) in enumerate(parameters):
-        if which is not None and j not in which:
-            continue
-        values = np.array(model.channel_values, dtype=float)
-        values[j] += GAUSS_NEWTON_STEP[kind]
-        moved, _, _ = _build(reference, model.structure, corrections_of(parameters, values), airborne, tyre)
-        moved = restrict(moved, rows) if rows is not None else moved
-        jacobian[f"{kind} of {effect.label}"] = (
-            moved.residuals(model.theta) - base_residual
-        ) / GAUSS_NEWTON_STEP[kind]
-    return jacobian
-
-
-def fit(
-    reference: Reference,
-    structure: ModelStructure,
-    rows: np.ndarray | None = None,
-    warm: FittedModel | None = None,
-    iterations: int = GAUSS_NEWTON_ITERATIONS,
-) -> FittedModel:
-    """Identify `structure` on the reference recording, using only the selected samples where `rows` is
-    True (all when None). warm: a fitted model of a similar structure to start from (its unknowns and
-    channel parameters, matched by family and kind; new ones start at zero). iterations: Gauss-Newton steps
-    at most (channel families). A step that raises the objective is halved (at most HALVINGS times, then
-    the fit keeps its best point): a delay and a lag of one channel are nearly collinear, and a full step
-    clipped at zero can overshoot."""
-    parameters = structure.channel_parameters
-    kinds = [kind for _, kind in parameters]
-    start = dict(zip(warm.structure.channel_parameters, warm.channel_values, strict=True)) if warm else {}
-    values = np.array([start.get(p, 0.0) for p in parameters], dtype=float)
-    liftoff = structure.has(EffectName.TYRE_LIFTOFF)
-    tyre = (0.0, 0.0, 0.0)
-    previous, best, step = warm, None, np.zeros(len(parameters))
-    final_pass, steps, halvings = False, 0, 0
-    while True:
-        system, signals, airborne = _build(
-            reference, structure, corrections_of(parameters, values), None, tyre
-        )
-        used = restrict(system, rows) if rows is not None else system
-        theta, objective = minimise(used, start_from(used, previous) if previous else None)
-        model = FittedModel(
-            structure,
-            reference.vehicle,
-            theta,
-            system,
-            signals,
-            values.copy(),
-            airborne if liftoff else [],
-            objective,
-            reference.knots_m,
-        )
-        if parameters and best is not None and objective > best.objective:
-            if halvings == HALVINGS:
-                return best
-            halvings, step = halvings + 1, step / 2.0
-            values = feasible(kinds, best.channel_values + step)
-            continue
-        best, previous, halvings = model, model, 0
-        tyre = _tyre_coefficients(system, theta)
-        if final_pass or (not parameters and not (liftoff and steps == 0)):
-            return model
-        steps += 1
-        if not parameters:
-            continue  # once more with the airborne samples of the fitted tyre force
-        moved = bounded_step(used, theta, channel_jacobian(reference, model, rows), kinds, values)
-        step, values = moved - values, moved
-        small = all(abs(d) < GAUSS_NEWTON_TOLERANCE[k] for d, k in zip(step, kinds, strict=True))
-        affine = all(k == "offset" for k in kinds) and not liftoff
-        final_pass = small or affine or steps == iterations
-
-
-def bounded_step(
-    used: LinearResiduals,
-    theta: np.ndarray,
-    jacobian: dict[str, np.ndarray],
-    kinds: list[str],
-    values: np.ndarray,
-) -> np.ndarray:
-    """The channel values after one Gauss-Newton step, θ solved with them, under the bounds of `feasible`
-    (an active-set step): a parameter the step would push past its bound is held at the bound and the
-    others are solved again with its change in the offset. Clipping afterwards instead would keep the
-    others' share of a combined move: a delay and an averaging window of one channel fitted to a pure
-    3 ms delay step to +10 ms and −7 ms, and clipping the window at zero left the delay at 10 ms."""
-    names = list(jacobian)
-    fixed: dict[int, float] = {}
-    while True:
-        free = [j for j in range(len(names)) if j not in fixed]
-        offset = used.offset + sum((jacobian[names[j]] * change for j, change in fixed.items()), 0.0)
-        augmented = with_columns(used, {names[j]: jacobian[names[j]] for j in free}, offset)
-        solved = minimise(augmented, np.concatenate([theta, np.zeros(len(free))]), 1e-8)[0]
-        increment = np.zeros(len(names))
-        increment[free] = solved[used.n_params :]
-        for j, change in fixed.items():
-            increment[j] = change
-        moved = feasible(kinds, values + increment)
-        clipped = [j for j in free if moved[j] != values[j] + increment[j]]
-        if not clipped or len(free) == 1:
-            return moved
-        for j in clipped:
-            fixed[j] = moved[j] - values[j]
-
-
-def fit_added(
-    reference: Reference, current: FittedModel, family: EffectInstance, start: FittedModel
-) -> FittedModel:
-    """The current model with `family` added, identified from `start` (its one-step model), or from the
-    current model when that ends worse than the current model: a larger model cannot fit worse, and a
-    one step of nearly collinear channel parameters (a delay and a lag) can start far off."""
-    structure = current.structure.with_effect(family)
-    model = fit(reference, structure, warm=start)
-    return model if model.objective <= current.objective else fit(reference, structure, warm=current)

@@ -7,7 +7,7 @@ estimator is not: at the current model's θ, with the family's unknowns at zero,
 build each) are appended, and the linearised system is minimised once. Starting from a consistent estimate,
 one such step is asymptotically as efficient as the full fit (the one-step estimator of Le Cam), so the Wald
 statistic of the step's unknowns is the score test of the family at the current model. Only the family a
-round names is then fitted fully (estimator.doctor.model.fit).
+round names is then fitted fully (estimator.doctor.fitting.fit).
 """
 
 from __future__ import annotations
@@ -17,16 +17,8 @@ import numpy as np
 from estimator.doctor.catalog import EffectInstance
 from estimator.doctor.columns import with_columns
 from estimator.doctor.criteria import EquationTest, TestResult
-from estimator.doctor.model import (
-    FittedModel,
-    Reference,
-    bounded_step,
-    build_at,
-    channel_jacobian,
-    feasible,
-    minimise,
-    start_from,
-)
+from estimator.doctor.fitting import bounded_step, channel_jacobian, feasible, minimise, start_from
+from estimator.doctor.model import FittedModel, Reference, build_at
 
 
 def one_step(

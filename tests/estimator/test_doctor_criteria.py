@@ -28,7 +28,7 @@ from estimator.doctor.criteria import (
 )
 from estimator.doctor.criteria import TestResult as Outcome  # pytest would take a Test… class for tests
 from estimator.doctor.diagnose import DiagnoseOptions
-from estimator.doctor.model import minimise
+from estimator.doctor.fitting import minimise
 from estimator.equations import LinearResiduals
 from estimator.signals import FilterChoice
 from estimator.vehicle import TyreModel

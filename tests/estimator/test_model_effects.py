@@ -19,7 +19,8 @@ import pytest
 
 from estimator.damper import CurveBatch, PiecewiseLinearCurve
 from estimator.doctor.catalog import EffectInstance, EffectName
-from estimator.doctor.model import FitSettings, Reference, fit, starting_structure
+from estimator.doctor.fitting import fit
+from estimator.doctor.model import FitSettings, Reference, starting_structure
 from estimator.doctor.result import model_json
 from estimator.doctor.simulation import (
     MAX_SUBSTEPS,
