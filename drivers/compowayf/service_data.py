@@ -1,6 +1,6 @@
 """CompoWay/F service data (the PDU inside a frame): element widths, signed hex values, the area read and
 write requests, and the replies of 0503 (controller attributes) and 0601 (status). No I/O, no framing
-(that is drivers/compowayf/codec.py, which re-exports these names for its callers).
+(that is drivers/compowayf/codec.py).
 
 Both sides use it: the driver encodes requests and decodes replies; the simulated amplifier decodes
 requests and encodes replies, so the two agree by construction.

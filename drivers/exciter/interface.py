@@ -28,7 +28,7 @@ from collections.abc import Callable
 
 from drivers.exciter.codes import CommandCode, ExciterState, ExciterStatus
 from drivers.exciter.envelope import SafetyEnvelope
-from drivers.exciter.errors import EnvelopeBreachError, ExciterError
+from drivers.exciter.errors import EnvelopeBreachError, ExciterDeviceExceptionError, ExciterError
 from estimator.sweep import SweepSettings
 
 __all__ = ["ExciterState", "ExciterStatus", "PlateExciter"]
@@ -91,13 +91,23 @@ class PlateExciter(ABC):
         self._sweep = settings
 
     async def start(self) -> None:
-        """Start the configured sweep. Refused (ExciterDeviceFaultError) if the drive is in fault."""
+        """Start the configured sweep. Refused (ExciterDeviceFaultError) if the drive is in fault, also when
+        it trips between the status check and START and refuses START itself: a Modbus drive answers that
+        with an exception code, so its status is read again and a fault is raised as the fault it is (as
+        CAN's REJECTED_FAULT and CiA 402's own state check say it)."""
         if self._sweep is None:
             raise ExciterError("no sweep configured: call configure_sweep first")
         self.envelope.check(self._sweep)  # the envelope object may have been replaced since configure
         (await self.status()).raise_for_fault()
         self._moving = True  # from here on a lost answer may still mean a moving plate
-        await self._send_command(CommandCode.START)
+        try:
+            await self._send_command(CommandCode.START)
+        except ExciterDeviceExceptionError as refusal:
+            try:
+                (await self.status()).raise_for_fault()
+            except ExciterError as fault:
+                raise fault from refusal
+            raise
         self._running = True
         self._started_s = self.clock()
         self._last_keepalive_s = self._started_s  # START arms the drive's watchdog: a full period to go

@@ -136,7 +136,10 @@ def register(sub: argparse._SubParsersAction) -> None:
         help=f"worker processes of the local cluster, one thread each (default {DEFAULT_WORKERS})",
     )
     p.add_argument(
-        "--batch", type=int, default=None, help="recordings per Dask task (default: up to 4, by the archive)"
+        "--batch",
+        type=int,
+        default=None,
+        help="recordings per Dask task (default: up to 8, fewer towards the end)",
     )
     p.add_argument("--diagnose", action="store_true", help="run the model doctor on each recording too")
     p.add_argument("--tyre", choices=[t.value for t in TyreModel], default="maxwell")

@@ -16,6 +16,7 @@ a recording's bytes only shortly before a worker needs them, so an archive of an
 from __future__ import annotations
 
 import logging
+import math
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -61,12 +62,36 @@ recordings: 6.1 s against 2.8 s of thread CPU, same with the variable set in a p
 cluster leaves it unset; workers of a scheduler given by address are started by whoever runs them, who
 should do the same (this key set to null in their Dask configuration; BENCHMARKS.md, "Archive
 re-analysis")."""
+KEEP_FREED_MEMORY = {
+    "distributed.nanny.pre-spawn-environ.MALLOC_MMAP_THRESHOLD_": str(64 << 20),
+    "distributed.nanny.pre-spawn-environ.MALLOC_TOP_PAD_": str(64 << 20),
+}
+"""glibc's allocator in the local cluster's workers set up as `shockbench identify` sets up its own
+(service.cli.allocator: arrays up to 64 MiB from the heap, which grows 64 MiB at a time and keeps freed
+memory for reuse), read by glibc when the worker starts. By default every array above 128 kB was a fresh
+mapping whose pages fault in zeroed: about 9 000 page faults and 17 ms of system time a 12 s recording (of
+some 110 ms), measured in-process with and without. Workers of a scheduler given by address should be
+started with the same two variables."""
 ONE_BLAS_THREAD = {
     f"distributed.nanny.pre-spawn-environ.{name}": value for name, value in BLAS_THREADS.items()
 }
 """The local cluster's workers start with one BLAS thread (set before numpy loads)."""
-MAX_BATCH = 4
-"""Recordings per task at most: Dask's per-task cost shared, the last tasks still short."""
+QUIET_CLUSTER = {
+    "distributed.worker.profile.enabled": False,
+    "distributed.admin.tick.interval": "1s",
+    "distributed.worker.memory.monitor-interval": "1s",
+    "distributed.admin.system-monitor.interval": "2s",
+}
+"""What the local cluster's scheduler, nannies and workers do beside the work, cut down: the workers'
+statistical profiler (every 10 ms, on the worker's event loop thread, which takes the GIL from the analysis
+for it), every server's event-loop health tick (every 20 ms), the memory monitor (every 100 ms, a psutil call
+per worker in the client's process) and the system monitor (every 500 ms). They serve the dashboard's
+plots and warnings only, and they ran on the same cores as the analyses: 5 ms a recording of the client
+process's CPU (12 against 7 ms with them cut down, 100 recordings on 2 workers)."""
+MAX_BATCH = 8
+"""Recordings per task at most: Dask's per-task cost (about 7 ms of the client's and the local scheduler's
+CPU, taken from the workers' cores) shared, the last tasks short all the same (batched). 100 recordings on
+2 workers: 19 tasks and 4.0 ms of client CPU a recording, against 29 tasks and 4.7 ms with at most 4."""
 IN_FLIGHT_PER_WORKER = 3
 """Batches submitted per worker ahead of the results."""
 
@@ -77,11 +102,18 @@ def batch_size(recordings: int, workers: int) -> int:
 
 
 def batched(work: Sequence[Any], size: int, workers: int) -> list[list[Any]]:
-    """`work` in batches of `size`, but the last 2·size·workers one at a time: the workers then end
-    together, instead of one finishing a whole batch while the others wait."""
-    tail = min(len(work), 2 * size * workers) if size > 1 else 0
-    head = len(work) - tail
-    return [list(work[i : min(i + size, head)]) for i in range(0, head, size)] + [[w] for w in work[head:]]
+    """`work` in batches of `size`, shorter towards the end: each batch at most a (2·workers)-th of what is
+    left, down to single recordings, so the workers end together instead of one finishing a whole batch
+    while the others wait, in fewer tasks than single recordings all along the end (a task costs the
+    client and the scheduler about 7 ms of CPU on the workers' cores)."""
+    batches: list[list[Any]] = []
+    start = 0
+    while start < len(work):
+        left = len(work) - start
+        step = max(1, min(size, math.ceil(left / (2 * max(1, workers)))))
+        batches.append(list(work[start : start + step]))
+        start += step
+    return batches
 
 
 @dataclass(frozen=True)
@@ -156,7 +188,7 @@ def dask_client(settings: RunSettings) -> Iterator[Client]:
             yield client
         return
     with (
-        dask.config.set({**NO_MALLOC_TRIM, **ONE_BLAS_THREAD}),
+        dask.config.set({**NO_MALLOC_TRIM, **KEEP_FREED_MEMORY, **ONE_BLAS_THREAD, **QUIET_CLUSTER}),
         LocalCluster(
             n_workers=settings.workers,
             threads_per_worker=1,

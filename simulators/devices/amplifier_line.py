@@ -15,11 +15,13 @@ from drivers.compowayf.codec import (
     CommandFrame,
     build_end_code_response,
     build_response,
-    is_hex,
     parse_command,
     split_frame,
 )
 from drivers.compowayf.errors import CompowayFError, EndCodeError
+from drivers.compowayf.service_data import (
+    is_hex,
+)
 from simulators.devices.amplifier_node import BUFFER_SIZE_BYTES, SimulatedAmplifier
 
 GARBAGE_REPLY = b"\xff\x00\x7e#GARBAGE#\x03\x5a"

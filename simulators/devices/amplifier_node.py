@@ -14,8 +14,11 @@ import numpy as np
 
 from drivers.compowayf.codec import (
     CommandFrame,
-    ControllerAttributes,
     Service,
+)
+from drivers.compowayf.layout import COUNTER_MODULUS, AmplifierConfig, MeasuredArea
+from drivers.compowayf.service_data import (
+    ControllerAttributes,
     StatusReport,
     decode_parameter_area_request,
     decode_variable_area_read,
@@ -24,7 +27,6 @@ from drivers.compowayf.codec import (
     parameter_element_width,
     variable_element_width,
 )
-from drivers.compowayf.layout import COUNTER_MODULUS, AmplifierConfig, MeasuredArea
 from simulators.coupling import PlatePhysics
 from simulators.devices.sensor_heads import ZX_LD40, HeadModel, SimulatedHead
 

@@ -13,15 +13,21 @@ from hypothesis import strategies as st
 from drivers.compowayf import errors
 from drivers.compowayf.codec import (
     CommandFrame,
-    ControllerAttributes,
     ResponseFrame,
     Service,
-    StatusReport,
     bcc,
     build_command,
     build_end_code_response,
     build_response,
     check_response,
+    parse_command,
+    parse_response,
+    split_frame,
+    split_reply,
+)
+from drivers.compowayf.service_data import (
+    ControllerAttributes,
+    StatusReport,
     decode_int,
     decode_parameter_area_request,
     decode_values,
@@ -32,10 +38,6 @@ from drivers.compowayf.codec import (
     encode_parameter_area_write,
     encode_variable_area_read,
     max_elements_per_read,
-    parse_command,
-    parse_response,
-    split_frame,
-    split_reply,
 )
 
 # Variable area read, node 01, type C0, address 0000, bit 00, 1 element.

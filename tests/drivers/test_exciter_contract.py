@@ -234,6 +234,31 @@ async def _drive_fault(r: Rig) -> None:
 test_drive_fault = on_each(_drive_fault)
 
 
+async def _drive_refuses_start_in_fault(r: Rig) -> None:
+    """A drive that trips after the host's status check refuses START itself; every back end raises that
+    as a drive fault with the drive's code (a Modbus drive answers with an exception code, CAN with
+    REJECTED_FAULT, CiA 402 shows it in its state), and the plate stays at rest."""
+    await r.exciter.configure_sweep(SWEEP)
+    healthy = await r.exciter.status()
+    r.inject_drive_fault(DRIVE_FAULT)
+    read_status, reads = r.exciter.status, []
+
+    async def status_tripping_after_first_read() -> ExciterStatus:
+        reads.append(r.now_s())
+        return healthy if len(reads) == 1 else await read_status()
+
+    r.exciter.status = status_tripping_after_first_read  # type: ignore[method-assign]
+    with pytest.raises(ExciterDeviceFaultError) as info:
+        await r.exciter.start()
+    assert info.value.fault_code == DRIVE_FAULT and len(reads) >= 1
+    r.exciter.status = read_status  # type: ignore[method-assign]
+    status = await r.run_for(0.3)
+    assert (status.state, status.fault_code, status.position_m) == (ExciterState.FAULT, DRIVE_FAULT, 0.0)
+
+
+test_drive_refuses_start_in_fault = on_each(_drive_refuses_start_in_fault)
+
+
 async def _silent_drive(r: Rig) -> None:
     """A drive that does not answer is a timeout, within the heartbeat supervision; then the link recovers."""
     await r.exciter.status()
