@@ -200,7 +200,7 @@ class _Doctor:
                     k = candidates.index(candidate)
                     scores[k] = _calibrated(scores[k], *scales[candidate])
                     log_p[candidate] = _log_p(scores[k], *scales[candidate])
-            chosen = Selection(options.alpha).choose(_liftoff_first(log_p, bound))
+            chosen = Selection(options.alpha).choose(log_p)
             scores = [_verdict(s, chosen, bound) for s in scores]
             rounds.append(scores)
             if chosen is None:
@@ -395,14 +395,6 @@ def score_candidate(
         parameters=report(candidate, model),
         verdict=reason or "tested",
     )
-
-
-def _liftoff_first(log_p: dict[EffectInstance, float], bound: float) -> dict[EffectInstance, float]:
-    """The round's p-values, or tyre_liftoff's alone when it is significant: it adds no unknown (it cannot
-    fit noise), and while the model's tyre pulls on the plate every other family is tested against a model
-    that is physically impossible (a plate cannot pull), whose misfit they would stand in for."""
-    liftoff = {c: p for c, p in log_p.items() if c.name is EffectName.TYRE_LIFTOFF and p <= math.log(bound)}
-    return liftoff or log_p
 
 
 def _log_p(score: CandidateScore, wald_scale: float = 1.0, ratio_scale: float = 1.0) -> float:
