@@ -8,18 +8,20 @@ The archive: `--distinct` quarter-car sweeps of `--seconds` s at 1 kHz (simulato
 car, seeds 0..distinct-1), each copied until there are `--recordings` CSV files, every copy with bytes of
 its own (a comment line names the copy: the database stores each once by its sha256), one vehicle.toml.
 
-Measured in this process (no OPENBLAS_NUM_THREADS set here: the workers set their own): first the import,
-then `--repeats` rounds of the other three side by side (the machine's speed drifts from minute to minute
-even when nothing else runs on it), medians reported:
+Measured (no OPENBLAS_NUM_THREADS set here: the workers set their own): first the import, then `--repeats`
+rounds of the others side by side (the machine's speed drifts from minute to minute even when nothing else
+runs on it), medians reported:
 1. import: `shockbench archive import`'s code into a fresh SQLite file: recordings per second, bytes per
    recording as files and as stored;
 2. in-process: service.reanalyse.task.run_task on each recording (after one warm-up; glibc's allocator
    set up as `shockbench identify` and the workers set it up), its mean wall time: the reference cost of
    one identification here;
 3. workers1 and workers2: service.reanalyse.run.reanalyse on the database (a LocalCluster of 1 and 2
-   worker processes, recordings shipped as bytes in batches), wall time from the call to its return, the
-   cluster's start and stop included, and the mean time a worker spent per recording (Outcome.seconds:
-   the analysis, reading included) against the in-process cost.
+   worker processes, recordings shipped as bytes in batches), each run in a fresh Python process with only
+   what `shockbench reanalyse` has loaded when it starts its cluster (Dask's import is part of the start),
+   wall time from the call to its return, the cluster's start and stop included, and the mean time a
+   worker spent per recording (Outcome.seconds: the analysis, reading included) against the in-process
+   cost.
 The per-recording breakdown divides each run's wall time into the cluster's start (until its client is up,
 workers set up), worker compute (worker time over the workers), and the rest (shipping the bytes,
 scheduling, storing results, the last batch's tail, the cluster's stop).
@@ -33,23 +35,23 @@ the last one kept whatever it saw); the discarded runs are printed.
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import platform
 import resource
 import shutil
 import statistics
+import subprocess
 import sys
 import tempfile
 import time
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_reanalyse import make_archive  # noqa: E402  (the archive bench_reanalyse.py makes, unique copies)
-
 if TYPE_CHECKING:
     from service.reanalyse.sources import Item
 
@@ -94,8 +96,28 @@ class ClusterRun:
 
 
 def timed_run(url: str, workers: int) -> ClusterRun:
-    """One re-analysis of the whole database on a local cluster of `workers` processes."""
-    from service.reanalyse.run import RunSettings, reanalyse
+    """One re-analysis of the whole database on a local cluster of `workers` processes, in a fresh Python
+    process (run_alone) that has loaded only what `shockbench reanalyse` has when it starts its cluster
+    (Dask itself is imported as part of the start, as in the command). Other processes' CPU is read here,
+    around it."""
+    machine, own = busy_cpu_s(), own_cpu_s()
+    child = subprocess.run(
+        [sys.executable, __file__, "--run-alone", url, str(workers)],
+        capture_output=True,
+        text=True,
+    )
+    if child.returncode != 0:
+        raise SystemExit(f"the re-analysis failed:\n{child.stderr}")
+    others = others_cpu_s(machine, own)
+    *lines, result = child.stdout.splitlines()
+    print(*lines, sep="\n", flush=True)
+    return ClusterRun(**json.loads(result), others_cpu_s=others)
+
+
+def run_alone(url: str, workers: int) -> None:
+    """timed_run's process: the re-analysis, its client's CPU a recording printed, then its ClusterRun (but
+    for others_cpu_s) as one JSON line."""
+    from service.reanalyse import run
     from service.reanalyse.sources import items_in_database, open_archive
 
     database = open_archive(url)
@@ -110,20 +132,20 @@ def timed_run(url: str, workers: int) -> ClusterRun:
 
     try:
         items = items_in_database(database)
-        machine, own = busy_cpu_s(), own_cpu_s()
         start = time.perf_counter()
-        settings = RunSettings(out=None, workers=workers, database=database)
+        settings = run.RunSettings(out=None, workers=workers, database=database)
         cpu = time.process_time()
         client_up = lambda client: up.append(time.perf_counter())  # noqa: E731
-        reanalyse(items, settings, lambda _l: None, progress, client_up)
+        run.reanalyse(items, settings, lambda _l: None, progress, client_up)
         wall = time.perf_counter() - start
         client_cpu = time.process_time() - cpu  # this process: the client and the local scheduler
-        others = others_cpu_s(machine, own)
     finally:
         database.dispose()
     print(f"    client and scheduler CPU {client_cpu / len(seconds) * 1e3:.1f} ms a recording", flush=True)
     stop = start + wall - last[0]
-    return ClusterRun(wall, up[0] - start, statistics.mean(seconds), len(seconds), stop, others)
+    fields = asdict(ClusterRun(wall, up[0] - start, statistics.mean(seconds), len(seconds), stop, None))
+    del fields["others_cpu_s"]
+    print(json.dumps(fields), flush=True)
 
 
 def in_process_loop(items: list[Item]) -> float:
@@ -170,6 +192,10 @@ def measured(url: str, workers: int, max_others_cpu_s: float | None, attempts: i
 
 
 def main() -> None:
+    if sys.argv[1:2] == ["--run-alone"]:
+        url, workers = sys.argv[2:4]
+        run_alone(url, int(workers))
+        return
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
@@ -190,7 +216,9 @@ def main() -> None:
     )
     args = parser.parse_args()
 
-    from service.cli.allocator import keep_freed_memory
+    from bench_reanalyse import make_archive  # the archive bench_reanalyse.py makes, unique copies
+
+    from service.allocator import keep_freed_memory
     from service.reanalyse.archive import import_folder
     from service.reanalyse.sources import items_in_folder
     from service.reanalyse.task import Analysis, AnalysisOptions, Task, run_task, warm_up
@@ -238,15 +266,16 @@ def main() -> None:
     print(f"| in-process loop | {in_process * len(items):.2f} s | - | {in_process * 1e3:.0f} ms | 1.00× |")
     walls = {}
     for workers in (1, 2):
-        wall = walls[workers] = statistics.median(r.wall_s for r in runs[workers])
-        to_first = statistics.median(r.start_s for r in runs[workers])
-        per = statistics.median(r.worker_s for r in runs[workers])
+        done = runs[workers]
+        wall = walls[workers] = statistics.median(r.wall_s for r in done)
+        to_first = statistics.median(r.start_s for r in done)
+        per = statistics.median(r.worker_s for r in done)
         print(
             f"| {workers} worker(s) | {wall:.2f} s | {to_first:.2f} s | {per * 1e3:.0f} ms | "
             f"{per / in_process:.2f}× |"
         )
-        n = runs[workers][0].recordings
-        stop = statistics.median(r.stop_s for r in runs[workers])
+        n = done[0].recordings
+        stop = statistics.median(r.stop_s for r in done)
         rest = wall - to_first - stop - per * n / workers
         print(
             f"  wall per recording, {workers} worker(s): {wall / n * 1e3:.0f} ms = cluster start "

@@ -152,12 +152,13 @@ def _substeps(
     # a population (the output-error refinement) carries one tyre damping per column
     dashpot = float(np.max(np.abs(model.tyre_damping_Ns_per_m))) if kelvin_voigt else 0.0
     corners = [physics.corner] if isinstance(physics, QuarterCarPhysics) else [physics.left, physics.right]
-    friction = max(float(np.max(np.abs(c.coulomb_friction_N))) for c in corners)
     dashpot = max(dashpot, *(float(np.max(np.abs(c.tyre_dashpot_Ns_per_m))) for c in corners))
-    # a Stribeck peak steps at zero velocity like the friction (absent where its velocity is zero)
-    stribeck = max(
-        float(np.max(np.abs(np.where(np.asarray(c.stribeck_velocity_m_s) != 0, c.stribeck_peak_N, 0.0))))
-        for c in corners
+    # every corner's and column's friction law: the steepest counts (dynamics.friction_slope_Ns_per_m)
+    laws = [
+        np.broadcast_arrays(c.coulomb_friction_N, c.stribeck_peak_N, c.stribeck_velocity_m_s) for c in corners
+    ]
+    friction, stribeck, stribeck_velocity = (
+        np.concatenate([np.ravel(law[k]) for law in laws]) for k in range(3)
     )
     return model_substeps(
         curves,  # type: ignore[arg-type]
@@ -168,6 +169,7 @@ def _substeps(
         coulomb_friction_N=friction,
         wheel_dashpot_Ns_per_m=dashpot,
         stribeck_peak_N=stribeck,
+        stribeck_velocity_m_s=stribeck_velocity,
     )
 
 

@@ -54,6 +54,7 @@ class BenchState:
     model: str
     simulated: bool
     busy: bool
+    """A sweep runs, or the end of the one that ran is being stored (its `done`)."""
     sweep_id: str | None
     progress: SweepProgress | None
     devices: list[dict[str, str]] = field(default_factory=list)
@@ -79,6 +80,8 @@ class BenchController:
         self._lock = threading.Lock()
         self._thread: threading.Thread | None = None
         self._sweep_id: str | None = None
+        self._ending: str | None = None
+        """A sweep whose thread has ended and whose end its `done` is storing: reported busy until then."""
         self._progress: SweepProgress | None = None
         self._last_progress: SweepProgress | None = None  # kept after the sweep: what the devices delivered
         self._abort = threading.Event()
@@ -143,8 +146,8 @@ class BenchController:
                 name=self.config.name,
                 model=str(self.config.model),
                 simulated=self.simulated,
-                busy=self._thread is not None,
-                sweep_id=self._sweep_id,
+                busy=self._thread is not None or self._ending is not None,
+                sweep_id=self._sweep_id or self._ending,
                 progress=self._progress,
                 devices=list(self._devices),
             )
@@ -252,10 +255,19 @@ class BenchController:
         except Exception as exc:  # the thread must report, whatever happened
             error = f"{type(exc).__name__}: {exc}"
         finally:
+            # The bench is free for the next sweep now (the scheduler, woken by `done`, may start it), but
+            # the state reads busy with this sweep until `done` has stored its end: a screen that saw the
+            # bench free opened the sweep and found it still "running" in the database, with no result.
             with self._lock:
                 self._thread = None
                 self._sweep_id = None
-            done(sweep_id, outcome, error)
+                self._ending = sweep_id
+            try:
+                done(sweep_id, outcome, error)
+            finally:
+                with self._lock:
+                    if self._ending == sweep_id:
+                        self._ending = None
 
     def _abort_reason(self) -> str:
         return SERVICE_STOPPED if self._service_stopping else "aborted by the operator"

@@ -177,6 +177,19 @@ def test_importing_the_estimator_loads_neither_numpy_nor_the_doctor() -> None:
     assert "'estimator.identify'" in after.stdout and "estimator.doctor" not in after.stdout
 
 
+def test_a_sweep_on_the_hardware_does_not_load_the_mocks() -> None:
+    """The product's sweep (daq.sweep.run, its devices and the service's sweep route) reaches the real
+    drivers; the in-process mocks (drivers.mock, daq.sweep.mock_devices) are for tests only."""
+    program = (
+        "import sys, daq.sweep.run, daq.sweep.devices, service.api.app\n"
+        "print(sorted(m for m in sys.modules if m in ('drivers.mock', 'daq.sweep.mock_devices')))\n"
+    )
+    loaded = subprocess.run(
+        [sys.executable, "-c", program], capture_output=True, text=True, cwd=ROOT, timeout=120, check=True
+    )
+    assert loaded.stdout.strip() == "[]"
+
+
 # ---- the checkers see what they look for ----------------------------------------------------------------
 
 

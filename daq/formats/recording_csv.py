@@ -94,18 +94,8 @@ def read_recording_csv(path: Path | str) -> Recording:
     path = Path(path)
     if not path.is_file():
         raise RecordingFormatError(f"{path}: no such file")
-    return parse_recording_csv(path.read_bytes(), path)
-
-
-def parse_recording_csv(data: bytes, path: Path | str) -> Recording:
-    """The recording in a recording CSV's bytes, as read_recording_csv reads the file at `path` (which the
-    one-line errors name): the same checks, the same numbers (a worker holding a recording's bytes reads
-    them without writing a file)."""
-    path = Path(path)
-    text = _text(data, path)
-    fast = _read_plain(path, data, text)
-    if fast is None:
-        fast = _read_well_formed(path, text)
+    text = _text(path.read_bytes(), path)
+    fast = _read_well_formed(path, text)
     if fast is not None:
         return fast
     layout = _layout(io.StringIO(text, newline=""), path)  # lines as an editor numbers them
@@ -155,51 +145,6 @@ def _read_well_formed(path: Path, text: str) -> Recording | None:
     if data.shape != (len(data_lines), len(header)) or not np.all(np.isfinite(data)):
         return None
     return _from_table(path, header, data, layout.rows[0][0], layout.metadata)
-
-
-PLAIN_ROW_BYTES = b"0123456789+-.eE,\n"
-"""All that the data rows of a plain recording CSV hold (as write_recording_csv writes them): numbers in
-decimal or exponent notation, commas and line feeds."""
-
-
-def _header_end(text: str) -> int | None:
-    """Where the line after the header starts: the header is the first line neither blank nor a '#' line
-    (None: no such line ends with a line feed)."""
-    start = 0
-    while (end := text.find("\n", start)) >= 0:
-        line = text[start:end].strip()
-        if line and not line.startswith("#"):
-            return end + 1
-        start = end + 1
-    return None
-
-
-def _read_plain(path: Path, data: bytes, text: str) -> Recording | None:
-    """The recording of a plain file (PLAIN_ROW_BYTES after the header: no blank, comment, CR or other line
-    in the data rows), its rows parsed in one piece by numpy's C reader; None otherwise, and
-    _read_well_formed takes it. Why: _read_well_formed sorts every line in Python before numpy reads them;
-    only the lines before the header need sorting."""
-    end = _header_end(text)
-    if end is None:
-        return None
-    head = text[:end]
-    lines = head.splitlines()
-    if len(lines) != head.count("\n"):  # a line break other than a line feed: the readers below count them
-        return None
-    rows = data[len(head.encode("utf-8")) :]
-    if not rows or rows.startswith(b"\n") or b"\n\n" in rows or rows.translate(None, PLAIN_ROW_BYTES):
-        return None
-    try:
-        layout = _layout(lines, path)
-        header = layout.header or []  # the last of `lines` (_header_end)
-        _check_header(path, header, 0)
-        table = np.loadtxt(io.BytesIO(rows), delimiter=",", comments=None, dtype=float, ndmin=2)
-    except (RecordingFormatError, ValueError):
-        return None
-    count = rows.count(b"\n") + (not rows.endswith(b"\n"))
-    if count < 3 or table.shape != (count, len(header)) or not np.all(np.isfinite(table)):
-        return None
-    return _from_table(path, header, table, len(lines) + 1, layout.metadata)
 
 
 def _from_table(

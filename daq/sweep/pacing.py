@@ -4,7 +4,7 @@
   (lasers sharing an RS-485 line take turns on it) polls its sources: streaming amplifiers every
   `poll_interval_s`, polled ones back to back, as fast as the line answers. Time is time.monotonic.
 * `SimulatedPacing`: a simulated bench on a manual clock (any `SteppedSimulation`: the service's
-  SimulatedBench, or drivers.mock.ManualClock under the mock devices of daq.sweep.devices.MockDevices),
+  SimulatedBench, or drivers.mock.ManualClock under the mock devices of daq.sweep.mock_devices.MockDevices),
   for tests and `shockbench sweep --simulated`. `wait(dt)` moves the bench's clock in steps of
   `poll_interval_s` and polls every source after each step, so a run is deterministic and needs no sleeps
   (and runs as fast as the machine allows).

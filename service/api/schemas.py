@@ -269,7 +269,7 @@ class BenchOut(BaseModel):
     name: str
     model: str = Field(description="quarter-car or axle")
     simulated: bool = Field(description="the in-process simulated bench (serve --simulated)")
-    busy: bool = Field(description="a sweep is running")
+    busy: bool = Field(description="a sweep is running, or the end of the one that ran is being stored")
     sweep_id: int | None = Field(None, description="the running sweep")
     progress: SweepProgressOut | None = Field(None, description="the running sweep's latest progress")
 
@@ -287,7 +287,7 @@ SweepSettingsOut: type[BaseModel] = create_model(
 class LiveStateEvent(BaseModel):
     """The data of a live stream's `state` event (GET /bench/live)."""
 
-    busy: bool = Field(description="a sweep is running")
+    busy: bool = Field(description="a sweep is running, or the end of the one that ran is being stored")
     sweep_id: int | None = Field(None, description="the running sweep")
     progress: SweepProgressOut | None = Field(None, description="the running sweep's latest progress")
     devices: list[dict[str, str]] = Field(

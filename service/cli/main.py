@@ -79,7 +79,7 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
 
 
 SHORT_LIVED_COMMANDS = frozenset({"identify", "diagnose", "validate", "simulate", "demo", "fit-tanh"})
-"""Commands that run one computation and exit: their allocator keeps freed memory (service.cli.allocator),
+"""Commands that run one computation and exit: their allocator keeps freed memory (service.allocator),
 and their objects are frozen before the interpreter's shutdown."""
 
 
@@ -88,7 +88,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     # as the console script's process (argv None), not as a function called by a process that goes on (tests)
     short_lived = argv is None and bool(arguments) and arguments[0] in SHORT_LIVED_COMMANDS
     if short_lived:
-        from service.cli.allocator import keep_freed_memory
+        from service.allocator import keep_freed_memory
 
         keep_freed_memory()
     parser = build_parser(arguments[0] if arguments else None)

@@ -54,28 +54,11 @@ DASK_NEEDED_FOR = "shockbench reanalyse (on dask.distributed)"
 """What needs the [cluster] extra, in the one line that says it is missing (service.extras)."""
 CONNECT_TIMEOUT = "10s"
 """How long to try a scheduler given by address before a one-line error."""
-NO_MALLOC_TRIM = {"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}
-"""Dask's nannies start workers with MALLOC_TRIM_THRESHOLD_=65536 (to give memory back to the system
-sooner); setting it turns off glibc's adaptive mmap threshold, so every array of the estimator above 128 kB
-is a fresh mmap whose pages fault in zeroed: an identification took 2.2 times the CPU time (30 short
-recordings: 6.1 s against 2.8 s of thread CPU, same with the variable set in a plain loop). The local
-cluster leaves it unset; workers of a scheduler given by address are started by whoever runs them, who
-should do the same (this key set to null in their Dask configuration; BENCHMARKS.md, "Archive
-re-analysis")."""
-KEEP_FREED_MEMORY = {
-    "distributed.nanny.pre-spawn-environ.MALLOC_MMAP_THRESHOLD_": str(64 << 20),
-    "distributed.nanny.pre-spawn-environ.MALLOC_TOP_PAD_": str(64 << 20),
-}
-"""glibc's allocator in the local cluster's workers set up as `shockbench identify` sets up its own
-(service.cli.allocator: arrays up to 64 MiB from the heap, which grows 64 MiB at a time and keeps freed
-memory for reuse), read by glibc when the worker starts. By default every array above 128 kB was a fresh
-mapping whose pages fault in zeroed: about 9 000 page faults and 17 ms of system time a 12 s recording (of
-some 110 ms), measured in-process with and without. Workers of a scheduler given by address should be
-started with the same two variables."""
 ONE_BLAS_THREAD = {
     f"distributed.nanny.pre-spawn-environ.{name}": value for name, value in BLAS_THREADS.items()
 }
-"""The local cluster's workers start with one BLAS thread (set before numpy loads)."""
+"""The local cluster's workers start with one BLAS thread (set before numpy loads); those of a scheduler
+given by address are limited when they join (task.warm_up)."""
 QUIET_CLUSTER = {
     "distributed.worker.profile.enabled": False,
     "distributed.admin.tick.interval": "1s",
@@ -188,7 +171,7 @@ def dask_client(settings: RunSettings) -> Iterator[Client]:
             yield client
         return
     with (
-        dask.config.set({**NO_MALLOC_TRIM, **KEEP_FREED_MEMORY, **ONE_BLAS_THREAD, **QUIET_CLUSTER}),
+        dask.config.set({**ONE_BLAS_THREAD, **QUIET_CLUSTER}),
         LocalCluster(
             n_workers=settings.workers,
             threads_per_worker=1,

@@ -1,4 +1,4 @@
-"""A quarter-car bench of in-process mocks (drivers/mock.py through daq.sweep.devices.MockDevices): the
+"""A quarter-car bench of in-process mocks (drivers/mock.py through daq.sweep.mock_devices.MockDevices): the
 sweep orchestration's unit tests run on it with no pty, socket or CAN bus, on a ManualClock that
 SimulatedPacing advances (deterministic, nothing sleeps)."""
 
@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from daq.bench_config import BenchConfig, parse_bench_config
-from daq.sweep.devices import MockDevices
+from daq.sweep.mock_devices import MockDevices
 from daq.sweep.model import SweepOutcome, SweepProgress, SweepRequest
 from daq.sweep.pacing import SimulatedPacing
 from daq.sweep.plan import plan_sweep

@@ -5,7 +5,8 @@
   carries its own per column;
 - Stribeck friction: the low-speed friction rises to Coulomb + peak just above the smoothing band and
   falls back to the Coulomb level at speeds far above the Stribeck velocity, with the Coulomb friction's
-  own smoothed sign; its Runge-Kutta steps count the peak as they count the friction;
+  own smoothed sign; the Runge-Kutta steps follow the friction law's steepest slope, and a simulation at
+  those steps equals one at finer steps;
 - estimator.model_io: `spring_hinges`, the Stribeck pair and the sensor effects go through the model's
   JSON form and back onto the corner and the channel corrections; bad values are one-line errors.
 """
@@ -22,11 +23,14 @@ from estimator.dynamics import (
     COULOMB_SMOOTHING_M_S,
     HINGES,
     CornerPhysics,
+    QuarterCarPhysics,
     coulomb_sign,
-    decay_rate_per_s,
+    friction_slope_Ns_per_m,
     model_substeps,
+    sample_substeps,
 )
 from estimator.model_io import ModelFormatError, SpringHinge, model_from_json
+from estimator.simulation_kernel import integrate_compiled
 
 SPRING_N_PER_M = 20e3
 NO_DAMPER = PiecewiseLinearCurve(np.array([-1.0, 1.0]), np.array([0.0, 0.0]))
@@ -142,21 +146,87 @@ def test_stribeck_friction_peaks_at_low_speed_and_falls_to_the_coulomb_level() -
     assert _extra_N(corner, 0.0, 0.0) == 0.0
 
 
-def test_the_stribeck_peak_counts_in_the_runge_kutta_steps_as_friction_does() -> None:
-    """Near zero velocity the peak steps like the Coulomb friction (F / COULOMB_SMOOTHING_M_S): a peak
-    of F decays as fast as a friction of F, and with a friction both add."""
-    assert decay_rate_per_s(0.0, 0.0, 0.0, 95.0, 14.0, stribeck_peak_N=200.0) == decay_rate_per_s(
-        0.0, 200.0, 0.0, 95.0, 14.0
+FRICTION_LAWS = [
+    (200.0, 0.0, 0.0),  # Coulomb alone
+    (50.0, 200.0, 0.005),  # a static peak above the sliding level
+    (120.0, 80.0, 0.0025),  # a peak narrower than the smoothing band
+    (1550.0, -1420.0, 0.02),  # a fitted friction whose peak has the other sign: a smooth rise
+    (-300.0, 500.0, 0.04),
+]
+
+
+@pytest.mark.parametrize(("coulomb_N", "peak_N", "stribeck_m_s"), FRICTION_LAWS)
+def test_the_friction_slope_is_the_steepest_slope_of_the_corner_s_friction(
+    coulomb_N: float, peak_N: float, stribeck_m_s: float
+) -> None:
+    """friction_slope_Ns_per_m against the corner's own friction force differentiated on a fine grid."""
+    stribeck = {"stribeck_peak_N": peak_N, "stribeck_velocity_m_s": stribeck_m_s} if stribeck_m_s else {}
+    corner = _corner(coulomb_friction_N=coulomb_N, **stribeck)
+    velocity = np.linspace(-0.3, 0.3, 600_001)
+    force = _extra_N(corner, np.zeros_like(velocity), velocity)
+    steepest = float(np.max(np.abs(np.gradient(force, velocity))))
+    assert friction_slope_Ns_per_m(coulomb_N, peak_N, stribeck_m_s) == pytest.approx(steepest, rel=0.01)
+
+
+def test_a_peak_of_the_other_sign_is_not_counted_as_friction() -> None:
+    """At zero velocity friction and peak step together: (F_c + peak) / band, whatever their signs; the old
+    bound (|F_c| + |peak|) / band was ten times too steep for a fitted +1 550 N with a −1 420 N peak at
+    20 mm/s, and the simulation took 48 Runge-Kutta steps a 2 ms sample for it instead of 5."""
+    assert friction_slope_Ns_per_m(150.0, 50.0, 0.005) == pytest.approx(
+        200.0 / COULOMB_SMOOTHING_M_S, rel=1e-3
     )
-    assert decay_rate_per_s(0.0, 100.0, 0.0, 95.0, 14.0, stribeck_peak_N=-100.0) == decay_rate_per_s(
-        0.0, 200.0, 0.0, 95.0, 14.0
+    assert friction_slope_Ns_per_m(1550.0, -1420.0, 0.02) < 0.15 * 2970.0 / COULOMB_SMOOTHING_M_S
+    # a Stribeck velocity of zero is no Stribeck term (CornerPhysics), so its peak adds nothing
+    assert friction_slope_Ns_per_m(100.0, 500.0, 0.0) == friction_slope_Ns_per_m(100.0, 0.0, 0.0)
+    # per column: the steepest column counts
+    columns = friction_slope_Ns_per_m(
+        np.array([100.0, 1550.0]), np.array([0.0, -1420.0]), np.array([0, 0.02])
     )
-    # a motorcycle-sized wheel at 2 ms: (1500 + 50/0.005)·(1/190 + 1/14) = 882/s, one step per sample;
-    # with a 200 N peak (1500 + 250/0.005)·(...) = 3949/s, |λ|·h = 7.9: four steps of at most RK4_STABLE_STEP
-    curve = PiecewiseLinearCurve(np.array([-1.0, 0.0, 1.0]), np.array([-1500.0, 0.0, 1500.0]))
-    without = model_substeps([curve], 190.0, 14.0, 1, 0.002, coulomb_friction_N=50.0)
-    with_peak = model_substeps([curve], 190.0, 14.0, 1, 0.002, coulomb_friction_N=50.0, stribeck_peak_N=200.0)
-    assert (without, with_peak) == (1, 4)
+    assert columns == max(friction_slope_Ns_per_m(100.0), friction_slope_Ns_per_m(1550.0, -1420.0, 0.02))
+
+
+def test_the_steps_the_friction_slope_gives_simulate_as_finer_steps_do() -> None:
+    """A motorcycle-sized corner with that fitted friction at 2 ms, driven by a 0-20 Hz sweep: the response
+    at the steps model_substeps gives equals the response at four times as many within 0.1 µm."""
+    damper = PiecewiseLinearCurve(np.array([-1.0, 0.0, 1.0]), np.array([-1500.0, 0.0, 1500.0]))
+    corner = CornerPhysics(
+        damper=damper,
+        spring_stiffness_N_per_m=14_000.0,
+        tyre_stiffness_N_per_m=101_000.0,
+        coulomb_friction_N=1550.0,
+        stribeck_peak_N=-1420.0,
+        stribeck_velocity_m_s=0.02,
+    )
+    physics = QuarterCarPhysics(corner, 95.0, 14.0)
+    dt = 0.002
+    steps = model_substeps(
+        [damper],
+        95.0,
+        14.0,
+        1,
+        dt,
+        coulomb_friction_N=1550.0,
+        stribeck_peak_N=-1420.0,
+        stribeck_velocity_m_s=0.02,
+    )
+    assert steps <= 8
+    time_s = np.arange(0.0, 6.0, dt)
+    phase = 2 * np.pi * (20.0 / 6.0) * time_s**2 / 2  # 0 to 20 Hz in 6 s
+    plate, rate = 0.004 * np.sin(phase), 0.004 * np.cos(phase) * 2 * np.pi * (20.0 / 6.0) * time_s
+
+    def response(per_sample: int) -> np.ndarray:
+        states = integrate_compiled(
+            physics,
+            np.zeros(5),
+            dt / per_sample,
+            sample_substeps(plate, per_sample),
+            sample_substeps(rate, per_sample),
+        )[::per_sample]
+        return np.stack([states[:, 0], states[:, 2]])
+
+    coarse, fine = response(steps), response(4 * steps)
+    assert np.all(np.isfinite(coarse))
+    assert float(np.max(np.abs(coarse - fine))) < 1e-7
 
 
 MODEL = {

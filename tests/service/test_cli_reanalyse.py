@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import csv
 import json
-import os
 import shutil
 import subprocess
 import sys
@@ -187,12 +186,6 @@ def dask_client(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Client]:
 def scheduler(dask_client: Client) -> str:
     """A running Dask scheduler with one worker process, for `--scheduler`."""
     return dask_client.scheduler.address
-
-
-def test_the_local_cluster_leaves_malloc_trimming_off(dask_client: Client) -> None:
-    """Dask's default MALLOC_TRIM_THRESHOLD_ made identify take 2.2 times the CPU (service.reanalyse.run)."""
-    (worker_has,) = dask_client.run(os.environ.get, "MALLOC_TRIM_THRESHOLD_").values()
-    assert worker_has is None
 
 
 def test_a_rerun_skips_what_is_done_and_redoes_a_changed_input(

@@ -1,12 +1,15 @@
 """What keeps `reanalyse` near the in-process speed (issue 33, item 4): batches that shrink towards the
-end, the local cluster's workers started with glibc's allocator keeping freed memory and with Dask's
+end, the workers set up with glibc's allocator keeping freed memory, the local cluster's with Dask's
 dashboard-only chores cut down, and a closing worker's objects frozen before its process ends."""
 
 from __future__ import annotations
 
+import ctypes
 import math
-import os
+import subprocess
+import sys
 from collections.abc import Iterator
+from pathlib import Path
 from types import SimpleNamespace
 
 import pytest
@@ -14,8 +17,6 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from service.reanalyse.run import (
-    KEEP_FREED_MEMORY,
-    NO_MALLOC_TRIM,
     ONE_BLAS_THREAD,
     QUIET_CLUSTER,
     RunSettings,
@@ -62,25 +63,64 @@ def client(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Client]:
         yield running
 
 
-def _worker_settings() -> dict[str, object]:
-    return {
-        "environment": {name: os.environ.get(name) for name in ("MALLOC_MMAP_THRESHOLD_", "MALLOC_TOP_PAD_")},
-        "config": {key: dask.config.get(key) for key in QUIET_CLUSTER},
-    }
+class MallInfo2(ctypes.Structure):
+    """glibc's struct mallinfo2 (malloc.h): hblkhd is the bytes held in mappings of their own."""
+
+    _fields_ = [
+        (name, ctypes.c_size_t)
+        for name in (
+            *("arena", "ordblks", "smblks", "hblks", "hblkhd"),
+            *("usmblks", "fsmblks", "uordblks", "fordblks", "keepcost"),
+        )
+    ]
 
 
-def test_the_local_cluster_workers_keep_freed_memory_and_skip_the_dashboard_chores(client: Client) -> None:
-    (settings,) = client.run(_worker_settings).values()
-    assert settings["environment"] == {
-        key.rsplit(".", 1)[1]: value for key, value in KEEP_FREED_MEMORY.items()
-    }
-    assert settings["config"] == QUIET_CLUSTER
-    assert settings["config"]["distributed.worker.profile.enabled"] is False
+def mapped_for_a_40_mib_array() -> int:
+    """Bytes glibc mapped from the system for one 40 MiB array in this process: all of it with glibc's
+    defaults (its adaptive threshold stops at 32 MiB), none with freed memory kept (heap up to 64 MiB)."""
+    import numpy as np
+
+    mallinfo2 = ctypes.CDLL("libc.so.6").mallinfo2
+    mallinfo2.restype = MallInfo2
+    before = mallinfo2().hblkhd
+    array = np.ones(40 << 20, dtype=np.uint8)
+    mapped = int(mallinfo2().hblkhd - before)
+    del array
+    return mapped
+
+
+linux_only = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="glibc's allocator is Linux's")
+
+
+@linux_only
+def test_a_fresh_process_maps_a_40_mib_array_of_its_own() -> None:
+    """The measure below tells the settings apart: glibc's defaults map the array."""
+    here = Path(__file__).parent
+    code = f"import sys; sys.path.insert(0, {str(here)!r}); from {Path(__file__).stem} import "
+    code += "mapped_for_a_40_mib_array as mapped; print(mapped())"
+    child = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert int(child.stdout) >= 40 << 20
+
+
+@linux_only
+def test_the_workers_keep_freed_memory(client: Client) -> None:
+    (mapped,) = client.run(mapped_for_a_40_mib_array).values()
+    assert mapped == 0
+
+
+def _dask_settings() -> dict[str, object]:
+    return {key: dask.config.get(key) for key in QUIET_CLUSTER}
+
+
+def test_the_local_cluster_workers_skip_the_dashboard_chores(client: Client) -> None:
+    (settings,) = client.run(_dask_settings).values()
+    assert settings == QUIET_CLUSTER
+    assert settings["distributed.worker.profile.enabled"] is False
 
 
 def test_the_local_cluster_settings_are_dask_keys_set_once() -> None:
     """Keys Dask knows (a misspelt one would be ignored silently), none set twice."""
-    keys = [*NO_MALLOC_TRIM, *KEEP_FREED_MEMORY, *ONE_BLAS_THREAD, *QUIET_CLUSTER]
+    keys = [*ONE_BLAS_THREAD, *QUIET_CLUSTER]
     assert len(keys) == len(set(keys))
     for key in keys:
         known = key.rsplit(".", 1)[0] if ".pre-spawn-environ." in key else key

@@ -1,4 +1,4 @@
-"""service.cli.allocator: glibc's mallopt takes the settings on Linux; elsewhere nothing is changed."""
+"""service.allocator: glibc's mallopt takes the settings on Linux; elsewhere nothing is changed."""
 
 from __future__ import annotations
 
@@ -8,13 +8,13 @@ import sys
 
 import pytest
 
-from service.cli import allocator
+from service import allocator
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="glibc's mallopt is Linux's")
 def test_glibc_takes_every_setting() -> None:
     """In a child process: the settings are process-wide and would stay with the test session."""
-    code = "from service.cli.allocator import keep_freed_memory; print(keep_freed_memory())"
+    code = "from service.allocator import keep_freed_memory; print(keep_freed_memory())"
     child = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert child.stdout.strip() == "True"
 

@@ -1,11 +1,12 @@
-"""glibc's allocator set up for a short numeric process: freed memory is kept for reuse instead of being
-returned to the system at once.
+"""glibc's allocator set up for a process that only computes (a short-lived command, a re-analysis
+worker): freed memory is kept for reuse instead of being returned to the system at once.
 
 Why: identify and diagnose allocate and free arrays of megabytes many times over (residual systems, filter
 buffers, Newton steps). By default glibc maps each allocation above 128 KiB from the system and unmaps it when
 freed (it raises that threshold only after the first few), and trims the heap's top beyond 128 KiB; every
 fresh mapping then costs its page faults again. `shockbench identify` of the 12 s benchmark recording spends
-about 10 ms of its 175 ms on that (benchmarks/bench_identify_process.py, BENCHMARKS.md). Long-lived processes
+about 10 ms of its 175 ms on that (benchmarks/bench_identify_process.py, BENCHMARKS.md); a re-analysis
+worker about 17 ms of system time a recording (service.reanalyse.worker_setup). Long-lived processes
 (`serve`, the simulated devices) keep glibc's defaults, which return memory to the system sooner.
 """
 
