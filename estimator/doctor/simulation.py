@@ -145,6 +145,7 @@ def substeps(model: FittedModel, sample_time_s: float) -> int:
         coulomb_friction_N=model.value(FRICTION_UNKNOWNS[0]),
         wheel_dashpot_Ns_per_m=model.value("tyre_dashpot_Ns_per_m"),
         stribeck_peak_N=model.value(FRICTION_UNKNOWNS[1]),
+        stribeck_velocity_m_s=model.stribeck_velocity_m_s,
     )
 
 
