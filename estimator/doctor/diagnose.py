@@ -12,8 +12,10 @@ leaves more than its own noise would.
    and in the free simulation (a likelihood ratio of the gap); its p-value is the larger of the two. A
    candidate whose fitted values are physically impossible (estimator.doctor.parameters.implausible) is not
    named whatever its p-value.
-4. *Select*: the candidate with the smallest p-value is named when it is at most α/m (Bonferroni over the m
-   candidates of the round). Repeat from 2 with it added, until a round names nothing.
+4. *Calibrate*: a candidate significant as it stands has both statistics divided by their mean over bootstrap
+   draws of the current model (a scaled χ²; calibrate). *Select*: the candidate with the smallest p-value is
+   named when it is at most α/m (Bonferroni over the m candidates of the round). Repeat from 2 with it added,
+   until a round names nothing.
 5. *Goodness of fit*: the final model against a parametric bootstrap of itself; p < α: "unexplained", with
    where the disagreement is largest (estimator.doctor.residuals.Localisation).
 """
@@ -195,7 +197,8 @@ class _Doctor:
             significant = [c for c in log_p if log_p[c] <= math.log(bound)]
             if significant:
                 self.report(step, "calibrating the significant candidates by a bootstrap of the model")
-                scales = self.calibrate(current, simulated, significant)
+                observed = {c: scores[candidates.index(c)] for c in significant}
+                scales = self.calibrate(current, simulated, observed, bound)
                 for candidate in significant:
                     k = candidates.index(candidate)
                     scores[k] = _calibrated(scores[k], *scales[candidate])
@@ -314,42 +317,65 @@ class _Doctor:
         ]
 
     def calibrate(
-        self, current: FittedModel, simulated: Simulated, candidates: list[EffectInstance]
+        self,
+        current: FittedModel,
+        simulated: Simulated,
+        observed: dict[EffectInstance, CandidateScore],
+        bound: float,
     ) -> dict[EffectInstance, tuple[float, float]]:
         """Per candidate, the scales of its Wald and likelihood-ratio statistics under the current model:
         their mean over the bootstrap draws (the current structure and the candidate identified on each
-        synthetic recording, as on the measurement) over their degrees of freedom, at least 1 (a scaled χ²:
-        the model's own approximation and the noise's colour inflate both statistics alike on the
-        measurement and on the draws)."""
+        synthetic recording, as on the measurement; a statistic below 0 counts as 0) over their degrees of
+        freedom, at least 1 (a scaled χ²: the model's own approximation and the noise's colour inflate both
+        statistics alike on the measurement and on the draws).
+
+        The draws are made `workers` at a time. Every statistic is at least 0, so the sum over the draws made,
+        spread over all `draws`, is a lower bound of a scale: a candidate whose p-value at those lower bounds
+        is already above `bound` (its round's α/m) cannot be named whatever the other draws give, and is not
+        stepped on them (its scales are then the mean over the draws it had); the draws stop when no candidate
+        is left. The round's decision is the one every draw would give."""
         synthetic = self.synthetic(current, simulated, plausible=False)
         if not synthetic:
-            return {c: (1.0, 1.0) for c in candidates}
+            return {c: (1.0, 1.0) for c in observed}
+        values: dict[EffectInstance, tuple[list[float], list[float]]] = {c: ([], []) for c in observed}
+        alive = list(observed)
+        for first in range(0, len(synthetic), max(self.options.workers, 1)):
+            chunk = synthetic[first : first + max(self.options.workers, 1)]
+            for draw in self.map(lambda r, cs=tuple(alive): self.draw_statistics(current, r, cs), chunk):
+                for candidate, statistics in draw.items():
+                    for kept, statistic in zip(values[candidate], statistics, strict=True):
+                        if np.isfinite(statistic):
+                            kept.append(max(statistic, 0.0))
+            alive = [
+                c
+                for c in alive
+                if _log_p(observed[c], *_scales(observed[c], values[c], len(synthetic))) <= math.log(bound)
+            ]
+            if not alive:
+                break
+        return {c: _scales(observed[c], values[c]) for c in observed}
 
-        def one(recording: Recording) -> list[tuple[float, float, int]]:
-            on = Reference.of(recording, current.vehicle, self.reference.settings, self.reference.identified)
-            on = replace(on, knots_m=self.reference.knots_m)
-            base = fit(on, current.structure, warm=current)
-            stepped = [one_step(on, base, c) for c in candidates]
-            outcomes = _simulate([base, *(m for m, _ in stepped)], recording)
-            return [
-                (score.equation_statistic, score.simulation_statistic, score.unknowns)
-                for score in (
+    def draw_statistics(
+        self, current: FittedModel, recording: Recording, candidates: tuple[EffectInstance, ...]
+    ) -> dict[EffectInstance, tuple[float, float]]:
+        """On one synthetic recording: the current structure identified, each candidate stepped from it and
+        tested as on the measurement; its Wald and likelihood-ratio statistics."""
+        on = Reference.of(recording, current.vehicle, self.reference.settings, self.reference.identified)
+        on = replace(on, knots_m=self.reference.knots_m)
+        base = fit(on, current.structure, warm=current)
+        stepped = [one_step(on, base, c) for c in candidates]
+        outcomes = _simulate([base, *(m for m, _ in stepped)], recording)
+        return {
+            c: (score.equation_statistic, score.simulation_statistic)
+            for c, score in zip(
+                candidates,
+                (
                     score_candidate(c, base, outcomes[0], m, t, o)
                     for c, (m, t), o in zip(candidates, stepped, outcomes[1:], strict=True)
-                )
-            ]
-
-        per_draw = self.map(one, synthetic)
-        scales = {}
-        for k, candidate in enumerate(candidates):
-            unknowns = max(per_draw[0][k][2], 1)
-            wald = [d[k][0] for d in per_draw if np.isfinite(d[k][0])]
-            ratio = [max(d[k][1], 0.0) for d in per_draw if np.isfinite(d[k][1])]
-            scales[candidate] = (
-                max(1.0, float(np.mean(wald)) / unknowns) if wald else 1.0,
-                max(1.0, float(np.mean(ratio)) / unknowns) if ratio else 1.0,
+                ),
+                strict=True,
             )
-        return scales
+        }
 
     def bootstrap(self, final: FittedModel, simulated: Simulated) -> tuple[list[float], list[float]]:
         """The equation objective and gap of the final structure re-identified on the synthetic recordings
@@ -407,6 +433,18 @@ def _log_p(score: CandidateScore, wald_scale: float = 1.0, ratio_scale: float = 
         equation = log_chi_square_survival(score.equation_statistic / wald_scale, q)
     simulation = log_chi_square_survival(max(score.simulation_statistic, 0.0) / ratio_scale, q)
     return max(equation, simulation)
+
+
+def _scales(
+    score: CandidateScore, values: tuple[list[float], list[float]], draws: int | None = None
+) -> tuple[float, float]:
+    """The Wald and likelihood-ratio scales of a candidate from its statistics on the draws (calibrate):
+    their mean over the draws with a finite value, or their sum over `draws` (a lower bound of that mean
+    once all draws are made), over the degrees of freedom, at least 1."""
+    q = max(score.unknowns, 1)
+    return tuple(  # type: ignore[return-value]
+        max(1.0, sum(kept) / ((draws or len(kept)) * q)) if kept else 1.0 for kept in values
+    )
 
 
 def _calibrated(score: CandidateScore, wald_scale: float, ratio_scale: float) -> CandidateScore:
