@@ -165,6 +165,8 @@ def log_chi_square_survival(statistic: float, degrees: int) -> float:
     if not math.isfinite(statistic):
         return -math.inf
     half = statistic / 2.0
+    if half == 0.0:  # a statistic so small that half of it underflows: P = 1
+        return 0.0
     log_half = math.log(half)
     if degrees % 2 == 0:
         terms = [k * log_half - half - math.lgamma(k + 1) for k in range(degrees // 2)]

@@ -190,3 +190,11 @@ def test_the_goodness_of_fit_finds_a_gap_beyond_its_draws() -> None:
     assert test.p_value(math.inf, draws) == 0.0  # the final model diverges
     assert test.p_value(30e-6, [math.inf, 25e-6]) == 0.0  # its own re-identifications diverge
     assert test.p_value(20e-6, draws) > test.p_value(40e-6, draws)
+
+
+def test_a_statistic_whose_half_underflows_has_p_one() -> None:
+    """The smallest positive float (a draw's statistic can be that): ln P = 0, not a math domain error."""
+    from estimator.doctor.residuals import log_chi_square_survival
+
+    assert log_chi_square_survival(5e-324, 2) == 0.0
+    assert log_chi_square_survival(5e-324, 3) == 0.0
