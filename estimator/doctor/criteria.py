@@ -106,6 +106,10 @@ class SimulationTest:
         """samples: the effective number of independent samples of the residual without the family
         (estimator.doctor.residuals.effective_samples, summed over its channels)."""
         q = max(unknowns, 1)
+        if not np.isfinite(gap_with_m) and not np.isfinite(gap_without_m):
+            # neither model can be simulated: the simulation cannot tell them apart and says nothing
+            # against the family (statistic nan, p = 1 would veto every family): the equations decide
+            return TestResult(math.nan, q, 0.0)
         if not np.isfinite(gap_with_m):
             return TestResult(-np.inf, q, 1.0)
         if not np.isfinite(gap_without_m):

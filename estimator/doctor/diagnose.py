@@ -431,7 +431,10 @@ def _log_p(score: CandidateScore, wald_scale: float = 1.0, ratio_scale: float = 
         equation = math.log(score.equation_p) if score.equation_p > 0 else -math.inf
     else:
         equation = log_chi_square_survival(score.equation_statistic / wald_scale, q)
-    simulation = log_chi_square_survival(max(score.simulation_statistic, 0.0) / ratio_scale, q)
+    if math.isnan(score.simulation_statistic):  # neither model simulates: the equations decide
+        simulation = -math.inf
+    else:
+        simulation = log_chi_square_survival(max(score.simulation_statistic, 0.0) / ratio_scale, q)
     return max(equation, simulation)
 
 
@@ -453,6 +456,8 @@ def _calibrated(score: CandidateScore, wald_scale: float, ratio_scale: float) ->
     equation_p = chi_square_survival(score.equation_statistic / wald_scale, q)
     positive = score.simulation_statistic > 0
     simulation_p = chi_square_survival(score.simulation_statistic / ratio_scale, q) if positive else 1.0
+    if math.isnan(score.simulation_statistic):  # neither model simulates (SimulationTest)
+        simulation_p = 0.0
     if score.effect.startswith(EffectName.TYRE_LIFTOFF.value):
         equation_p = score.equation_p  # no unknown: its equation test is not a Wald test
     return replace(

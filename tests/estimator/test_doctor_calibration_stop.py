@@ -62,3 +62,19 @@ def test_the_lower_bound_spreads_the_sum_over_every_draw() -> None:
     assert _scales(score, ([16.0, 16.0, 16.0], [20.0, 30.0, 30.0])) == (8.0, 80.0 / 6.0)
     # below 1: no scale; no finite draw: none
     assert _scales(score, ([0.5], []), 8) == (1.0, 1.0)
+
+
+def test_where_neither_model_simulates_the_equations_decide() -> None:
+    """SimulationTest's nan (neither the current model nor the candidate can be simulated): the candidate's
+    p-value, calibrated or not, is its Wald test's."""
+    import math
+
+    from estimator.doctor.diagnose import _calibrated
+    from estimator.doctor.residuals import log_chi_square_survival
+
+    score = _score(40.0, math.nan, 2, "spring_curve")
+    assert _log_p(score) == log_chi_square_survival(40.0, 2)
+    assert _log_p(score, 4.0, 3.0) == log_chi_square_survival(10.0, 2)
+    calibrated = _calibrated(score, 4.0, 3.0)
+    assert calibrated.simulation_p == 0.0
+    assert calibrated.p_value == calibrated.equation_p == math.exp(log_chi_square_survival(10.0, 2))

@@ -120,6 +120,11 @@ def test_the_simulation_test_of_diverged_models() -> None:
     test = SimulationTest()
     assert test.test(1000, 1e-4, math.inf, 2).p_value == 1.0  # the family makes the model diverge
     assert test.test(1000, math.inf, 1e-4, 2).p_value == 0.0  # it keeps a diverging model bounded
+    # neither simulates (a starting model fitted from rates stated far off, lab rig 4): the simulation says
+    # nothing against the family, so the equation test decides the intersection-union p-value
+    neither = test.test(1000, math.inf, math.inf, 2)
+    assert math.isnan(neither.statistic) and neither.p_value == 0.0
+    assert intersection_union(Outcome(4163.0, 5, 1e-12), neither) == 1e-12
     assert test.test(1000, 1e-4, 2e-4, 2).p_value == 1.0  # a larger gap is no evidence for it
     assert test.test(1000, 1e-4, 1e-4, 0).unknowns == 1  # an effect without unknowns: one degree
 
