@@ -16,6 +16,10 @@ def _say(line: str) -> None:
     print(f"shockbench archive: {escaped(line)}", file=sys.stderr, flush=True)
 
 
+def _other_vehicle(lines: list[str]) -> str:
+    return f" ({len(lines)} of them given with another vehicle text: the stored one kept)" if lines else ""
+
+
 def run_import(args: argparse.Namespace) -> int:
     from service.reanalyse.archive import import_folder
     from service.store.database import Database
@@ -30,7 +34,8 @@ def run_import(args: argparse.Namespace) -> int:
     ratio = f", {report.bytes_stored / report.bytes_in:.0%} of their size" if report.bytes_in else ""
     print(
         f"stored {report.stored} recording(s) ({report.bytes_in / 1e6:.1f} MB{ratio}), "
-        f"{report.already} stored before, {len(report.failed)} failed; {rate:.1f} recordings/s"
+        f"{report.already} stored before{_other_vehicle(report.other_vehicle)}, {len(report.failed)} failed; "
+        f"{rate:.1f} recordings/s"
     )
     return EXIT_FAILED if report.failed else 0
 

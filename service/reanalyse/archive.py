@@ -36,6 +36,8 @@ class ImportReport:
     stored: int = 0
     already: int = 0
     """Recordings whose bytes were stored already (nothing written)."""
+    other_vehicle: list[str] = field(default_factory=list)
+    """Of those, one line each for the ones given with another vehicle text than the stored one."""
     failed: list[str] = field(default_factory=list)
     """One line per bad file."""
     bytes_in: int = 0
@@ -93,6 +95,12 @@ def import_folder(folder: Path, database: Database, say: Callable[[str], None]) 
             report.bytes_stored += put.stored_bytes
         else:
             report.already += 1
+            if put.other_vehicle:  # the same bytes under another vehicle: said, not silently dropped
+                report.other_vehicle.append(
+                    f"{item.recording}: stored before with another vehicle text, which is kept "
+                    f"(sha256 {put.sha256[:12]})"
+                )
+                say(report.other_vehicle[-1])
     report.seconds = time.perf_counter() - start
     return report
 

@@ -81,6 +81,8 @@ class Put:
     created: bool
     """False when the same bytes were stored already (nothing written)."""
     stored_bytes: int
+    other_vehicle: bool = False
+    """The bytes were stored already with another vehicle text (which is kept)."""
 
 
 def _listed(session: Session) -> list[StoredRecording]:
@@ -113,10 +115,12 @@ def store_recording(
     sweep_uid: str | None = None,
 ) -> Put:
     """In `session`'s transaction: the recording stored unless its bytes are (idempotent by sha256; the
-    insert runs in a savepoint, so a concurrent writer's row wins without failing the transaction)."""
+    insert runs in a savepoint, so a concurrent writer's row wins without failing the transaction). Bytes
+    stored already keep their stored vehicle text; Put.other_vehicle says when the one given differs."""
     sha256 = hashlib.sha256(content).hexdigest()
-    if session.scalar(select(RecordingRow.id).where(RecordingRow.sha256 == sha256)) is not None:
-        return Put(sha256, False, 0)
+    stored = session.execute(select(RecordingRow.vehicle_text).where(RecordingRow.sha256 == sha256)).first()
+    if stored is not None:
+        return Put(sha256, False, 0, other_vehicle=stored.vehicle_text != vehicle_text)
     compression, data = pack(content, file_format.lower())
     row = RecordingRow(
         sha256=sha256,

@@ -88,6 +88,37 @@ def test_import_is_idempotent_a_bad_file_fails_alone_and_export_gives_the_bytes_
         other.dispose()
 
 
+def test_the_same_bytes_with_another_vehicle_file_are_said_and_the_stored_vehicle_kept(
+    archive: Path, tmp_path: Path
+) -> None:
+    """The archive is idempotent by the recording's bytes: imported again beside another vehicle file, a
+    recording keeps its stored vehicle text, and the import says so in one line instead of dropping it
+    silently."""
+    url = f"sqlite:///{tmp_path / 'central.sqlite3'}"
+    first = tmp_path / "first"
+    shutil.copytree(archive / "a", first)
+    (first / "broken.csv").unlink()
+    assert shockbench("archive", "import", str(first), "--database", url).returncode == 0
+    stated = (first / "vehicle.toml").read_text()
+    changed = tmp_path / "changed"
+    shutil.copytree(first, changed)
+    (changed / "vehicle.toml").write_text(stated.replace("[vehicle]", "[vehicle]\n# weighed again", 1))
+    again = shockbench("archive", "import", str(changed), "--database", url)
+    assert again.returncode == 0, again.stderr
+    lines = again.stderr.strip().splitlines()
+    kept = "stored before with another vehicle text, which is kept"
+    assert len(lines) == 2 and all(kept in line for line in lines)
+    assert "sim-6s-1.csv" in lines[0] and "sim-6s-2.csv" in lines[1]
+    assert "2 stored before (2 of them given with another vehicle text: the stored one kept)" in again.stdout
+    database = Database(url)
+    try:
+        assert {r.vehicle_text for r in RecordingStore(database).listing()} == {stated}
+    finally:
+        database.dispose()
+    same = shockbench("archive", "import", str(first), "--database", url)
+    assert same.returncode == 0 and same.stderr == "" and "2 stored before," in same.stdout
+
+
 def test_reanalysis_from_the_database_alone_is_a_run_and_two_runs_compare(
     archive: Path, tmp_path: Path
 ) -> None:
