@@ -47,6 +47,12 @@ the same model's gap on the same sweep was 896 µm at one step per 1 ms sample a
 both sample rates."""
 
 
+FRICTION_SLOPE_GRID = 801
+"""Velocities friction_slope_Ns_per_m looks at from 0 to 4 times the wider of the band and v_s: a step of a
+200th of the wider scale, where the peak's slope changes by well under a percent; the smoothed step is
+steepest at v = 0, which is on the grid (tests/estimator/test_force_shapes.py: within 1% of a fine grid)."""
+
+
 def friction_slope_Ns_per_m(
     coulomb_friction_N: float | np.ndarray,
     stribeck_peak_N: float | np.ndarray = 0.0,
@@ -57,8 +63,8 @@ def friction_slope_Ns_per_m(
     columns of arrays: at zero velocity (F_c + peak)/COULOMB_SMOOTHING_M_S, elsewhere where the peak's decay
     bends it. A zero v_s is no Stribeck term. Why not (|F_c| + |peak|)/band: a fitted friction often has a
     peak of the other sign (+1 550 N sliding with a −1 420 N peak at 20 mm/s is a smooth 130 → 1 550 N
-    rise), whose steepest slope is 61 kN·s/m, not the 594 kN·s/m that sum gave, and 48 Runge-Kutta steps a
-    sample where 5 are stable."""
+    rise), whose steepest slope is 61 kN·s/m, not the 594 kN·s/m that sum gave: 48 Runge-Kutta steps a 2 ms
+    sample instead of 6 on a motorcycle's corner."""
     coulomb, peak, v_s = np.broadcast_arrays(
         *(
             np.atleast_1d(np.asarray(x, dtype=float))
@@ -73,15 +79,9 @@ def friction_slope_Ns_per_m(
     velocity = np.linspace(0.0, 1.0, FRICTION_SLOPE_GRID)[:, None] * 4.0 * scale
     decay = np.exp(-np.square(velocity / v_s))
     step = np.tanh(velocity / band)
-    slope = (coulomb + peak * decay) * (
-        1.0 - step * step
-    ) / band - step * peak * decay * 2.0 * velocity / v_s**2
-    return float(np.max(np.abs(slope)))
-
-
-FRICTION_SLOPE_GRID = 801
-"""Velocities friction_slope_Ns_per_m looks at from 0 to 4 times the wider of the band and v_s: the grid step
-is at most a 200th of either scale, where the slope changes by well under a percent."""
+    rise = (coulomb + peak * decay) * (1.0 - step * step) / band  # the smoothed sign's step
+    bend = step * peak * decay * 2.0 * velocity / v_s**2  # the peak's decay away from zero
+    return float(np.max(np.abs(rise - bend)))
 
 
 def decay_rate_per_s(
