@@ -155,19 +155,25 @@ def bounded_step(
     jacobian: dict[str, np.ndarray],
     kinds: list[str],
     values: np.ndarray,
+    free_solution: np.ndarray | None = None,
 ) -> np.ndarray:
     """The channel values after one Gauss-Newton step, θ solved with them, under the bounds of `feasible`
     (an active-set step): a parameter the step would push past its bound is held at the bound and the
     others are solved again with its change in the offset. Clipping afterwards instead would keep the
     others' share of a combined move: a delay and an averaging window of one channel fitted to a pure
-    3 ms delay step to +10 ms and −7 ms, and clipping the window at zero left the delay at 10 ms."""
+    3 ms delay step to +10 ms and −7 ms, and clipping the window at zero left the delay at 10 ms.
+    free_solution: the step with every parameter free, when the caller has solved it (θ, then the
+    parameters' steps), so that it is not solved again."""
     names = list(jacobian)
     fixed: dict[int, float] = {}
     while True:
         free = [j for j in range(len(names)) if j not in fixed]
         offset = used.offset + sum((jacobian[names[j]] * change for j, change in fixed.items()), 0.0)
-        augmented = with_columns(used, {names[j]: jacobian[names[j]] for j in free}, offset)
-        solved = minimise(augmented, np.concatenate([theta, np.zeros(len(free))]), 1e-8)[0]
+        if free_solution is not None and not fixed:  # the unbounded step, solved already by the caller
+            solved = free_solution
+        else:
+            augmented = with_columns(used, {names[j]: jacobian[names[j]] for j in free}, offset)
+            solved = minimise(augmented, np.concatenate([theta, np.zeros(len(free))]), 1e-8)[0]
         increment = np.zeros(len(names))
         increment[free] = solved[used.n_params :]
         for j, change in fixed.items():

@@ -52,7 +52,7 @@ def one_step(
     own_kinds = [kinds[k] for k in own]
     if np.any(feasible(own_kinds, values[own] + steps) != values[own] + steps):
         # the test keeps the unbounded step; the model moves by the step within the bounds
-        values[own] = bounded_step(system, start, jacobian, own_kinds, values[own])
+        values[own] = bounded_step(system, start, jacobian, own_kinds, values[own], solution)
         system, signals, airborne = build_at(reference, current, structure, values)
         theta, objective = minimise(system, start)
     else:
