@@ -15,10 +15,11 @@
 - Selection: of the m candidates of a round, the one with the smallest p-value is named when p ≤ α/m
   (Bonferroni: the chance of naming anything in a round where nothing is missing is at most α).
 - GoodnessOfFit: does what the final model leaves look like what it would leave if it were the truth? A
-  parametric bootstrap: the final model's structure is re-identified on `draws` synthetic recordings of its
-  own (smooth) response with noise drawn as the recording's own (level, colour, reading resolution) and
-  simulated again; the observed equation objective and gap are compared with those draws (on a log scale,
-  normal prediction intervals), the two p-values combined by Bonferroni.
+  parametric bootstrap: the final model's structure is re-identified on `draws` synthetic recordings of the
+  response of a plausible truth (the structure at twice the curve's resolution, with a damper whose force
+  rises with velocity: estimator.doctor.expected) read with noise drawn as the recording's own (level,
+  colour, reading resolution), and simulated again; the observed gap is compared with those draws (a
+  Student's t prediction interval of its logarithm), the equation objective's ratio reported beside it.
 
 The doctor's decision constants are ALPHA and the bases' sizes (estimator.doctor.catalog: HINGE_FRACTIONS,
 STRIBECK_VELOCITIES_M_S) and the bootstrap's size (DiagnoseOptions.draws).

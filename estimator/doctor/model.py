@@ -94,11 +94,17 @@ def corrections_of(parameters: list[tuple[EffectInstance, str]], values: np.ndar
     )
 
 
+LOW_SPEED_KNOTS_M_S = (0.0, 0.01)
+"""Suspension velocities (m/s) at which a grid with low-speed knots gets a knot (at ± each), evenly spaced."""
+
+
 @dataclass(frozen=True)
 class FitSettings:
     points: int | None = None
     """Damper curve points (default 20 for a quarter car, 10 per side for an axle), before low-speed knots."""
     nsample: int | None = 5000
+    low_speed_knots_m_s: tuple[float, ...] = LOW_SPEED_KNOTS_M_S
+    """The low-speed knots (low_speed_grids); a bootstrap truth has them finer (estimator.doctor.expected)."""
 
 
 @dataclass
@@ -228,22 +234,21 @@ class Reference:
             )
         base = build(recording, vehicle, TyreModel.SPRING, settings.points, settings.nsample)
         knots = hinge_knots_m(recording, vehicle)
-        return Reference(
-            recording, vehicle, settings, low_speed_grids(base.grids_m_s), base.filters, knots, identified
-        )
+        grids = low_speed_grids(base.grids_m_s, settings.low_speed_knots_m_s)
+        return Reference(recording, vehicle, settings, grids, base.filters, knots, identified)
 
 
-LOW_SPEED_KNOTS_M_S = (0.0, 0.01)
-"""Suspension velocities (m/s) at which a grid with low-speed knots gets a knot (at ± each)."""
 LOW_SPEED_CLEARANCE = 0.5
 """A uniform knot closer to a low-speed knot than this share of the low-speed knots' spacing gives way."""
 
 
-def low_speed_grids(grids: list[np.ndarray]) -> list[np.ndarray]:
-    """The grids with knots at ±LOW_SPEED_KNOTS_M_S added (those inside the grid), the uniform knots too close
+def low_speed_grids(
+    grids: list[np.ndarray], knots_m_s: tuple[float, ...] = LOW_SPEED_KNOTS_M_S
+) -> list[np.ndarray]:
+    """The grids with knots at ±knots_m_s added (those inside the grid), the uniform knots too close
     to them dropped (not the end knots). An axle's two grids keep the same number of knots (the widest
     intervals of the shorter one are halved)."""
-    extra = np.unique(np.concatenate([-np.asarray(LOW_SPEED_KNOTS_M_S), LOW_SPEED_KNOTS_M_S]))
+    extra = np.unique(np.concatenate([-np.asarray(knots_m_s), knots_m_s]))
     clearance = LOW_SPEED_CLEARANCE * float(np.min(np.diff(extra)))
     changed = []
     for grid in grids:

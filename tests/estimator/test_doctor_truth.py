@@ -1,0 +1,62 @@
+"""The goodness of fit's bootstrap truth (estimator.doctor.expected): a physically possible damper (force
+non-decreasing in velocity) at twice the doctor's resolution, near zero velocity too.
+
+- increasing is the least-squares isotonic regression (checked against scipy's on random sequences);
+- a fitted curve that falls somewhere (the zig-zag a missing series compliance leaves) becomes a smooth curve
+  that never falls, and a curve that already rises keeps its points;
+- the truth of a fitted model has knots at twice the resolution, the low-speed ones included.
+
+The outcomes this is for are tested in test_doctor_independent.py (a compliant top mount is unexplained, a
+damper's dead band is not).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy.optimize import isotonic_regression
+
+from estimator.damper import PiecewiseLinearCurve
+from estimator.doctor.expected import TRUTH_POINTS_FACTOR, increasing, plausible_truth, smooth_curve
+from estimator.doctor.fitting import fit
+from estimator.doctor.model import LOW_SPEED_KNOTS_M_S, FitSettings, Reference, starting_structure
+from estimator.sweep import SweepSettings
+from estimator.vehicle import TyreModel
+from simulators.vehicle_sim import SimulationSettings, default_quarter_car, simulate
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.floats(-1e4, 1e4, allow_nan=False), min_size=1, max_size=40))
+def test_increasing_is_the_least_squares_isotonic_regression(values: list[float]) -> None:
+    fitted = increasing(np.array(values))
+    assert np.all(np.diff(fitted) >= 0.0)
+    np.testing.assert_allclose(fitted, isotonic_regression(values).x, rtol=1e-9, atol=1e-9)
+
+
+def test_a_curve_that_falls_becomes_one_that_does_not() -> None:
+    velocity = np.linspace(-0.5, 0.5, 21)
+    rising = 2000.0 * velocity + 300.0 * np.tanh(velocity / 0.05)
+    zigzag = rising + np.where(np.arange(21) % 2 == 0, 250.0, -250.0) * (np.abs(velocity) > 0.1)
+    assert np.any(np.diff(zigzag) < 0.0)
+    dense = np.linspace(-0.6, 0.6, 2001)
+    smooth = smooth_curve(PiecewiseLinearCurve(velocity, zigzag)).force(dense)
+    assert np.all(np.diff(smooth) >= -1e-9)
+    kept = smooth_curve(PiecewiseLinearCurve(velocity, rising))
+    np.testing.assert_allclose(kept.force(velocity), rising, rtol=2e-3, atol=1.0)  # tabulated densely
+
+
+def test_the_truth_has_twice_the_resolution_near_zero_velocity_too() -> None:
+    car = default_quarter_car()
+    recording = simulate(car, SimulationSettings(sweep=SweepSettings(duration_s=4.0), seed=3)).recording
+    settings_ = FitSettings(points=20)
+    model = fit(Reference.of(recording, car.known, settings_), starting_structure(TyreModel.MAXWELL))
+    truth = plausible_truth(model, recording, settings_)
+    knots = model.system.grids_m_s[0]
+    fine = truth.system.grids_m_s[0]
+    spacing = LOW_SPEED_KNOTS_M_S[1] - LOW_SPEED_KNOTS_M_S[0]
+    low = {round(s * k * spacing / TRUTH_POINTS_FACTOR, 9) for k in range(3) for s in (-1.0, 1.0)}
+    assert low <= {round(float(v), 9) for v in fine}
+    assert not {round(0.5 * spacing, 9)} <= {round(float(v), 9) for v in knots}
+    assert fine.size > 1.5 * knots.size
+    assert np.all(np.diff(truth.curves[0].force(np.linspace(fine[0], fine[-1], 500))) >= -1e-9)
