@@ -1,27 +1,7 @@
-"""The catalogue of effect families: each a named extension of the model that can take the shape the data
-show, with a bounded number of unknowns, the signature it leaves in the residuals of a model that lacks it,
-and what makes its fitted values physically possible.
-
-Two kinds of family:
-
-- *force* families add unknowns that enter the equations of motion linearly (a column each, see
-  estimator.doctor.columns), so the paper's objective stays convex and the exact solver fits them with the
-  damper curve:
-  - spring_curve: the suspension spring force as a curve of deflection: a change of the stated rate plus
-    hinges (a rate that starts beyond a knot) at HINGE_FRACTIONS of the largest deflection, either way. It
-    covers a wrong stated rate, a progressive spring and a bump or rebound stop with or without clearance.
-    An axle has one curve for both springs (the vehicle file states one rate for both);
-  - low_speed_friction: a force step at zero suspension velocity (the sliding level) plus a static peak
-    above it that decays over a Stribeck velocity (one variant per STRIBECK_VELOCITIES_M_S), beside the
-    damper curve's own slope (the curve has knots at 0 and ±10 mm/s, estimator.doctor.model.low_speed_grids);
-  - tyre_stiffness, tyre_damping (a dashpot beside the tyre), anti_roll_bar (an axle without a stated bar);
-  - tyre_liftoff has no unknown: where the tyre would pull on the plate its force is the static load.
-- *channel* families correct one sensor channel before the equations are built (estimator.laser_channels):
-  sensor_dynamics (a delay plus a first-order lag, or a delay plus a moving average: the ZX amplifier's
-  averaging), sensor_gain (a scale error: a wrong head range or calibration) and sensor_offset. Their
-  unknowns are found by Gauss-Newton steps (estimator.doctor.model).
-
-The names are stable: they are what `shockbench diagnose --json` prints.
+"""The catalogue of effect families, each a named extension of the model with a bounded number of unknowns
+(the names are what `shockbench diagnose --json` prints). Force families add unknowns that enter the
+equations of motion linearly (a column each), so the exact solver fits them with the damper curve; channel
+families correct a sensor channel before the equations are built, by Gauss-Newton (estimator.doctor.fitting).
 """
 
 from __future__ import annotations
@@ -53,7 +33,7 @@ class EffectName(StrEnum):
 @dataclass(frozen=True, order=True)
 class EffectInstance:
     """A family as added to a model; channel families name their channel, sensor_dynamics its variant
-    ("lag" or "average")."""
+    ("lag" or "average"), low_speed_friction its Stribeck velocity ("5 mm/s")."""
 
     name: EffectName
     channel: str | None = None
@@ -66,19 +46,9 @@ class EffectInstance:
 
 
 HINGE_FRACTIONS = (0.4, 0.7)
-"""Basis size of spring_curve: hinge knots at these fractions of the largest deflection (its 0.1% / 99.9%
-quantile) on either side, so the curve has two knots per side besides the rate change at zero deflection."""
+"""spring_curve's hinge knots: these fractions of the largest deflection (0.1% / 99.9% quantile) each way."""
 STRIBECK_VELOCITIES_M_S = (0.0025, 0.005, 0.01, 0.02, 0.04)
-"""Basis size of low_speed_friction: the velocities v_s over which the static peak may decay to the sliding
-level (exp(−(v/v_s)²)), one variant of the family each: octaves from 2.5 to 40 mm/s (strut and seal friction
-decays over a few to a few tens of mm/s); a round tests each, and Bonferroni counts them."""
-
-
-def stribeck_velocity_m_s(effect: EffectInstance) -> float:
-    """v_s of a low_speed_friction variant ("5 mm/s")."""
-    return float(str(effect.variant).removesuffix(" mm/s")) / 1000.0
-
-
+"""low_speed_friction's variants: the velocity v_s over which the static peak decays (exp(−(v/v_s)²))."""
 MAX_DELAY_S = 0.02
 """Search limit of a channel's delay, lag and averaging window (s)."""
 
@@ -91,12 +61,16 @@ CHANNEL_PARAMETERS = {
     (EffectName.SENSOR_GAIN, None): ("gain",),
     (EffectName.SENSOR_OFFSET, None): ("offset",),
 }
-"""The Gauss-Newton parameters (estimator.laser_channels.ChannelCorrections' kinds) of each channel family."""
+"""The Gauss-Newton parameters (kinds of estimator.doctor.model.corrections_of) of each channel family."""
+
+
+def stribeck_velocity_m_s(effect: EffectInstance) -> float:
+    """v_s of a low_speed_friction variant ("5 mm/s")."""
+    return float(str(effect.variant).removesuffix(" mm/s")) / 1000.0
 
 
 def hinge_knots_m(recording: Recording, vehicle: VehicleParameters) -> tuple[float, ...]:
-    """The spring_curve's hinge knots (m of suspension deflection, ζ = x_s − x_t, extension positive) of
-    this recording: HINGE_FRACTIONS of its largest extension and compression over every corner."""
+    """spring_curve's hinge knots (m of suspension deflection ζ = x_s − x_t, extension positive)."""
     suffixes = ("_l", "_r") if vehicle.is_axle else ("",)
     deflection = np.concatenate(
         [recording.channels[f"x_s{s}"] - recording.channels[f"x_t{s}"] for s in suffixes]
@@ -106,8 +80,8 @@ def hinge_knots_m(recording: Recording, vehicle: VehicleParameters) -> tuple[flo
 
 
 def hinge(deflection_m: np.ndarray, knot_m: float) -> np.ndarray:
-    """ζ − knot beyond the knot on its side (ζ > knot for a knot ≥ 0, ζ < knot for one below), else 0: the
-    deflection a hinge's rate acts on (estimator.dynamics.CornerPhysics has the same)."""
+    """ζ − knot beyond the knot on its side (above a knot ≥ 0, below one < 0), else 0: what a hinge's
+    rate acts on (as estimator.dynamics.CornerPhysics has it)."""
     beyond = deflection_m > knot_m if knot_m >= 0.0 else deflection_m < knot_m
     return np.where(beyond, deflection_m - knot_m, 0.0)
 
@@ -118,8 +92,8 @@ def hinge_unknowns(knots_m: tuple[float, ...]) -> list[str]:
 
 @dataclass(frozen=True)
 class Effect:
-    """One family. summary: what it is physically; signature: what a model that lacks it leaves in the
-    residuals; channel_kind: "channel" for channel families, None for force families."""
+    """One family: summary, what it is physically; signature, what a model without it leaves in the
+    residuals; channel_kind, "channel" for channel families (None: force family)."""
 
     name: EffectName
     summary: str
@@ -132,9 +106,8 @@ class Effect:
         recording: Recording,
         identified: frozenset[VehicleConstant] = frozenset(),
     ) -> list[EffectInstance]:
-        """The ways this family can be added to a model of this vehicle and recording (identified: the
-        constants identified from this recording because the vehicle file did not state them: a tyre rate
-        that was not stated cannot contradict the data)."""
+        """The ways this family can be added to a model (identified: constants found from this recording,
+        which cannot contradict it)."""
         if self.name is EffectName.TYRE_STIFFNESS:
             return [] if VehicleConstant.TYRE in identified else [EffectInstance(self.name)]
         if self.name is EffectName.ANTI_ROLL_BAR:
@@ -146,8 +119,7 @@ class Effect:
             return [EffectInstance(self.name)]
         names = sorted(recording.channels)
         if self.name is EffectName.SENSOR_OFFSET:
-            # a zero error of a body channel only shifts the damper curve by a constant force (the curve's
-            # basis sums to one): it changes neither the residuals nor the gap, so it cannot be diagnosed
+            # a body channel's zero error only shifts the damper curve: neither residuals nor gap change
             names = [n for n in names if not n.startswith("x_s")]
         variants = ("lag", "average") if self.name is EffectName.SENSOR_DYNAMICS else (None,)
         return [EffectInstance(self.name, n, v) for n in names for v in variants]
@@ -160,8 +132,8 @@ class Effect:
         knots_m: tuple[float, ...],
         identified: frozenset[VehicleConstant],
     ) -> dict[str, np.ndarray]:
-        """Unknown name -> (equations, samples) column, for force families; airborne: per corner, where the
-        tyre has left the plate (tyre forces are zero there)."""
+        """Unknown name -> (equations, samples) column of a force family; airborne: per corner, where the
+        tyre is off the plate (no tyre force)."""
         corners = signals.corners
         contact = [1.0 - a for a in airborne]
         if self.name is EffectName.TYRE_DAMPING:
@@ -214,64 +186,52 @@ class Effect:
         return signals.tyre_column(series)
 
 
+_DESCRIPTIONS = {
+    EffectName.SPRING_CURVE: (
+        "the suspension spring's force is another curve of deflection than the stated rate: a wrong "
+        "rate, a progressive spring, a bump or rebound stop (with or without clearance)",
+        "suspension residual following the deflection, or the deflection beyond a clearance",
+    ),
+    EffectName.LOW_SPEED_FRICTION: (
+        "strut and seal friction: a force step at zero velocity, with a static peak above the sliding "
+        "level (Stribeck)",
+        "suspension residual that steps where the suspension velocity changes sign",
+    ),
+    EffectName.TYRE_STIFFNESS: (
+        "the stated tyre rate is wrong (one rate for both tyres of an axle)",
+        "wheel-equation residual in phase with the tyre deflection, largest around the wheel hop",
+    ),
+    EffectName.TYRE_DAMPING: (
+        "Kelvin-Voigt dashpot in the tyre, parallel to its spring",
+        "wheel-equation residual in phase with the tyre deflection rate, growing with frequency",
+    ),
+    EffectName.TYRE_VISCOELASTIC: (
+        "Maxwell element in the tyre (dashpot in series with a spring, relaxation time from ϑ)",
+        "wheel-equation residual following the low-passed tyre deflection rate",
+    ),
+    EffectName.TYRE_LIFTOFF: (
+        "the tyre leaves the plate: the contact force cannot go below zero",
+        "wheel-equation residual confined to the moments the tyre would pull on the plate",
+    ),
+    EffectName.ANTI_ROLL_BAR: (
+        "anti-roll bar of an axle: a spring on the difference of left and right deflections",
+        "opposite suspension residuals left and right following the deflection difference",
+    ),
+    EffectName.SENSOR_DYNAMICS: (
+        "a sensor channel lags: a delay plus a first-order lag, or plus a moving average (the "
+        "amplifier's averaging)",
+        "residual following the channel's rate, growing with frequency",
+    ),
+    EffectName.SENSOR_GAIN: (
+        "a channel's scale is off (a wrong head range or calibration)",
+        "residual following the channel's reading itself",
+    ),
+    EffectName.SENSOR_OFFSET: (
+        "a channel's zero is off",
+        "a constant residual in the wheel equation and a constant output-error offset",
+    ),
+}
 CATALOG: dict[EffectName, Effect] = {
-    effect.name: effect
-    for effect in (
-        Effect(
-            EffectName.SPRING_CURVE,
-            "the suspension spring's force is another curve of deflection than the stated rate: a wrong "
-            "rate, a progressive spring, a bump or rebound stop (with or without clearance)",
-            "suspension residual following the deflection, or the deflection beyond a clearance",
-        ),
-        Effect(
-            EffectName.LOW_SPEED_FRICTION,
-            "strut and seal friction: a force step at zero velocity, with a static peak above the sliding "
-            "level (Stribeck)",
-            "suspension residual that steps where the suspension velocity changes sign",
-        ),
-        Effect(
-            EffectName.TYRE_STIFFNESS,
-            "the stated tyre rate is wrong (one rate for both tyres of an axle)",
-            "wheel-equation residual in phase with the tyre deflection, largest around the wheel hop",
-        ),
-        Effect(
-            EffectName.TYRE_DAMPING,
-            "Kelvin-Voigt dashpot in the tyre, parallel to its spring",
-            "wheel-equation residual in phase with the tyre deflection rate, growing with frequency",
-        ),
-        Effect(
-            EffectName.TYRE_VISCOELASTIC,
-            "Maxwell element in the tyre (dashpot in series with a spring, relaxation time from ϑ)",
-            "wheel-equation residual following the low-passed tyre deflection rate",
-        ),
-        Effect(
-            EffectName.TYRE_LIFTOFF,
-            "the tyre leaves the plate: the contact force cannot go below zero",
-            "wheel-equation residual confined to the moments the tyre would pull on the plate",
-        ),
-        Effect(
-            EffectName.ANTI_ROLL_BAR,
-            "anti-roll bar of an axle: a spring on the difference of left and right deflections",
-            "opposite suspension residuals left and right following the deflection difference",
-        ),
-        Effect(
-            EffectName.SENSOR_DYNAMICS,
-            "a sensor channel lags: a delay plus a first-order lag, or plus a moving average (the "
-            "amplifier's averaging)",
-            "residual following the channel's rate, growing with frequency",
-            channel_kind="channel",
-        ),
-        Effect(
-            EffectName.SENSOR_GAIN,
-            "a channel's scale is off (a wrong head range or calibration)",
-            "residual following the channel's reading itself",
-            channel_kind="channel",
-        ),
-        Effect(
-            EffectName.SENSOR_OFFSET,
-            "a channel's zero is off",
-            "a constant residual in the wheel equation and a constant output-error offset",
-            channel_kind="channel",
-        ),
-    )
+    name: Effect(name, summary, signature, "channel" if name in {n for n, _ in CHANNEL_PARAMETERS} else None)
+    for name, (summary, signature) in _DESCRIPTIONS.items()
 }

@@ -1,25 +1,10 @@
-"""The sensor noise of a recording, measured from the data itself, so that the expected gap's synthetic
-recordings carry noise like the measured one (level, colour and reading resolution), not white noise of a
-level read off the top of the band.
+"""The sensor noise of a recording, measured from the data, for the expected gap's synthetic recordings.
 
-A laser's internal filter colours its noise: a first-order filter makes it an AR(1) process, whose density
-rises towards low frequencies, where the vehicle's response and the equations of motion are. Its density at
-the top of the band (what estimator.signals reads as the noise floor) then understates both the noise's RMS
-and its density in the signal band (AR(1) with ρ 0.67: a quarter of the RMS² at Nyquist, five times the
-white density at zero frequency). Measured on the independent world's clean recordings
-(benchmarks/bench_doctor_independent.py), white bootstrap noise of that level left the expected equation
-residual at a fifth of what the coloured noise gives.
-
-How it is measured: the output residual of the final model (simulated from the measured plate minus the
-measured reading) holds the noise plus the model's own error; the model's error lies in the band the
-vehicle responds in, the noise everywhere. The noise's density is at most the residual's (misfit and noise
-are independent) and at most the measured reading's (response and noise are too), so per frequency the
-smaller of the two bounds it: a model whose simulated wheel rings at 30-80 Hz, where the measured wheel
-does not move, makes the residual's density there twenty times the reading's, and that ringing is not the
-sensor's noise. Above NOISE_BAND_FROM × the excitation's top frequency that bound is fitted, per channel,
-with an AR(1) density plus a white floor (sensor white noise and the reading's quantisation),
-S(f) = a/(1 − 2ρ·cos ω + ρ²) + b, a, b ≥ 0, ρ on a grid, least squares on the density relative to the
-measured one. The fitted law is extrapolated to the whole band.
+A laser's filter colours its noise (AR(1)): the density at the top of the band understates it where the
+vehicle responds. The smaller of the output residual's and the measured reading's densities bounds the
+noise's per frequency (misfit and response are each independent of it); above NOISE_BAND_FROM × the
+excitation's top frequency it is fitted by S(f) = a/(1 − 2ρ·cos ω + ρ²) + b + c/f (a, b, c ≥ 0, ρ on a
+grid; AR(1), white and 1/f parts), extrapolated to the whole band.
 """
 
 from __future__ import annotations
@@ -41,9 +26,8 @@ MIN_BINS = 8
 @dataclass(frozen=True)
 class ChannelNoise:
     """Noise of one channel: an AR(1) part e[n] = ρ·e[n−1] + w[n] of standard deviation coloured_m, white
-    noise of standard deviation white_m and 1/f noise of one-sided density pink_m2·Hz⁻¹·(1 Hz / f) above
-    the record's lowest frequency (flat below it); readings rounded to quantum_m (0: not quantised).
-    sample_time_s: what the 1/f part is drawn at (0: no 1/f part)."""
+    noise of standard deviation white_m, 1/f noise of one-sided density pink_m2/f (drawn at sample_time_s;
+    0: none), readings rounded to quantum_m (0: not quantised)."""
 
     coloured_m: float
     lag1_correlation: float
@@ -57,14 +41,11 @@ class ChannelNoise:
         return float(np.hypot(self.coloured_m, self.white_m))
 
     def pink(self, samples: int, rng: np.random.Generator) -> np.ndarray:
-        """The 1/f part: white noise shaped in the frequency domain to the density pink_m2/f (flat below the
-        record's lowest frequency, 1/(samples·Δt))."""
+        """The 1/f part: white noise shaped to the density pink_m2/f (flat below 1/(samples·Δt))."""
         if self.pink_m2 <= 0.0 or self.sample_time_s <= 0.0:
             return np.zeros(samples)
         dt = self.sample_time_s
-        frequency = np.fft.rfftfreq(samples, dt)
-        lowest = 1.0 / (samples * dt)
-        density = self.pink_m2 / np.maximum(frequency, lowest)
+        density = self.pink_m2 / np.maximum(np.fft.rfftfreq(samples, dt), 1.0 / (samples * dt))
         # unit white noise has the one-sided density 2·Δt
         spectrum = np.fft.rfft(rng.standard_normal(samples)) * np.sqrt(density / (2.0 * dt))
         return np.fft.irfft(spectrum, samples)
@@ -80,37 +61,23 @@ class ChannelNoise:
     def read(self, true_m: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         """What a sensor with this noise and resolution reads of `true_m`."""
         reading = true_m + self.draw(true_m.size, rng)
-        if self.quantum_m > 0.0:
-            reading = np.round(reading / self.quantum_m) * self.quantum_m
-        return reading
+        q = self.quantum_m
+        return np.round(reading / q) * q if q > 0.0 else reading
 
 
 def reading_quantum_m(x: np.ndarray) -> float:
-    """The resolution the readings are rounded to: the smallest step between distinct readings when every
-    reading is a whole multiple of it (0 when the readings are not quantised, or too finely to matter)."""
+    """The smallest step between distinct readings when every reading is a whole multiple of it, else 0."""
     values = np.unique(x)
-    if values.size < 3:
-        return 0.0
-    step = float(np.min(np.diff(values)))
-    if step <= 0.0:
-        return 0.0
-    multiples = x / step
-    if np.max(np.abs(multiples - np.round(multiples))) > 1e-3:
+    step = float(np.min(np.diff(values))) if values.size >= 3 else 0.0
+    if step <= 0.0 or np.max(np.abs(x / step - np.round(x / step))) > 1e-3:
         return 0.0
     return step
 
 
-def _ar1_shape(frequency_Hz: np.ndarray, sample_time_s: float, rho: float) -> np.ndarray:
-    omega = 2.0 * np.pi * frequency_Hz * sample_time_s
-    return 1.0 / (1.0 - 2.0 * rho * np.cos(omega) + rho * rho)
-
-
 def small_nnls(design: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, float]:
-    """scipy.optimize.nnls for a design of a few columns: x ≥ 0 minimising ||design·x − target||, and that
-    norm, by trying every set of free columns (the optimum is the unconstrained least squares on one of
-    them with the rest at zero). Why not scipy's: importing scipy.optimize costs a diagnosis about 0.12 s
-    for this one small fit. On a tie the set with the fewest and earliest columns wins (collinear columns:
-    ρ = 0 makes the AR(1) shape white)."""
+    """x ≥ 0 minimising ||design·x − target||, and that norm, for a design of a few columns: the least
+    squares on every set of free columns (the rest at zero); on a tie the fewest and earliest columns win
+    (ρ = 0 makes the AR(1) shape white). Not scipy.optimize.nnls: importing it costs more than the fit."""
     columns = design.shape[1]
     best: tuple[float, np.ndarray] = (float(np.linalg.norm(target)), np.zeros(columns))
     tie = 1e-12 * float(np.linalg.norm(target))
@@ -119,8 +86,7 @@ def small_nnls(design: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, floa
         key=lambda subset: (len(subset), subset),
     )
     for subset in subsets:
-        part = design[:, subset]
-        solution = np.linalg.lstsq(part, target, rcond=None)[0]
+        solution = np.linalg.lstsq(design[:, subset], target, rcond=None)[0]
         if np.any(solution < 0.0):
             continue
         x = np.zeros(columns)
@@ -138,8 +104,8 @@ def measure_channel_noise(
     quantum_m: float = 0.0,
     measured_m: np.ndarray | None = None,
 ) -> ChannelNoise:
-    """The AR(1)-plus-white law fitted to the residual's density above band_from_Hz, bounded per frequency
-    by the measured reading's own density when given (module docstring)."""
+    """The noise law fitted to the residual's density above band_from_Hz, bounded by the measured reading's
+    density when given (module docstring)."""
     fs = 1.0 / sample_time_s
     x = residual_m - np.mean(residual_m)
     nperseg = int(min(x.size, max(256, 2 ** int(np.log2(fs)))))
@@ -152,15 +118,14 @@ def measure_channel_noise(
     f, p = frequency[band], density[band]
     if f.size == 0:
         return ChannelNoise(0.0, 0.0, 0.0, quantum_m)
-    best: tuple[float, float, float, float, float] | None = None
-    for rho in LAG1_GRID:
-        shape = _ar1_shape(f, sample_time_s, float(rho))
-        design = np.column_stack([shape / p, 1.0 / p, 1.0 / (f * p)])
-        (a, b, c), misfit = small_nnls(design, np.ones(f.size))
-        if best is None or misfit < best[0]:
-            best = (float(misfit), float(rho), float(a), float(b), float(c))
-    assert best is not None
-    _, rho, a, b, c = best
+    cos_omega = np.cos(2.0 * np.pi * f * sample_time_s)
+
+    def fitted(rho: float) -> tuple[float, float, float, float, float]:
+        shape = 1.0 / (1.0 - 2.0 * rho * cos_omega + rho * rho)
+        (a, b, c), misfit = small_nnls(np.column_stack([shape / p, 1.0 / p, 1.0 / (f * p)]), np.ones(f.size))
+        return float(misfit), rho, float(a), float(b), float(c)
+
+    _, rho, a, b, c = min(map(fitted, map(float, LAG1_GRID)), key=lambda fit: fit[0])
     # one-sided density of AR(1) with innovation variance s²: 2·s²·Δt / |1 − ρe^{−iω}|²; its variance
     # s²/(1 − ρ²); white noise of variance σ²: 2·σ²·Δt
     coloured_variance = a / (2.0 * sample_time_s) / (1.0 - rho * rho)
@@ -177,8 +142,7 @@ def measure_noise(
     sample_time_s: float,
     excitation_top_Hz: float,
 ) -> dict[str, ChannelNoise]:
-    """Per channel: the noise of the output residual (module docstring), with the resolution of the
-    channel's measured readings."""
+    """Per channel: the noise of the output residual, with the resolution of the measured readings."""
     band_from = NOISE_BAND_FROM * excitation_top_Hz
     return {
         name: measure_channel_noise(

@@ -1,6 +1,5 @@
 """A fitted family as the user reads it (report: SI units in the names) and whether its fitted values are
-physically possible (implausible: a dissipative element must dissipate, a stiffness stays positive, a tyre
-that is said to leave the plate does leave it). These are signs and limits of physics, not thresholds."""
+physically possible (implausible: signs and limits of physics, not thresholds)."""
 
 from __future__ import annotations
 
@@ -12,20 +11,20 @@ from estimator.doctor.catalog import (
     TYRE_RATE_UNKNOWN,
     EffectInstance,
     EffectName,
+    hinge,
 )
 from estimator.doctor.model import FittedModel
 
 
 def spring_curve_points(model: FittedModel) -> tuple[np.ndarray, np.ndarray]:
-    """The suspension spring force (N) of the model at its hinge knots and the ends of the deflection range
-    (m): the stated rate, its change and the hinges (what the report plots)."""
+    """The model's suspension spring force (N) at its hinge knots and beyond (m of deflection): the stated
+    rate, its change and the hinges (what the report plots)."""
     knots = np.array(model.knots_m)
     span = 1.5 * float(np.max(np.abs(knots))) / 0.7 if knots.size else 0.01
     deflection = np.unique(np.concatenate([[-span, 0.0, span], knots]))
     force = model.spring_stiffness_N_per_m * deflection
     for knot, rate in zip(knots, model.hinge_rates_N_per_m, strict=True):
-        beyond = deflection > knot if knot >= 0 else deflection < knot
-        force = force + rate * np.where(beyond, deflection - knot, 0.0)
+        force = force + rate * hinge(deflection, knot)
     return deflection, force
 
 

@@ -1,10 +1,5 @@
-"""The monotone piecewise-cubic interpolant (PCHIP) as scipy.interpolate.PchipInterpolator defines it, in
-numpy: the same knot slopes (Fritsch-Butland weighted harmonic mean, Moler's one-sided end slopes), the same
-cubic Hermite coefficients, evaluated in the same order of operations as scipy's piecewise polynomials (a sum
-of powers, not Horner), so the values are the same to the last bit (tests/estimator/test_pchip.py).
-
-Why not scipy: importing scipy.interpolate (with scipy itself) costs a diagnosis, which imports no other
-scipy module, some 0.1-0.2 s for the one smooth curve of estimator.doctor.expected.
+"""scipy.interpolate.PchipInterpolator in numpy, to the last bit (the same knot slopes and coefficients, the
+same order of operations): importing scipy.interpolate would cost a diagnosis more than its one curve.
 """
 
 from __future__ import annotations
@@ -45,8 +40,7 @@ def _knot_slopes(x: np.ndarray, y: np.ndarray) -> np.ndarray:
 
 @dataclass(frozen=True)
 class Pchip:
-    """PchipInterpolator(knots_x, knots_y, extrapolate=False): `value` and `slope` at points within the
-    knots (NaN outside). Units: x's and y's, the slope y per x."""
+    """PchipInterpolator(knots_x, knots_y, extrapolate=False): value and slope inside the knots, else NaN."""
 
     knots_x: np.ndarray
     coefficients: np.ndarray
@@ -54,7 +48,6 @@ class Pchip:
 
     @classmethod
     def through(cls, x: np.ndarray, y: np.ndarray) -> Pchip:
-        """The interpolant through the points (x strictly increasing, at least two points)."""
         x, y = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
         if x.ndim != 1 or x.shape != y.shape or x.size < 2 or not np.all(np.diff(x) > 0):
             raise ValueError("PCHIP needs at least two points with strictly increasing x")
@@ -68,7 +61,7 @@ class Pchip:
         return self._evaluate(v, self.coefficients)
 
     def slope(self, v: np.ndarray | float) -> np.ndarray:
-        """The first derivative (scipy's PPoly.derivative(): the coefficients times 3, 2, 1)."""
+        """The first derivative (scipy's PPoly.derivative())."""
         return self._evaluate(v, self.coefficients[:-1] * np.array([3.0, 2.0, 1.0])[:, None])
 
     def _evaluate(self, v: np.ndarray | float, c: np.ndarray) -> np.ndarray:
