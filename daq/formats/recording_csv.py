@@ -69,8 +69,9 @@ def _cells(path: Path, line_no: int, line: str) -> list[str]:
         raise RecordingFormatError(f"{path}:{line_no}: not a CSV line ({one_line(exc)})") from None
 
 
-def _text(data: bytes, path: Path) -> str:
+def _text(path: Path) -> str:
     """The file's text (RecordingFormatError naming the line of the first byte that is not UTF-8)."""
+    data = path.read_bytes()
     try:
         return data.decode("utf-8")
     except UnicodeDecodeError as exc:
@@ -94,7 +95,7 @@ def read_recording_csv(path: Path | str) -> Recording:
     path = Path(path)
     if not path.is_file():
         raise RecordingFormatError(f"{path}: no such file")
-    text = _text(path.read_bytes(), path)
+    text = _text(path)
     fast = _read_well_formed(path, text)
     if fast is not None:
         return fast
@@ -144,17 +145,10 @@ def _read_well_formed(path: Path, text: str) -> Recording | None:
         return None
     if data.shape != (len(data_lines), len(header)) or not np.all(np.isfinite(data)):
         return None
-    return _from_table(path, header, data, layout.rows[0][0], layout.metadata)
-
-
-def _from_table(
-    path: Path, header: list[str], data: np.ndarray, first_data_line: int, metadata: dict[str, str]
-) -> Recording:
-    """The recording of a parsed table (rows of the header's columns), its time checked for uniform steps."""
     t = data[:, header.index("t")]
-    _check_uniform(path, t, first_data_line=first_data_line)
+    _check_uniform(path, t, first_data_line=layout.rows[0][0])
     channels = {name: np.ascontiguousarray(data[:, i]) for i, name in enumerate(header) if name != "t"}
-    return _recording(path, np.ascontiguousarray(t), channels, metadata)
+    return _recording(path, np.ascontiguousarray(t), channels, layout.metadata)
 
 
 def _check_header(path: Path, header: list[str], line_no: int) -> None:
