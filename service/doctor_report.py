@@ -130,7 +130,7 @@ def spectra_figure(result: DiagnosisResult) -> plt.Figure:
                 axes[row, 0].semilogy(f, p, color=colour, lw=0.9, label=label)
             bands = located.output_bands
             if name in bands.values:
-                centres = 0.5 * (bands.edges_Hz[:-1] + bands.edges_Hz[1:])
+                centres = 0.5 * (bands.edges[:-1] + bands.edges[1:])
                 axes[row, 1].plot(centres, bands.values[name] * 1e6, "o-", color=colour, ms=3, label=label)
         axes[row, 0].set_xlim(0, 60)
         axes[row, 0].set_ylabel(f"{name}: m²/Hz")

@@ -2,18 +2,24 @@
 (the names are what `shockbench diagnose --json` prints). Force families add unknowns that enter the
 equations of motion linearly (a column each), so the exact solver fits them with the damper curve; channel
 families correct a sensor channel before the equations are built, by Gauss-Newton (estimator.doctor.fitting).
+
+A force family's column is its force filtered by the equations' own low-pass (estimator.equations: per
+selected sample, residual forces in N), so that the equations still hold exactly.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Callable
+from dataclasses import dataclass, replace
 from enum import StrEnum
 
 import numpy as np
 
-from estimator.doctor.columns import EquationSignals, interval_mean
+from estimator.digital_filters import first_order_filter
 from estimator.dynamics import coulomb_sign
+from estimator.equations import LinearResiduals
 from estimator.recording import Recording
+from estimator.signals import lowpass
 from estimator.vehicle import VehicleConstant, VehicleParameters
 
 
@@ -49,8 +55,7 @@ HINGE_FRACTIONS = (0.4, 0.7)
 """spring_curve's hinge knots: these fractions of the largest deflection (0.1% / 99.9% quantile) each way."""
 STRIBECK_VELOCITIES_M_S = (0.0025, 0.005, 0.01, 0.02, 0.04)
 """low_speed_friction's variants: the velocity v_s over which the static peak decays (exp(−(v/v_s)²))."""
-MAX_DELAY_S = 0.02
-"""Search limit of a channel's delay, lag and averaging window (s)."""
+MAX_DELAY_S = 0.02  # search limit of a channel's delay, lag and averaging window (s)
 
 FRICTION_UNKNOWNS = ("friction_sliding_N", "friction_static_excess_N")
 SPRING_RATE_UNKNOWN = "spring_rate_change_N_per_m"
@@ -62,6 +67,99 @@ CHANNEL_PARAMETERS = {
     (EffectName.SENSOR_OFFSET, None): ("offset",),
 }
 """The Gauss-Newton parameters (kinds of estimator.doctor.model.corrections_of) of each channel family."""
+INTERVAL_POINTS = 16  # points per sample interval at which interval_mean evaluates its function
+
+
+@dataclass(frozen=True)
+class Corner:
+    """One corner's signals (m, m/s): deflection ζ = x_s − x_t and its rate (kinematics low-pass), ζ and tyre
+    deflection δ = x_t − x_r as measured (the spring terms), δ low-passed (lift-off) and its rate."""
+
+    deflection_m: np.ndarray
+    velocity_m_s: np.ndarray
+    spring_deflection_m: np.ndarray
+    tyre_deflection_m: np.ndarray
+    tyre_deflection_smooth_m: np.ndarray
+    tyre_rate_m_s: np.ndarray
+
+
+class EquationSignals:
+    """Signals of one recording (as corrected for the model's channel errors) and the system built on it."""
+
+    def __init__(self, recording: Recording, vehicle: VehicleParameters, system: LinearResiduals) -> None:
+        self.recording, self.vehicle, self.system = recording, vehicle, system
+        self.sample_time_s = recording.sample_time_s
+        kin, raw = system.kinematics, recording.channels
+        self.corners: list[Corner] = []
+        for suffix in ("_l", "_r") if vehicle.is_axle else ("",):
+            body, wheel, plate = kin[f"x_s{suffix}"], kin[f"x_t{suffix}"], kin[f"x_r{suffix}"]
+            self.corners.append(
+                Corner(
+                    deflection_m=body.position_m - wheel.position_m,
+                    velocity_m_s=body.velocity_m_s - wheel.velocity_m_s,
+                    spring_deflection_m=raw[f"x_s{suffix}"] - raw[f"x_t{suffix}"],
+                    tyre_deflection_m=raw[f"x_t{suffix}"] - raw[f"x_r{suffix}"],
+                    tyre_deflection_smooth_m=wheel.position_m - plate.position_m,
+                    tyre_rate_m_s=wheel.velocity_m_s - plate.velocity_m_s,
+                )
+            )
+
+    @property
+    def equations(self) -> tuple[str, ...]:
+        return ("left wheel", "right wheel", "heave", "roll") if self.vehicle.is_axle else ("body", "wheel")
+
+    def eq(self, series: np.ndarray) -> np.ndarray:
+        """The equation low-pass of a full-length series, at the system's selected samples."""
+        filtered = lowpass(series, self.system.filters.equation_cutoff_Hz, self.sample_time_s)
+        return filtered[self.system.sample_index]
+
+    def maxwell_regressor(self, rate_m_s: np.ndarray) -> np.ndarray:
+        """g with f_v = C_d·g for the Maxwell element τ·ḟ_v + f_v = C_d·δ̇, τ = Δt·ϑ/(1−ϑ), by the bilinear
+        transform, not the paper's backward Euler (eq 4): it matches the continuous element simulated."""
+        dt = self.sample_time_s
+        tau = self.vehicle.maxwell_time_constant_s(dt)
+        pole, gain = (2.0 * tau - dt) / (2.0 * tau + dt), dt / (2.0 * tau + dt)
+        return first_order_filter((gain, gain), -pole, rate_m_s)
+
+    def suspension_column(self, per_corner: list[np.ndarray]) -> np.ndarray:
+        """(equations, samples) column of a force in each suspension, like the damper (a series a corner)."""
+        parts = [self.eq(series) for series in per_corner]
+        if not self.vehicle.is_axle:
+            return np.stack([parts[0], -parts[0]])
+        left, right = parts
+        return np.stack([-left, -right, left + right, left - right])
+
+    def tyre_column(self, per_corner: list[np.ndarray]) -> np.ndarray:
+        """(equations, samples) column of a force in each tyre (in its wheel equation, beside K_t·δ)."""
+        parts = [self.eq(series) for series in per_corner]
+        zero = np.zeros_like(parts[0])
+        if not self.vehicle.is_axle:
+            return np.stack([zero, parts[0]])
+        return np.stack([parts[0], parts[1], zero, zero])
+
+
+def with_columns(
+    system: LinearResiduals, columns: dict[str, np.ndarray], offset: np.ndarray
+) -> LinearResiduals:
+    """The system with extra unknowns appended (each column (equations, samples)) and a new offset."""
+    matrix = system.matrix
+    if columns:
+        matrix = np.concatenate([matrix, np.stack(list(columns.values()), axis=2)], axis=2)
+    names = [*system.parameter_names, *columns]
+    return replace(system, matrix=matrix, offset=offset, parameter_names=names, tyre_theta=None, _flat=None)
+
+
+def interval_mean(function: Callable[[np.ndarray], np.ndarray], series: np.ndarray) -> np.ndarray:
+    """Per sample, the mean of function(series(t)) over its own interval (the series linear between samples):
+    a force that steps at a zero crossing acts for its share of the interval, not a sample early or late."""
+    before = np.concatenate([series[:1], series[:-1]])
+    after = np.concatenate([series[1:], series[-1:]])
+    total = np.zeros_like(series, dtype=float)
+    for k in range(INTERVAL_POINTS):
+        fraction = (k + 0.5) / INTERVAL_POINTS - 0.5
+        neighbour = before if fraction < 0.0 else after
+        total += function(series + (neighbour - series) * abs(fraction))
+    return total / INTERVAL_POINTS
 
 
 def stribeck_velocity_m_s(effect: EffectInstance) -> float:
@@ -71,10 +169,8 @@ def stribeck_velocity_m_s(effect: EffectInstance) -> float:
 
 def hinge_knots_m(recording: Recording, vehicle: VehicleParameters) -> tuple[float, ...]:
     """spring_curve's hinge knots (m of suspension deflection ζ = x_s − x_t, extension positive)."""
-    suffixes = ("_l", "_r") if vehicle.is_axle else ("",)
-    deflection = np.concatenate(
-        [recording.channels[f"x_s{s}"] - recording.channels[f"x_t{s}"] for s in suffixes]
-    )
+    c, suffixes = recording.channels, (("_l", "_r") if vehicle.is_axle else ("",))
+    deflection = np.concatenate([c[f"x_s{s}"] - c[f"x_t{s}"] for s in suffixes])
     high, low = float(np.quantile(deflection, 0.999)), float(np.quantile(deflection, 0.001))
     return tuple(f * low for f in reversed(HINGE_FRACTIONS)) + tuple(f * high for f in HINGE_FRACTIONS)
 
@@ -92,13 +188,11 @@ def hinge_unknowns(knots_m: tuple[float, ...]) -> list[str]:
 
 @dataclass(frozen=True)
 class Effect:
-    """One family: summary, what it is physically; signature, what a model without it leaves in the
-    residuals; channel_kind, "channel" for channel families (None: force family)."""
+    """One family: summary, what it is physically; signature, what a model lacking it leaves in residuals."""
 
     name: EffectName
     summary: str
     signature: str
-    channel_kind: str | None = None
 
     def instances(
         self,
@@ -115,7 +209,7 @@ class Effect:
             return [EffectInstance(self.name)] if vehicle.is_axle and not known else []
         if self.name is EffectName.LOW_SPEED_FRICTION:
             return [EffectInstance(self.name, None, f"{v * 1e3:g} mm/s") for v in STRIBECK_VELOCITIES_M_S]
-        if self.channel_kind is None:
+        if not any(self.name is n for n, _ in CHANNEL_PARAMETERS):  # a force family
             return [EffectInstance(self.name)]
         names = sorted(recording.channels)
         if self.name is EffectName.SENSOR_OFFSET:
@@ -135,16 +229,12 @@ class Effect:
         """Unknown name -> (equations, samples) column of a force family; airborne: per corner, where the
         tyre is off the plate (no tyre force)."""
         corners = signals.corners
-        contact = [1.0 - a for a in airborne]
+        contact = [(c, 1.0 - a) for c, a in zip(corners, airborne, strict=True)] if airborne else []
         if self.name is EffectName.TYRE_DAMPING:
-            series = [c.tyre_rate_m_s * k for c, k in zip(corners, contact, strict=True)]
-            return {"tyre_dashpot_Ns_per_m": signals.tyre_column(series)}
+            return {"tyre_dashpot_Ns_per_m": signals.tyre_column([c.tyre_rate_m_s * k for c, k in contact])}
         if self.name is EffectName.TYRE_VISCOELASTIC:
             # off the plate nothing drives the element: it relaxes, and lands with what is left of its force
-            series = [
-                signals.maxwell_regressor(c.tyre_rate_m_s * k) * k
-                for c, k in zip(corners, contact, strict=True)
-            ]
+            series = [signals.maxwell_regressor(c.tyre_rate_m_s * k) * k for c, k in contact]
             return {"maxwell_damping_Ns_per_m": signals.tyre_column(series)}
         if self.name is EffectName.LOW_SPEED_FRICTION:
 
@@ -154,9 +244,8 @@ class Effect:
             # each step's share of the sample interval, not its value at the sample instant
             sliding = [interval_mean(coulomb_sign, c.velocity_m_s) for c in corners]
             static = [interval_mean(peak, c.velocity_m_s) for c in corners]
-            return dict(
-                zip(FRICTION_UNKNOWNS, map(signals.suspension_column, (sliding, static)), strict=True)
-            )
+            columns = map(signals.suspension_column, (sliding, static))
+            return dict(zip(FRICTION_UNKNOWNS, columns, strict=True))
         if self.name is EffectName.SPRING_CURVE:
             deflection = [c.spring_deflection_m for c in corners]
             out = {}
@@ -169,21 +258,16 @@ class Effect:
             roll = corners[0].deflection_m - corners[1].deflection_m
             return {"anti_roll_bar_N_per_m": signals.suspension_column([roll, -roll])}
         if self.name is EffectName.TYRE_STIFFNESS:
-            series = [c.tyre_deflection_m * k for c, k in zip(corners, contact, strict=True)]
-            return {TYRE_RATE_UNKNOWN: signals.tyre_column(series)}
+            return {TYRE_RATE_UNKNOWN: signals.tyre_column([c.tyre_deflection_m * k for c, k in contact])}
         return {}
 
     def offset_change(self, signals: EquationSignals, airborne: list[np.ndarray]) -> np.ndarray | None:
         """tyre_liftoff: while airborne the wheel equation's tyre spring K_t·δ becomes the static load."""
         if self.name is not EffectName.TYRE_LIFTOFF:
             return None
-        load = signals.vehicle.static_wheel_load_N
-        stiffness = signals.vehicle.tyre_stiffness_N_per_m
-        series = [
-            a * (load - stiffness * c.tyre_deflection_m)
-            for c, a in zip(signals.corners, airborne, strict=True)
-        ]
-        return signals.tyre_column(series)
+        load, k_t = signals.vehicle.static_wheel_load_N, signals.vehicle.tyre_stiffness_N_per_m
+        pairs = zip(signals.corners, airborne, strict=True)
+        return signals.tyre_column([a * (load - k_t * c.tyre_deflection_m) for c, a in pairs])
 
 
 _DESCRIPTIONS = {
@@ -231,7 +315,4 @@ _DESCRIPTIONS = {
         "a constant residual in the wheel equation and a constant output-error offset",
     ),
 }
-CATALOG: dict[EffectName, Effect] = {
-    name: Effect(name, summary, signature, "channel" if name in {n for n, _ in CHANNEL_PARAMETERS} else None)
-    for name, (summary, signature) in _DESCRIPTIONS.items()
-}
+CATALOG: dict[EffectName, Effect] = {name: Effect(name, *texts) for name, texts in _DESCRIPTIONS.items()}

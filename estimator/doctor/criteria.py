@@ -1,28 +1,16 @@
-"""The doctor's statistical tests, each an object with one job and its own test
-(tests/estimator/test_doctor_criteria.py). The procedure that uses them is estimator.doctor.diagnose.
+"""The doctor's statistical tests, one object each (tests/estimator/test_doctor_criteria.py), for the
+procedure of estimator.doctor.diagnose.
 
 - EquationTest: is a family's contribution to the equations of motion zero? A Wald test with the sandwich
   covariance of the paper's objective (a block long-run variance of the score, estimator.uncertainty), so a
-  residual coloured by the laser's filters and by what the model still lacks is not counted as independent
-  samples.
-- SimulationTest: does the family shrink the free simulation's gap more than chance? A likelihood ratio on
-  the output-error residual, whose samples are counted as the residual's effective number of independent
-  samples (its autocorrelation: estimator.doctor.residuals.effective_samples).
-- A family is *significant* when both are (an intersection-union test: its size is at most the larger of
-  the two tests' sizes, so no correction is owed for asking both). The equations alone over-detect where the
-  model's own approximation (a piecewise-linear damper curve for a smooth one) correlates with a family's
-  columns; the simulation alone is blind to a family that the curve or the masses can stand in for.
-- Selection: of the m candidates of a round, the one with the smallest p-value is named when p ≤ α/m
-  (Bonferroni: the chance of naming anything in a round where nothing is missing is at most α).
-- GoodnessOfFit: does what the final model leaves look like what it would leave if it were the truth? A
-  parametric bootstrap: the final model's structure is re-identified on `draws` synthetic recordings of the
-  response of a plausible truth (the structure at twice the curve's resolution, with a damper whose force
-  rises with velocity: estimator.doctor.expected) read with noise drawn as the recording's own (level,
-  colour, reading resolution), and simulated again; the observed gap is compared with those draws (a
-  Student's t prediction interval of its logarithm), the equation objective's ratio reported beside it.
-
-The doctor's decision constants are ALPHA and the bases' sizes (estimator.doctor.catalog: HINGE_FRACTIONS,
-STRIBECK_VELOCITIES_M_S) and the bootstrap's size (DiagnoseOptions.draws).
+  residual coloured by the laser's filters and by what the model still lacks is not counted as independent.
+- SimulationTest: does the family shrink the free simulation's gap more than chance? A likelihood ratio, the
+  output error's samples counted as its effective number of independent ones.
+- intersection_union: significant when both are (size at most the larger, no correction owed). The equations
+  alone over-detect where the model's own approximation (a piecewise-linear curve for a smooth damper)
+  correlates with a family's columns; the simulation alone is blind to what the curve or masses stand in for.
+- Selection: Bonferroni over a round's m candidates; GoodnessOfFit: the final model's gap against its
+  parametric bootstrap (estimator.doctor.expected).
 """
 
 from __future__ import annotations
@@ -51,65 +39,31 @@ class TestResult:
 
 @dataclass(frozen=True)
 class EquationTest:
-    """Wald test of some of θ's unknowns (and of appended parameter columns) against zero:
-    W = θ_fᵀ V_ff⁻¹ θ_f ~ χ²(q) when they are zero."""
+    """Wald test of some unknowns against zero: W = θ_fᵀ V_ff⁻¹ θ_f ~ χ²(q) when they are zero."""
 
-    def test(
-        self,
-        system,
-        theta: np.ndarray,
-        names: list[str],
-        sample_time_s: float,
-        extra_values: np.ndarray | None = None,
-    ) -> TestResult:
-        """system, theta: the fitted model with the family (estimator.equations.LinearResiduals); names: the
-        family's unknowns in θ; extra_values: values of parameters whose columns were appended to `system`
-        after θ's (channel parameters: their columns are the residual's derivatives, so that at the fitted
-        θ their own estimate is zero and the test is of `extra_values`)."""
-        index = [system.parameter_names.index(n) for n in names]
-        values = [float(theta[k]) for k in index]
-        full_theta = theta
-        if extra_values is not None and extra_values.size:
-            first = len(theta)
-            index += list(range(first, first + extra_values.size))
-            values += [float(v) for v in extra_values]
-            full_theta = np.concatenate([theta, np.zeros(extra_values.size)])
-        if not index:
-            return TestResult(0.0, 0, 1.0)
-        covariance = confidence_intervals(system, full_theta, sample_time_s).covariance
-        block = covariance[np.ix_(index, index)]
-        vector = np.array(values)
-        statistic = float(vector @ np.linalg.lstsq(block, vector, rcond=None)[0])
-        if not np.isfinite(statistic):
-            return TestResult(statistic, len(index), 1.0)
-        return TestResult(statistic, len(index), chi_square_survival(statistic, len(index)))
-
-    def test_at(self, system, solution: np.ndarray, index: list[int], sample_time_s: float) -> TestResult:
-        """Wald test of solution[index] against zero, the covariance at `solution` (every unknown of the
-        system, appended columns included)."""
+    def test(self, system, solution: np.ndarray, index: list[int], sample_time_s: float) -> TestResult:
+        """system: an estimator.equations.LinearResiduals (appended columns included) solved by `solution`;
+        the test of solution[index], the covariance at `solution`."""
         if not index:
             return TestResult(0.0, 0, 1.0)
         covariance = confidence_intervals(system, solution, sample_time_s).covariance
-        block = covariance[np.ix_(index, index)]
         vector = solution[index]
-        statistic = float(vector @ np.linalg.lstsq(block, vector, rcond=None)[0])
-        if not np.isfinite(statistic):
-            return TestResult(statistic, len(index), 1.0)
-        return TestResult(statistic, len(index), chi_square_survival(statistic, len(index)))
+        statistic = float(vector @ np.linalg.lstsq(covariance[np.ix_(index, index)], vector, rcond=None)[0])
+        p_value = chi_square_survival(statistic, len(index)) if np.isfinite(statistic) else 1.0
+        return TestResult(statistic, len(index), p_value)
 
 
 @dataclass(frozen=True)
 class SimulationTest:
     """Likelihood ratio of the free simulation with and without the family: n_eff·ln(gap_without² /
-    gap_with²) ~ χ²(q), n_eff the effective number of independent samples of the residual without."""
+    gap_with²) ~ χ²(q)."""
 
     def test(self, samples: float, gap_without_m: float, gap_with_m: float, unknowns: int) -> TestResult:
         """samples: the effective number of independent samples of the residual without the family
         (estimator.doctor.residuals.effective_samples, summed over its channels)."""
         q = max(unknowns, 1)
         if not np.isfinite(gap_with_m) and not np.isfinite(gap_without_m):
-            # neither model can be simulated: the simulation cannot tell them apart and says nothing
-            # against the family (statistic nan, p = 1 would veto every family): the equations decide
+            # neither model simulates: no evidence against the family (p = 1 would veto every one)
             return TestResult(math.nan, q, 0.0)
         if not np.isfinite(gap_with_m):
             return TestResult(-np.inf, q, 1.0)
@@ -126,9 +80,8 @@ def intersection_union(*results: TestResult) -> float:
 
 @dataclass(frozen=True)
 class Selection:
-    """Bonferroni over a round's candidates: the smallest p-value wins if it is at most α/m. The p-values
-    are given as logarithms (residuals.log_chi_square_survival): large effects have p-values that would
-    underflow to 0 together, and which of them is the most significant must still be decided."""
+    """The smallest p-value of a round wins if at most α/m. Given as logarithms: those of large effects
+    underflow to 0 together, and which is the most significant must still be decided."""
 
     alpha: float = ALPHA
 
@@ -161,20 +114,15 @@ def student_upper_tail(t: float, degrees: int) -> float:
 
 @dataclass(frozen=True)
 class GoodnessOfFit:
-    """The final model's gap against `draws` bootstrap draws of the same (module docstring): p from a normal
-    prediction interval of the gap's logarithm (the draws' mean and standard deviation, widened by
-    √(1 + 1/draws) for their own uncertainty). The equation objective is reported beside it (its ratio to
-    the draws'), not tested: its null depends on the noise's spectrum inside the excitation band, which
-    cannot be measured apart from the vehicle's response (measured on DEV clean draws of the foreign world:
-    1.2-1.5 times the draws' with the gap at 0.4-1.0 times theirs)."""
+    """The final model's gap against its bootstrap draws'. The equation objective is reported, not tested:
+    its null depends on the noise inside the excitation band, not measurable apart from the response."""
 
     alpha: float = ALPHA
 
     def p_value(self, gap_m: float, draw_gaps_m: list[float]) -> float:
-        """p of a gap at least this large if the final model were the truth: Student's t prediction
-        interval of the gap's logarithm from the draws' (n − 1 degrees of freedom: their mean and spread
-        are estimated from a few draws). A model that diverges has 0; so has one whose own
-        re-identifications diverge (fewer than two finite draws: nothing shows it could be the truth)."""
+        """p of a gap at least this large if the final model were the truth: Student's t prediction interval
+        of the gap's logarithm (the draws' mean and spread × √(1 + 1/n), n − 1 degrees of freedom). 0 if the
+        model diverges or its re-identifications do (under two finite: nothing shows it could be true)."""
         if not np.isfinite(gap_m):
             return 0.0
         finite = np.log([d for d in draw_gaps_m if np.isfinite(d) and d > 0])

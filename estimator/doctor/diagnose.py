@@ -6,18 +6,20 @@ leaves more than its own noise would.
    resolved near zero velocity (estimator.doctor.model). Constants the vehicle file does not state are
    identified first and then held like stated ones.
 2. *A round*: every family of the catalogue the model lacks (estimator.doctor.catalog) is added in turn and
-   the model identified with it (the paper's objective, exact solver; channel parameters by Gauss-Newton
-   steps); all of them are simulated from the measured plate in one run.
-3. *Each candidate is tested* (estimator.doctor.criteria): in the equations (a Wald test of its unknowns)
-   and in the free simulation (a likelihood ratio of the gap); its p-value is the larger of the two. A
-   candidate whose fitted values are physically impossible (estimator.doctor.parameters.implausible) is not
-   named whatever its p-value.
+   its unknowns moved by one linearised step from the current model (fitting.one_step: the paper's
+   objective, exact solver; channel parameters by a Gauss-Newton step); all of them are simulated from the
+   measured plate in one run.
+3. *Each candidate is tested* (estimator.doctor.criteria, score_candidate): in the equations (a Wald test of
+   its unknowns) and in the free simulation (a likelihood ratio of the gap); its p-value is the larger of the
+   two. A candidate whose fitted values are physically impossible (estimator.doctor.parameters.implausible)
+   is not named whatever its p-value.
 4. *Calibrate*: a candidate significant as it stands has both statistics divided by their mean over bootstrap
    draws of the current model (a scaled χ²; calibrate). *Select*: the candidate with the smallest p-value is
-   named when it is at most α/m (Bonferroni over the m candidates of the round). Repeat from 2 with it added,
-   until a round names nothing.
-5. *Goodness of fit*: the final model against a parametric bootstrap of itself; p < α: "unexplained", with
-   where the disagreement is largest (estimator.doctor.residuals.Localisation).
+   named when it is at most α/m (Bonferroni over the m candidates of the round); it is then fitted fully
+   (fitting.fit_added). Repeat from 2 with it added, until a round names nothing.
+5. *Goodness of fit*: the final model against a parametric bootstrap of its plausible truth
+   (estimator.doctor.expected); p < α: "unexplained", with where the disagreement is largest
+   (estimator.doctor.residuals.Localisation).
 """
 
 from __future__ import annotations
@@ -41,21 +43,13 @@ from estimator.doctor.criteria import (
     TestResult,
     intersection_union,
 )
-from estimator.doctor.expected import plausible_truth, refit_on, synthetic_recording
-from estimator.doctor.fitting import fit, fit_added
-from estimator.doctor.model import FitSettings, FittedModel, ModelStructure, Reference, starting_structure
-from estimator.doctor.noise import measure_noise
+from estimator.doctor.expected import plausible_truth, synthetic_recordings
+from estimator.doctor.fitting import fit, fit_added, one_step
+from estimator.doctor.model import FitSettings, FittedModel, Reference, starting_structure
 from estimator.doctor.parameters import implausible, report
-from estimator.doctor.residuals import (
-    chi_square_survival,
-    effective_samples,
-    locate,
-    log_chi_square_survival,
-    sweep_frequency_Hz,
-)
+from estimator.doctor.residuals import effective_samples, locate, log_chi_square_survival, sweep_frequency_Hz
 from estimator.doctor.result import CandidateScore, DiagnosisResult, DiagnosisStep
-from estimator.doctor.screening import one_step
-from estimator.doctor.simulation import diverged, simulate_models
+from estimator.doctor.simulation import simulate_models
 from estimator.identify import IdentifyOptions, identify
 from estimator.recording import Recording
 from estimator.vehicle import TyreModel, VehicleParameters
@@ -64,9 +58,8 @@ Item = TypeVar("Item")
 Value = TypeVar("Value")
 
 DEFAULT_POINTS = {"quarter-car": 30, "axle": 15}
-"""Damper curve points per side before the low-speed knots (1.5 times identify's default: the curve of a
-diagnosis must follow a smooth damper closely enough that its own approximation is not taken for an
-effect)."""
+"""Damper curve points per side before the low-speed knots: 1.5 times identify's default, so that the curve's
+own approximation of a smooth damper is not taken for an effect."""
 
 
 @dataclass(frozen=True)
@@ -81,10 +74,8 @@ class DiagnoseOptions:
     alpha: float = ALPHA
     draws: int = 8
     max_steps: int = 6
-    seed: int = 0
-    """Seed of the bootstrap's noise (draw k uses seed + k)."""
-    workers: int = 2
-    """Threads the fits of a round run in (the diagnosis does not depend on it)."""
+    seed: int = 0  # of the bootstrap's noise (draw k uses seed + k)
+    workers: int = 2  # threads the fits of a round run in (the diagnosis does not depend on it)
 
 
 @dataclass(frozen=True)
@@ -111,35 +102,22 @@ def _simulate(models: list[FittedModel], recording: Recording) -> list[Simulated
     batch = simulate_models(models, recording)
     gaps = batch.gap_m()
     return [
-        Simulated(
-            float(gaps[k]),
-            batch.column(k),
-            {name: p[:, k] for name, p in batch.predicted.items()},
-        )
+        Simulated(float(gaps[k]), batch.column(k), {name: p[:, k] for name, p in batch.predicted.items()})
         for k in range(len(models))
     ]
 
 
+@dataclass
 class _Doctor:
-    def __init__(
-        self,
-        reference: Reference,
-        options: DiagnoseOptions,
-        progress: Callable[[DiagnoseProgress], object] | None,
-        cancel: threading.Event | None,
-    ) -> None:
-        self.reference = reference
-        self.recording = reference.recording
-        self.options = options
-        self.progress = progress
-        self.cancel = cancel
-        self.pool: ThreadPoolExecutor | None = None
+    reference: Reference
+    options: DiagnoseOptions
+    progress: Callable[[DiagnoseProgress], object] | None
+    cancel: threading.Event | None
+    pool: ThreadPoolExecutor | None = None
 
     def map(self, function: Callable[[Item], Value], items: Iterable[Item]) -> list[Value]:
         """function over items, in the pool's threads (the heavy parts of a fit release the GIL)."""
-        if self.pool is None:
-            return [function(item) for item in items]
-        return list(self.pool.map(function, items))
+        return [function(i) for i in items] if self.pool is None else list(self.pool.map(function, items))
 
     def report(self, step: int, stage: str) -> None:
         if self.cancel is not None and self.cancel.is_set():
@@ -147,62 +125,45 @@ class _Doctor:
         if self.progress is not None:
             self.progress(DiagnoseProgress(step, stage))
 
-    def candidates(self, structure: ModelStructure) -> list[EffectInstance]:
-        """The families the model lacks (a family with variants, sensor_dynamics per channel or
-        low_speed_friction, is added in one variant only)."""
-        present = {(e.name, e.channel) for e in structure.effects}
-        vehicle, reference = self.reference.vehicle, self.reference
-        return [
-            instance
-            for effect in CATALOG.values()
-            for instance in effect.instances(vehicle, self.recording, reference.identified)
-            if (instance.name, instance.channel) not in present
-        ]
-
-    def run(self) -> DiagnosisResult:
-        if self.options.workers <= 1:
-            return self.diagnose()
-        with ThreadPoolExecutor(self.options.workers) as pool:
-            self.pool = pool
-            try:
-                return self.diagnose()
-            finally:
-                self.pool = None
-
     def diagnose(self) -> DiagnosisResult:
-        options, reference = self.options, self.reference
-        structure = starting_structure(options.tyre)
+        """Steps 1 to 5 of the module docstring."""
+        options, reference, recording = self.options, self.reference, self.reference.recording
         self.report(0, "identifying the starting model")
-        current = fit(reference, structure)
-        (simulated,) = _simulate([current], self.recording)
-        initial, start = simulated, current
+        start = current = fit(reference, starting_structure(options.tyre))  # step 1
+        (initial,) = _simulate([current], recording)
+        simulated = initial
         steps: list[DiagnosisStep] = []
         rounds: list[list[CandidateScore]] = []
         for step in range(options.max_steps + 1):
             self.report(step, "fitting and testing the candidates")
-            candidates = self.candidates(structure) if step < options.max_steps else []
-            if not candidates:
+            # step 2: the families the model lacks (a family with variants, per channel or v_s, in one only)
+            present = {(e.name, e.channel) for e in current.structure.effects}
+            candidates = [
+                c
+                for effect in CATALOG.values()
+                for c in effect.instances(reference.vehicle, recording, reference.identified)
+                if (c.name, c.channel) not in present
+            ]
+            if not candidates or step == options.max_steps:
                 break
             stepped = self.map(lambda c, warm=current: one_step(reference, warm, c), candidates)
-            outcomes = _simulate([m for m, _ in stepped], self.recording)
-            scores, log_p = [], {}
-            for candidate, (model, equations), outcome in zip(candidates, stepped, outcomes, strict=True):
-                score = self.score(candidate, current, simulated, model, equations, outcome)
-                scores.append(score)
-                if score.verdict == "tested":
-                    log_p[candidate] = _log_p(score)
+            outcomes = _simulate([m for m, _ in stepped], recording)
+            scores = [  # step 3
+                score_candidate(c, current, simulated, m, test, o)
+                for c, (m, test), o in zip(candidates, stepped, outcomes, strict=True)
+            ]
+            log_p = {c: _log_p(s) for c, s in zip(candidates, scores, strict=True) if s.verdict == "tested"}
             bound = options.alpha / max(len(log_p), 1)
-            # calibration can only raise a p-value (its scales are at least 1): only the candidates that
-            # are significant uncalibrated need the bootstrap
+            # step 4: calibration can only raise a p-value (its scales are at least 1): only the candidates
+            # significant uncalibrated need the bootstrap
             significant = [c for c in log_p if log_p[c] <= math.log(bound)]
             if significant:
                 self.report(step, "calibrating the significant candidates by a bootstrap of the model")
                 observed = {c: scores[candidates.index(c)] for c in significant}
-                scales = self.calibrate(current, simulated, observed, bound)
-                for candidate in significant:
+                for candidate, scales in self.calibrate(current, simulated, observed, bound).items():
                     k = candidates.index(candidate)
-                    scores[k] = _calibrated(scores[k], *scales[candidate])
-                    log_p[candidate] = _log_p(scores[k], *scales[candidate])
+                    scores[k] = _calibrated(scores[k], *scales)
+                    log_p[candidate] = _log_p(scores[k], *scales)
             chosen = Selection(options.alpha).choose(log_p)
             scores = [_verdict(s, chosen, bound) for s in scores]
             rounds.append(scores)
@@ -211,7 +172,7 @@ class _Doctor:
             index = candidates.index(chosen)
             self.report(step, f"fitting {chosen.label}")
             model = fit_added(reference, current, chosen, stepped[index][0])
-            (outcome,) = _simulate([model], self.recording)
+            (outcome,) = _simulate([model], recording)
             steps.append(
                 DiagnosisStep(
                     effect=chosen.label,
@@ -224,51 +185,29 @@ class _Doctor:
                     predicted_after=outcome.predicted,
                 )
             )
-            structure, current, simulated = model.structure, model, outcome
+            current, simulated = model, outcome
         self.report(len(steps), "testing the final model against its own noise")
-        return self.conclude(start, initial, current, simulated, steps, rounds)
-
-    def score(
-        self,
-        candidate: EffectInstance,
-        current: FittedModel,
-        simulated: Simulated,
-        model: FittedModel,
-        equations: TestResult,
-        outcome: Simulated,
-    ) -> CandidateScore:
-        """The candidate's tests on the recording (module docstring, step 3)."""
-        return score_candidate(candidate, current, simulated, model, equations, outcome)
-
-    def conclude(
-        self,
-        start: FittedModel,
-        initial: Simulated,
-        final: FittedModel,
-        simulated: Simulated,
-        steps: list[DiagnosisStep],
-        rounds: list[list[CandidateScore]],
-    ) -> DiagnosisResult:
-        """The goodness-of-fit test of the final model and the diagnosis in words."""
-        objectives, gaps = self.bootstrap(final, simulated)
-        gof = GoodnessOfFit(self.options.alpha)
+        # step 5: the final structure re-identified on synthetic recordings of its plausible truth (started
+        # from the final model: each is its response plus noise)
+        final, synthetic = current, self.synthetic(current, simulated)
+        refits = self.map(lambda s: fit(reference.on(s), final.structure, warm=final), synthetic)
+        objectives = [m.objective for m in refits]
+        batch = simulate_models(refits, recording, list(synthetic)) if refits else None
+        gaps = [float(g) for g in batch.gap_m()] if batch else []
+        gof = GoodnessOfFit(options.alpha)
         p = gof.p_value(simulated.gap_m, gaps)
         unexplained = gof.unexplained(p)
         located = locate(final, simulated.residual, simulated.gap_m)
         finite = [g for g in gaps if np.isfinite(g)]
-        expected = float(np.mean(finite)) if finite else float("inf")
-        named = ", ".join(s.effect for s in steps)
         gap, before = simulated.gap_m * 1e6, initial.gap_m * 1e6
         verdict = (
-            f"p = {p:.2g} < α = {self.options.alpha:g}: unexplained; " + located.describe()
+            f"p = {p:.2g} < α = {options.alpha:g}: unexplained; " + located.describe()
             if unexplained
             else f"p = {p:.2g}: nothing left that the noise does not explain"
         )
-        if steps:
-            conclusion = f"named {named}: the gap fell from {before:.1f} µm to {gap:.1f} µm; {verdict}"
-        else:
-            conclusion = f"nothing named: the gap is {gap:.1f} µm; {verdict}"
-        plate = self.recording.channels["x_r_l" if final.vehicle.is_axle else "x_r"]
+        effects = ", ".join(s.effect for s in steps)
+        named = f"named {effects}: the gap fell from {before:.1f} µm to {gap:.1f} µm"
+        plate = recording.channels["x_r_l" if final.vehicle.is_axle else "x_r"]
         return DiagnosisResult(
             starting_effects=start.structure.labels,
             final_effects=final.structure.labels,
@@ -277,44 +216,30 @@ class _Doctor:
             steps=steps,
             rounds=rounds,
             unexplained=bool(unexplained),
-            conclusion=conclusion,
-            expected_gap_m=expected,
+            conclusion=(named if steps else f"nothing named: the gap is {gap:.1f} µm") + f"; {verdict}",
+            expected_gap_m=float(np.mean(finite)) if finite else float("inf"),
             residual_ratio=final.objective / float(np.mean(objectives)) if objectives else float("nan"),
             p_value=p,
-            alpha=self.options.alpha,
+            alpha=options.alpha,
             where=located.describe() if unexplained else None,
-            noise_floor_m=self.reference.filters.noise_floor_m,
+            noise_floor_m=reference.filters.noise_floor_m,
             located_before=locate(start, initial.residual, initial.gap_m),
-            measured={n: self.recording.channels[n] for n in initial.predicted},
+            measured={n: recording.channels[n] for n in initial.predicted},
             predicted_before=initial.predicted,
-            time_s=self.recording.time_s,
-            sweep_frequency_Hz=sweep_frequency_Hz(plate, self.recording.sample_time_s),
+            time_s=recording.time_s,
+            sweep_frequency_Hz=sweep_frequency_Hz(plate, recording.sample_time_s),
             final_model=final,
         )
 
     def synthetic(self, model: FittedModel, simulated: Simulated, plausible: bool = True) -> list[Recording]:
-        """`draws` synthetic recordings of the model's smooth response (its plausible truth) read with the
-        recording's own noise, measured on the model's output residual (estimator.doctor.expected,
-        estimator.doctor.noise); none when the truth diverges."""
-        recording, dt = self.recording, self.recording.sample_time_s
-        truth = (
-            plausible_truth(model, recording, self.reference.settings, self.reference.identified)
-            if plausible
-            else model
-        )
-        (response,) = _simulate([truth], recording)
+        """`draws` recordings of the model's (or its plausible truth's) response read with the noise measured
+        on its output residual; none when the truth diverges."""
+        reference, recording = self.reference, self.reference.recording
+        (response,) = _simulate([plausible_truth(model, reference) if plausible else model], recording)
         if not np.isfinite(response.gap_m):
             return []
-        measured = {name: recording.channels[name] for name in simulated.residual}
-        residual = {
-            name: measured[name] if diverged(r, measured[name]) else r
-            for name, r in simulated.residual.items()
-        }
-        noise = measure_noise(residual, measured, dt, self.reference.filters.excitation_top_Hz)
-        return [
-            synthetic_recording(recording, response.predicted, noise, self.options.seed + k)
-            for k in range(self.options.draws)
-        ]
+        seeds = range(self.options.seed, self.options.seed + self.options.draws)
+        return synthetic_recordings(reference, response.predicted, simulated.residual, seeds)
 
     def calibrate(
         self,
@@ -324,16 +249,13 @@ class _Doctor:
         bound: float,
     ) -> dict[EffectInstance, tuple[float, float]]:
         """Per candidate, the scales of its Wald and likelihood-ratio statistics under the current model:
-        their mean over the bootstrap draws (the current structure and the candidate identified on each
-        synthetic recording, as on the measurement; a statistic below 0 counts as 0) over their degrees of
-        freedom, at least 1 (a scaled χ²: the model's own approximation and the noise's colour inflate both
-        statistics alike on the measurement and on the draws).
+        their mean over bootstrap draws of it (each tested as the measurement; below 0 counts as 0) over the
+        degrees of freedom, at least 1 (a scaled χ²: the model's own approximation and the noise's colour
+        inflate both statistics alike on the measurement and on the draws).
 
-        The draws are made `workers` at a time. Every statistic is at least 0, so the sum over the draws made,
-        spread over all `draws`, is a lower bound of a scale: a candidate whose p-value at those lower bounds
-        is already above `bound` (its round's α/m) cannot be named whatever the other draws give, and is not
-        stepped on them (its scales are then the mean over the draws it had); the draws stop when no candidate
-        is left. The round's decision is the one every draw would give."""
+        The draws are made `workers` at a time. A sum over the draws made, spread over all `draws`, is a
+        lower bound of a scale: a candidate whose p-value at those bounds is already above `bound` cannot be
+        named, and is left out of the other draws; the round's decision is the one every draw would give."""
         synthetic = self.synthetic(current, simulated, plausible=False)
         if not synthetic:
             return {c: (1.0, 1.0) for c in observed}
@@ -346,11 +268,8 @@ class _Doctor:
                     for kept, statistic in zip(values[candidate], statistics, strict=True):
                         if np.isfinite(statistic):
                             kept.append(max(statistic, 0.0))
-            alive = [
-                c
-                for c in alive
-                if _log_p(observed[c], *_scales(observed[c], values[c], len(synthetic))) <= math.log(bound)
-            ]
+            lower = {c: _scales(observed[c], values[c], len(synthetic)) for c in alive}
+            alive = [c for c in alive if _log_p(observed[c], *lower[c]) <= math.log(bound)]
             if not alive:
                 break
         return {c: _scales(observed[c], values[c]) for c in observed}
@@ -358,35 +277,16 @@ class _Doctor:
     def draw_statistics(
         self, current: FittedModel, recording: Recording, candidates: tuple[EffectInstance, ...]
     ) -> dict[EffectInstance, tuple[float, float]]:
-        """On one synthetic recording: the current structure identified, each candidate stepped from it and
-        tested as on the measurement; its Wald and likelihood-ratio statistics."""
-        on = Reference.of(recording, current.vehicle, self.reference.settings, self.reference.identified)
-        on = replace(on, knots_m=self.reference.knots_m)
+        """Each candidate's Wald and likelihood-ratio statistics on one synthetic recording, as measured."""
+        on = self.reference.on(recording)
         base = fit(on, current.structure, warm=current)
         stepped = [one_step(on, base, c) for c in candidates]
         outcomes = _simulate([base, *(m for m, _ in stepped)], recording)
-        return {
-            c: (score.equation_statistic, score.simulation_statistic)
-            for c, score in zip(
-                candidates,
-                (
-                    score_candidate(c, base, outcomes[0], m, t, o)
-                    for c, (m, t), o in zip(candidates, stepped, outcomes[1:], strict=True)
-                ),
-                strict=True,
-            )
-        }
-
-    def bootstrap(self, final: FittedModel, simulated: Simulated) -> tuple[list[float], list[float]]:
-        """The equation objective and gap of the final structure re-identified on the synthetic recordings
-        of itself."""
-        recording = self.recording
-        synthetic = self.synthetic(final, simulated)
-        if not synthetic:
-            return [], []
-        refits = self.map(lambda s: refit_on(s, final, self.reference), synthetic)
-        batch = simulate_models(refits, recording, list(synthetic))
-        return [m.objective for m in refits], [float(g) for g in batch.gap_m()]
+        statistics = {}
+        for c, (m, test), o in zip(candidates, stepped, outcomes[1:], strict=True):
+            score = score_candidate(c, base, outcomes[0], m, test, o)
+            statistics[c] = (score.equation_statistic, score.simulation_statistic)
+        return statistics
 
 
 def score_candidate(
@@ -397,9 +297,8 @@ def score_candidate(
     equations: TestResult,
     outcome: Simulated,
 ) -> CandidateScore:
-    """A candidate's tests (module docstring, step 3): the one-step Wald test of its unknowns
-    (estimator.doctor.screening) and the likelihood ratio of its free simulation against the current
-    model's."""
+    """A candidate's tests (module docstring, step 3): the one-step Wald test of its unknowns and the
+    likelihood ratio of its free simulation against the current model's."""
     unknowns = equations.unknowns
     if candidate.name is EffectName.TYRE_LIFTOFF:  # no unknown: the equations must hold better with it
         better = model.objective < current.objective
@@ -423,45 +322,40 @@ def score_candidate(
     )
 
 
-def _log_p(score: CandidateScore, wald_scale: float = 1.0, ratio_scale: float = 1.0) -> float:
-    """ln of the candidate's p-value (the larger of its two tests', the statistics divided by their
-    calibration scales), without the underflow of score.p_value (Selection)."""
+def _log_p_values(score: CandidateScore, wald_scale: float, ratio_scale: float) -> tuple[float, float]:
+    """ln of the candidate's equation and simulation p-values, the statistics divided by their calibration
+    scales (tyre_liftoff's equation test is no Wald test: its p-value as it is)."""
     q = max(score.unknowns, 1)
-    if score.effect.startswith(EffectName.TYRE_LIFTOFF.value):  # no unknown: not a Wald test
+    if score.effect.startswith(EffectName.TYRE_LIFTOFF.value):
         equation = math.log(score.equation_p) if score.equation_p > 0 else -math.inf
     else:
         equation = log_chi_square_survival(score.equation_statistic / wald_scale, q)
     if math.isnan(score.simulation_statistic):  # neither model simulates: the equations decide
-        simulation = -math.inf
-    else:
-        simulation = log_chi_square_survival(max(score.simulation_statistic, 0.0) / ratio_scale, q)
-    return max(equation, simulation)
+        return equation, -math.inf
+    return equation, log_chi_square_survival(max(score.simulation_statistic, 0.0) / ratio_scale, q)
+
+
+def _log_p(score: CandidateScore, wald_scale: float = 1.0, ratio_scale: float = 1.0) -> float:
+    """ln of the candidate's p-value, the larger of its two tests' (for Selection: no underflow to 0)."""
+    return max(_log_p_values(score, wald_scale, ratio_scale))
+
+
+def _calibrated(score: CandidateScore, wald_scale: float, ratio_scale: float) -> CandidateScore:
+    """The score with its p-values from the statistics divided by their bootstrap scales."""
+    equation, simulation = (min(1.0, math.exp(v)) for v in _log_p_values(score, wald_scale, ratio_scale))
+    if score.effect.startswith(EffectName.TYRE_LIFTOFF.value):
+        equation = score.equation_p
+    return replace(score, equation_p=equation, simulation_p=simulation, p_value=max(equation, simulation))
 
 
 def _scales(
     score: CandidateScore, values: tuple[list[float], list[float]], draws: int | None = None
 ) -> tuple[float, float]:
-    """The Wald and likelihood-ratio scales of a candidate from its statistics on the draws (calibrate):
-    their mean over the draws with a finite value, or their sum over `draws` (a lower bound of that mean
-    once all draws are made), over the degrees of freedom, at least 1."""
+    """A candidate's Wald and likelihood-ratio scales (calibrate): the mean of its finite statistics on the
+    draws, or their sum over `draws` (a lower bound), over the degrees of freedom, at least 1."""
     q = max(score.unknowns, 1)
     return tuple(  # type: ignore[return-value]
         max(1.0, sum(kept) / ((draws or len(kept)) * q)) if kept else 1.0 for kept in values
-    )
-
-
-def _calibrated(score: CandidateScore, wald_scale: float, ratio_scale: float) -> CandidateScore:
-    """The score with its p-values from the statistics divided by their bootstrap scales."""
-    q = max(score.unknowns, 1)
-    equation_p = chi_square_survival(score.equation_statistic / wald_scale, q)
-    positive = score.simulation_statistic > 0
-    simulation_p = chi_square_survival(score.simulation_statistic / ratio_scale, q) if positive else 1.0
-    if math.isnan(score.simulation_statistic):  # neither model simulates (SimulationTest)
-        simulation_p = 0.0
-    if score.effect.startswith(EffectName.TYRE_LIFTOFF.value):
-        equation_p = score.equation_p  # no unknown: its equation test is not a Wald test
-    return replace(
-        score, equation_p=equation_p, simulation_p=simulation_p, p_value=max(equation_p, simulation_p)
     )
 
 
@@ -480,8 +374,7 @@ def _evidence(score: CandidateScore) -> str:
     return (
         f"equations: W = {score.equation_statistic:.1f} on {score.unknowns} unknowns "
         f"(p = {score.equation_p:.2g}); simulation: the gap {ratio} (likelihood ratio "
-        f"{score.simulation_statistic:.1f}, "
-        f"p = {score.simulation_p:.2g})"
+        f"{score.simulation_statistic:.1f}, p = {score.simulation_p:.2g})"
     )
 
 
@@ -495,11 +388,15 @@ def diagnose(
     """Find, name and add the effects the model lacks (module docstring); `progress` is called at every
     stage, `cancel` (set from another thread) stops the diagnosis with InterruptedError."""
     identified = vehicle.unknown
-    if vehicle.unknown:
+    if identified:
         if progress is not None:
             progress(DiagnoseProgress(0, "identifying the constants the vehicle file does not state"))
         found = identify(recording, vehicle, IdentifyOptions(points=options.points, output_error=False))
         vehicle = found.model.vehicle
     points = options.points or DEFAULT_POINTS[vehicle.model.value]
     reference = Reference.of(recording, vehicle, FitSettings(points, options.nsample), identified)
-    return _Doctor(reference, options, progress, cancel).run()
+    doctor = _Doctor(reference, options, progress, cancel)
+    if options.workers <= 1:
+        return doctor.diagnose()
+    with ThreadPoolExecutor(options.workers) as doctor.pool:
+        return doctor.diagnose()

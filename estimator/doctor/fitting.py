@@ -1,21 +1,24 @@
-"""A model with effect families identified on a recording: the paper's objective minimised exactly, channel
-parameters by Gauss-Newton steps (finite-difference columns solved jointly with θ, within bounds). With
-tyre_liftoff the airborne samples come from the fitted tyre force, decided again once.
+"""A model with effect families identified on a recording (fit): the paper's objective minimised exactly,
+channel parameters by Gauss-Newton steps (finite-difference columns solved jointly with θ, within bounds);
+with tyre_liftoff the airborne samples come from the fitted tyre force, decided again once.
+
+A candidate is screened by one linearised step from the current model (one_step): from a consistent estimate
+one step is as efficient as the fit (Le Cam), so the Wald statistic of its unknowns is a score test. Only the
+family a round names is fitted fully (fit_added).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from estimator.doctor.catalog import MAX_DELAY_S, EffectInstance, EffectName
-from estimator.doctor.columns import with_columns
+from estimator.doctor.catalog import MAX_DELAY_S, EffectInstance, EffectName, with_columns
+from estimator.doctor.criteria import EquationTest, TestResult
 from estimator.doctor.model import FittedModel, ModelStructure, Reference, build_extended
 from estimator.equations import LinearResiduals
 from estimator.solvers.exact import solve_exact
 
 GAUSS_NEWTON_ITERATIONS = 4
-HALVINGS = 3
-"""A Gauss-Newton step that raises the objective is halved at most this many times."""
+HALVINGS = 3  # a Gauss-Newton step that raises the objective is halved at most this many times
 GAUSS_NEWTON_STEP = {"delay": 5e-4, "lag": 5e-4, "average": 1e-3, "gain": 1e-3, "offset": 1e-4}
 """Finite-difference step of each kind of channel parameter (s, s, s, relative, m)."""
 GAUSS_NEWTON_TOLERANCE = {"delay": 2e-6, "lag": 2e-6, "average": 4e-6, "gain": 1e-5, "offset": 1e-7}
@@ -51,9 +54,8 @@ def minimise(
 def channel_jacobian(
     reference: Reference, model: FittedModel, which: list[int] | None = None
 ) -> dict[str, np.ndarray]:
-    """Per Gauss-Newton parameter of the model (those at the indices `which`, when given), the change of
-    its equation residual per unit of the parameter at the fitted θ, the airborne samples held: also what
-    the Wald test of a channel family takes as the family's columns."""
+    """Per Gauss-Newton parameter of the model (at the indices `which`, if given), the change of the equation
+    residual per unit of it at the fitted θ, airborne samples held (also a channel family's Wald columns)."""
     parameters = model.structure.channel_parameters
     base_residual = model.residuals()
     jacobian = {}
@@ -68,10 +70,9 @@ def channel_jacobian(
 
 
 def fit(reference: Reference, structure: ModelStructure, warm: FittedModel | None = None) -> FittedModel:
-    """Identify `structure` on the reference recording, from `warm` (a fitted model of a similar structure,
-    matched by unknown and by channel parameter; new ones start at zero). A Gauss-Newton step that raises
-    the objective is halved, HALVINGS times at most before the fit keeps its best point (a delay and a lag
-    of one channel are nearly collinear, and a full step clipped at zero can overshoot)."""
+    """Identify `structure` on the reference recording from `warm` (a similar model, matched by unknown and
+    channel parameter; new ones start at zero). A Gauss-Newton step that raises the objective is halved, at
+    most HALVINGS times (a delay and a lag of one channel are nearly collinear; a clipped step overshoots)."""
     parameters = structure.channel_parameters
     kinds = [kind for _, kind in parameters]
     values = warm.channel_values_for(parameters) if warm else np.zeros(len(parameters))
@@ -113,10 +114,9 @@ def bounded_step(
     values: np.ndarray,
     free_solution: np.ndarray | None = None,
 ) -> np.ndarray:
-    """The channel values after one Gauss-Newton step, θ solved with them, within the bounds of `feasible`
-    (an active-set step): a parameter the step would push past its bound is held there and the others are
-    solved again with its change in the offset (clipping afterwards would keep the others' share of a
-    combined move). free_solution: the step with every parameter free (θ, then the steps), if solved."""
+    """The channel values after one Gauss-Newton step within the bounds of `feasible` (active set): a
+    parameter pushed past its bound is held there, the others solved again with its change in the offset
+    (clipping afterwards would keep their share of a combined move). free_solution: the unbounded step."""
     names = list(jacobian)
     fixed: dict[int, float] = {}
     while True:
@@ -129,8 +129,7 @@ def bounded_step(
             solved = minimise(augmented, np.concatenate([theta, np.zeros(len(free))]), 1e-8)[0]
         increment = np.zeros(len(names))
         increment[free] = solved[used.n_params :]
-        for j, change in fixed.items():
-            increment[j] = change
+        increment[list(fixed)] = list(fixed.values())
         moved = feasible(kinds, values + increment)
         clipped = [j for j in free if moved[j] != values[j] + increment[j]]
         if not clipped or len(free) == 1:
@@ -143,8 +142,39 @@ def fit_added(
     reference: Reference, current: FittedModel, family: EffectInstance, start: FittedModel
 ) -> FittedModel:
     """The current model with `family` added, identified from `start` (its one-step model), or from the
-    current model when that ends worse than the current model (a larger model cannot fit worse; one step
-    of nearly collinear channel parameters can start far off)."""
+    current model when that ends worse (a larger model cannot fit worse; a step can start far off)."""
     structure = current.structure.with_effect(family)
     model = fit(reference, structure, warm=start)
     return model if model.objective <= current.objective else fit(reference, structure, warm=current)
+
+
+def one_step(
+    reference: Reference, current: FittedModel, candidate: EffectInstance
+) -> tuple[FittedModel, TestResult]:
+    """The current model with `candidate` added and its unknowns moved by one linearised step, and the Wald
+    test of those unknowns (their channel parameters' steps included) against zero."""
+    structure = current.structure.with_effect(candidate)
+    parameters = structure.channel_parameters
+    vehicle, knots, values = reference.vehicle, reference.knots_m, current.channel_values_for(parameters)
+    system, signals, airborne = build_extended(reference, structure, values, current.tyre)
+    start = start_from(system, current)
+    own = [k for k, (effect, _) in enumerate(parameters) if effect == candidate]
+    model = FittedModel(
+        structure, vehicle, start, system, signals, values, airborne, current.objective, knots
+    )
+    jacobian = channel_jacobian(reference, model, which=own)
+    augmented = with_columns(system, jacobian, system.offset) if jacobian else system
+    solution, objective = minimise(augmented, np.concatenate([start, np.zeros(len(jacobian))]))
+    theta, steps = solution[: system.n_params], solution[system.n_params :]
+    own_kinds = [parameters[k][1] for k in own]
+    if np.any(feasible(own_kinds, values[own] + steps) != values[own] + steps):
+        # the test keeps the unbounded step; the model moves by the step within the bounds
+        values[own] = bounded_step(system, start, jacobian, own_kinds, values[own], solution)
+        system, signals, airborne = build_extended(reference, structure, values, current.tyre)
+        theta, objective = minimise(system, start)
+    else:
+        values[own] = values[own] + steps
+    index = [k for k, n in enumerate(system.parameter_names) if n not in current.system.parameter_names]
+    index += range(system.n_params, system.n_params + len(own))  # and the steps of its channel parameters
+    test = EquationTest().test(augmented, solution, index, reference.recording.sample_time_s)
+    return FittedModel(structure, vehicle, theta, system, signals, values, airborne, objective, knots), test

@@ -1,7 +1,6 @@
-"""A model with effect families added, and its equations: the paper's, on the recording corrected for its
-channel families, with the damper grid and filters of the uncorrected recording (so that every candidate
-shares its unknowns) and the force families' columns appended; cached per Reference (a diagnosis fits many
-models of one recording).
+"""A model with effect families added, and its equations: the paper's on the recording corrected for its
+channel families, with the uncorrected recording's damper grid and filters (every candidate shares its
+unknowns) and the force families' columns appended; cached per Reference (a diagnosis fits many models).
 """
 
 from __future__ import annotations
@@ -21,11 +20,12 @@ from estimator.doctor.catalog import (
     TYRE_RATE_UNKNOWN,
     EffectInstance,
     EffectName,
+    EquationSignals,
     hinge_knots_m,
     hinge_unknowns,
     stribeck_velocity_m_s,
+    with_columns,
 )
-from estimator.doctor.columns import EquationSignals, with_columns
 from estimator.equations import LinearResiduals, build
 from estimator.errors import InvalidValueError
 from estimator.laser_channels import ChannelCorrections
@@ -33,8 +33,7 @@ from estimator.recording import Recording
 from estimator.signals import FilterChoice
 from estimator.vehicle import TyreModel, VehicleConstant, VehicleParameters
 
-ChannelParameters = list[tuple[EffectInstance, str]]
-"""(family, kind) of each Gauss-Newton parameter of a model, in order."""
+ChannelParameters = list[tuple[EffectInstance, str]]  # (family, kind) of each Gauss-Newton parameter
 
 
 @dataclass(frozen=True)
@@ -82,7 +81,7 @@ rise, and a friction step is what it cannot make."""
 @dataclass(frozen=True)
 class FitSettings:
     points: int | None = None
-    """Damper curve points (default 20 for a quarter car, 10 per side for an axle), before low-speed knots."""
+    """Damper curve points before the low-speed knots (None: identify's default)."""
     nsample: int | None = 5000
     low_speed_knots_m_s: tuple[float, ...] = LOW_SPEED_KNOTS_M_S
     """The low-speed knots (low_speed_grids); a bootstrap truth has them finer (estimator.doctor.expected)."""
@@ -90,9 +89,8 @@ class FitSettings:
 
 @dataclass
 class FittedModel:
-    """A structure identified on a recording: θ of the extended system (on the corrected recording, all
-    selected samples), the Gauss-Newton parameters (structure.channel_parameters' order), per corner where
-    the tyre would pull on the plate (with tyre_liftoff), and spring_curve's hinge knots."""
+    """A structure identified on a recording: θ of the extended system, the Gauss-Newton parameters
+    (structure.channel_parameters' order), per corner where the tyre is off the plate (with tyre_liftoff)."""
 
     structure: ModelStructure
     vehicle: VehicleParameters
@@ -138,13 +136,9 @@ class FittedModel:
         )
 
     @property
-    def maxwell_damping_Ns_per_m(self) -> float:
-        return self.value("maxwell_damping_Ns_per_m")
-
-    @property
     def tyre(self) -> tuple[float, float, float]:
         """The tyre's dashpot, Maxwell damping and stiffness correction (0 where the model lacks one)."""
-        dashpot, maxwell = self.value("tyre_dashpot_Ns_per_m"), self.maxwell_damping_Ns_per_m
+        dashpot, maxwell = self.value("tyre_dashpot_Ns_per_m"), self.value("maxwell_damping_Ns_per_m")
         return dashpot, maxwell, self.value(TYRE_RATE_UNKNOWN)
 
     @property
@@ -186,9 +180,8 @@ COLUMN_CACHE_ENTRIES = 32  # family columns a Reference keeps
 
 @dataclass(frozen=True)
 class Reference:
-    """What every fit of one recording shares: the damper grid(s) and filters of the uncorrected recording,
-    the spring hinges' knots, the constants identified from it, and caches of the systems built on it
-    (guarded by `lock`: candidates are fitted in parallel threads)."""
+    """What every fit of one recording shares: the uncorrected recording's damper grids and filters, the
+    hinge knots, the constants identified from it, and caches of the systems built (guarded by `lock`)."""
 
     recording: Recording
     vehicle: VehicleParameters
@@ -217,6 +210,11 @@ class Reference:
         knots = hinge_knots_m(recording, vehicle)
         grids = low_speed_grids(base.grids_m_s, settings.low_speed_knots_m_s)
         return Reference(recording, vehicle, settings, grids, base.filters, knots, identified)
+
+    def on(self, recording: Recording) -> Reference:
+        """The Reference of another recording (a bootstrap draw): these settings, hinge knots, constants."""
+        on = Reference.of(recording, self.vehicle, self.settings, self.identified)
+        return replace(on, knots_m=self.knots_m)
 
 
 LOW_SPEED_CLEARANCE = 0.5
@@ -248,11 +246,9 @@ def low_speed_grids(
 def _airborne(
     signals: EquationSignals, dashpot: float, maxwell: float, stiffness_change: float
 ) -> list[np.ndarray]:
-    """Per corner, 1.0 where the force of the fitted tyre would pull on the plate, else 0.0. An airborne
-    Maxwell element is not driven (it relaxes, as in its column and the simulation), so with one the
-    samples are decided in order, each with the element force the previous decisions leave."""
-    vehicle = signals.vehicle
-    load = vehicle.static_wheel_load_N
+    """Per corner, 1.0 where the fitted tyre's force would pull on the plate, else 0.0. An airborne Maxwell
+    element is not driven (it relaxes), so with one the samples are decided in order."""
+    vehicle, load = signals.vehicle, signals.vehicle.static_wheel_load_N
     masks = []
     for corner in signals.corners:
         force = (vehicle.tyre_stiffness_N_per_m + stiffness_change) * corner.tyre_deflection_smooth_m
@@ -303,17 +299,9 @@ def _base_system(
     )
 
     def make() -> tuple[LinearResiduals, EquationSignals]:
-        recording, s = corrections.apply(reference.recording), reference.settings
-        base = build(
-            recording,
-            reference.vehicle,
-            TyreModel.SPRING,
-            s.points,
-            s.nsample,
-            reference.filters,
-            reference.grids,
-        )
-        return base, EquationSignals(recording, reference.vehicle, base)
+        recording, r, s = corrections.apply(reference.recording), reference, reference.settings
+        base = build(recording, r.vehicle, TyreModel.SPRING, s.points, s.nsample, r.filters, r.grids)
+        return base, EquationSignals(recording, r.vehicle, base)
 
     base, signals = _cached(reference.built, reference.lock, key, make, BUILD_CACHE_ENTRIES)
     return key, base, signals

@@ -61,7 +61,7 @@ def report(effect: EffectInstance, model: FittedModel) -> dict[str, float | str]
         return {"tyre_dashpot_Ns_per_m": model.value("tyre_dashpot_Ns_per_m")}
     if name is EffectName.TYRE_VISCOELASTIC:
         return {
-            "tyre_damping_Ns_per_m": model.maxwell_damping_Ns_per_m,
+            "tyre_damping_Ns_per_m": model.value("maxwell_damping_Ns_per_m"),
             "relaxation_time_s": model.vehicle.maxwell_time_constant_s(model.signals.sample_time_s),
         }
     if name is EffectName.TYRE_LIFTOFF:

@@ -30,38 +30,31 @@ def _range(low: float, high: float) -> list[float | None]:
 
 
 def localisation_json(located: Localisation | None) -> dict[str, object] | None:
-    """Where a model's disagreement is largest, as numbers (Localisation.describe says it in words); None
-    when there is no localisation or the model diverged."""
+    """Localisation.describe as numbers; None without a localisation or when the model diverged."""
     if located is None or not np.isfinite(located.gap_m) or not located.channel_rms_m:
         return None
     channel = located.worst_channel()
     equation = max(located.equation_rms_N, key=lambda e: located.equation_rms_N[e])
-    ranges: dict[str, list[float | None]] = {}
-    for profile, key in zip(located.by_variable[:2], ("velocity_m_s", "deflection_m"), strict=False):
-        values = profile.values[equation]
-        if np.any(np.isfinite(values)):
-            k = int(np.nanargmax(values))
-            ranges[key] = _range(profile.edges[k], profile.edges[k + 1])
+    velocity, deflection = (p.worst(equation) for p in located.by_variable[:2])
     has_band = channel in located.output_bands.values
     return {
         "channel": channel,
         "channel_rms_m": _finite_or_none(located.channel_rms_m[channel]),
-        "band_Hz": _range(*located.worst_band(located.output_bands, channel)) if has_band else None,
+        "band_Hz": _range(*located.output_bands.worst(channel)) if has_band else None,
         "time_s": _range(*located.worst_time_s),
         "equation": equation,
         "equation_rms_N": _finite_or_none(located.equation_rms_N[equation]),
-        "equation_band_Hz": _range(*located.worst_band(located.equation_bands, equation)),
-        "velocity_m_s": ranges.get("velocity_m_s"),
-        "deflection_m": ranges.get("deflection_m"),
-        "white": sorted(c for c, w in located.whiteness.items() if w.white),
+        "equation_band_Hz": _range(*located.equation_bands.worst(equation)),
+        "velocity_m_s": _range(*velocity) if np.isfinite(velocity[0]) else None,
+        "deflection_m": _range(*deflection) if np.isfinite(deflection[0]) else None,
+        "white": sorted(located.white),
     }
 
 
 @dataclass(frozen=True)
 class CandidateScore:
-    """How one candidate fared in one round (estimator.doctor.criteria): objective_ratio, the paper's
-    objective with it over without; gap_ratio, its gap over the model's without it; the Wald test of its
-    unknowns (equation_), the likelihood ratio of the gap (simulation_), p_value the larger p; verdict."""
+    """One candidate in one round (estimator.doctor.criteria): objective and gap with it over without, the
+    Wald test of its unknowns (equation_), the likelihood ratio of the gap (simulation_), the larger p."""
 
     effect: str
     objective_ratio: float
@@ -101,10 +94,8 @@ class DiagnosisStep:
 
 @dataclass
 class DiagnosisResult:
-    """The whole diagnosis: starting_effects, final_effects, the model's families before and after;
-    expected_gap_m, the mean gap of the final structure re-identified on bootstrap draws of itself, and
-    p_value, the goodness-of-fit test's (estimator.doctor.criteria.GoodnessOfFit); unexplained, p_value <
-    alpha; where, what is left, located in words (when unexplained)."""
+    """The whole diagnosis: expected_gap_m, the mean gap of the final structure re-identified on its bootstrap
+    draws, p_value the goodness-of-fit test's (criteria.GoodnessOfFit); where: what is left, in words."""
 
     starting_effects: list[str]
     final_effects: list[str]
@@ -163,14 +154,14 @@ class DiagnosisResult:
 
 
 def model_json(model: FittedModel) -> dict[str, object]:
-    """A fitted model in the form of identify --json's result, plus `effects`: what that form has no key for,
-    so that estimator.model_io rebuilds it whole. The tyre: Maxwell with tyre_viscoelastic (a dashpot beside
-    it is an effect), Kelvin-Voigt with only the dashpot, a spring otherwise."""
+    """A fitted model as identify --json has it plus `effects` (what that form has no key for), which
+    estimator.model_io rebuilds whole. The tyre: Maxwell with tyre_viscoelastic (a dashpot beside it is an
+    effect), Kelvin-Voigt with only the dashpot, a spring otherwise."""
     vehicle, structure, corrections = model.vehicle, model.structure, model.corrections
-    maxwell = structure.has(EffectName.TYRE_VISCOELASTIC)
+    maxwell, sprung = structure.has(EffectName.TYRE_VISCOELASTIC), model.sprung_mass_kg
     dashpot = model.value("tyre_dashpot_Ns_per_m")
     if maxwell:
-        tyre, damping = TyreModel.MAXWELL, model.maxwell_damping_Ns_per_m
+        tyre, damping = TyreModel.MAXWELL, model.value("maxwell_damping_Ns_per_m")
     elif dashpot:
         tyre, damping, dashpot = TyreModel.KELVIN_VOIGT, dashpot, 0.0
     else:
@@ -203,10 +194,7 @@ def model_json(model: FittedModel) -> dict[str, object]:
                 ["left", "right"] if vehicle.is_axle else ["single"], model.curves, strict=True
             )
         ],
-        "masses_kg": {
-            "sprung": model.sprung_mass_kg,
-            "unsprung": vehicle.unsprung_mass_kg(model.sprung_mass_kg),
-        },
+        "masses_kg": {"sprung": sprung, "unsprung": vehicle.unsprung_mass_kg(sprung)},
         "stiffness_N_per_m": stiffness,
         "tyre_model": tyre.value,
         "tyre_damping_Ns_per_m": float(damping),

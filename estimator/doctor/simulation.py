@@ -1,6 +1,6 @@
-"""Output error of many fitted models at once, driven by the measured plate: the models are the columns of
-one population simulated by one Runge-Kutta run, each with the general tyre (a Maxwell element beside a
-dashpot). The gap (m) is the RMS over the body and wheel channels of predicted minus measured reading.
+"""Output error of many fitted models driven by the measured plate, as the columns of one population in one
+Runge-Kutta run (each with the general tyre: a Maxwell element beside a dashpot). The gap (m) is the RMS
+over the body and wheel channels of predicted minus measured reading.
 """
 
 from __future__ import annotations
@@ -39,8 +39,8 @@ def diverged(residual_m: np.ndarray, measured_m: np.ndarray | None = None) -> bo
 
 @dataclass
 class BatchOutputError:
-    """Per model (column): predicted readings and their residuals, channel -> (samples, models), m; and the
-    RMS of the measured motion each is compared with (response_m, per model)."""
+    """Predicted readings and residuals, channel -> (samples, models), m; response_m: per model, the RMS of
+    the measured motion it is compared with."""
 
     predicted: dict[str, np.ndarray]
     residual: dict[str, np.ndarray]
@@ -76,7 +76,7 @@ def _corner(models: list[FittedModel], side: int, sample_time_s: float) -> Corne
         spring_stiffness_N_per_m=np.array([m.spring_stiffness_N_per_m for m in models]),
         tyre_stiffness_N_per_m=np.array([m.tyre_stiffness_N_per_m for m in models]),
         tyre_model=TyreModel.MAXWELL,
-        tyre_damping_Ns_per_m=np.array([m.maxwell_damping_Ns_per_m for m in models]),
+        tyre_damping_Ns_per_m=np.array([m.value("maxwell_damping_Ns_per_m") for m in models]),
         maxwell_time_constant_s=vehicle.maxwell_time_constant_s(sample_time_s),
         coulomb_friction_N=each(FRICTION_UNKNOWNS[0]),
         stribeck_peak_N=each(FRICTION_UNKNOWNS[1]),
@@ -108,9 +108,8 @@ def substeps(model: FittedModel, sample_time_s: float) -> int:
 def simulate_models(
     models: list[FittedModel], recording: Recording, references: list[Recording | None] | None = None
 ) -> BatchOutputError:
-    """Simulate every model from the measured plate; compare with `recording` (or, per model, with its own
-    reference recording where one is given). Models are run in populations of the same number of
-    Runge-Kutta steps per sample, so that each is simulated the same whatever it is batched with."""
+    """Every model driven by the measured plate, compared with `recording` (or its own reference, if given),
+    in populations of one number of steps per sample (each is simulated the same whatever its batch)."""
     counts = [substeps(m, recording.sample_time_s) for m in models]
     refs = references or [None] * len(models)
     if len(set(counts)) == 1:  # (joined below, the arrays' layout and so the sums' rounding would differ)
@@ -134,8 +133,7 @@ def _simulate(
     models: list[FittedModel], recording: Recording, references: list[Recording | None], steps: int
 ) -> BatchOutputError:
     """simulate_models for models that share the number of Runge-Kutta steps per sample."""
-    vehicle = models[0].vehicle
-    dt = recording.sample_time_s
+    vehicle, dt = models[0].vehicle, recording.sample_time_s
     drives = [
         measured_drive(
             m.system.kinematics,

@@ -1,6 +1,6 @@
 """The catalogue's families as shapes (estimator.doctor.catalog), what a fitted family reports and when its
 values are impossible (estimator.doctor.parameters), and the one-step screening of a candidate
-(estimator.doctor.screening) against its full fit (estimator.doctor.fitting.fit).
+(estimator.doctor.fitting.one_step) against its full fit (estimator.doctor.fitting.fit).
 
 Recordings: the default quarter car (estimator's own simulator, 8 s sweeps, 5 µm noise) with strut
 friction, a wheel laser reading 3% high and a plate laser 0.3 mm off, and the same car with its wheel laser
@@ -27,10 +27,9 @@ from estimator.doctor.catalog import (
     hinge_unknowns,
     stribeck_velocity_m_s,
 )
-from estimator.doctor.fitting import fit, fit_added
+from estimator.doctor.fitting import fit, fit_added, one_step
 from estimator.doctor.model import FitSettings, FittedModel, Reference, starting_structure
 from estimator.doctor.parameters import implausible, report, spring_curve_points
-from estimator.doctor.screening import one_step
 from estimator.sweep import SweepSettings
 from estimator.vehicle import TyreModel, VehicleConstant
 from simulators.vehicle_sim import SimulationSettings, default_quarter_car, simulate, with_effects

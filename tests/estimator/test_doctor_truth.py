@@ -49,9 +49,9 @@ def test_a_curve_that_falls_becomes_one_that_does_not() -> None:
 def test_the_truth_has_twice_the_resolution_near_zero_velocity_too() -> None:
     car = default_quarter_car()
     recording = simulate(car, SimulationSettings(sweep=SweepSettings(duration_s=4.0), seed=3)).recording
-    settings_ = FitSettings(points=20)
-    model = fit(Reference.of(recording, car.known, settings_), starting_structure(TyreModel.MAXWELL))
-    truth = plausible_truth(model, recording, settings_)
+    reference = Reference.of(recording, car.known, FitSettings(points=20))
+    model = fit(reference, starting_structure(TyreModel.MAXWELL))
+    truth = plausible_truth(model, reference)
     knots = model.system.grids_m_s[0]
     fine = truth.system.grids_m_s[0]
     spacing = LOW_SPEED_KNOTS_M_S[1] - LOW_SPEED_KNOTS_M_S[0]
