@@ -13,6 +13,7 @@ from estimator.doctor.catalog import (
     EffectName,
     hinge,
 )
+from estimator.doctor.criteria import ALPHA, EquationTest
 from estimator.doctor.model import FittedModel
 
 
@@ -88,6 +89,15 @@ def report(effect: EffectInstance, model: FittedModel) -> dict[str, float | str]
     return {"channel": channel, "offset_m": model.channel_value(effect, "offset")}
 
 
+def _below_zero(model: FittedModel, name: str) -> bool:
+    """Is the unknown `name` of θ below zero beyond chance: a one-sided Wald test at level ALPHA (the
+    equations' sandwich covariance). An estimate at a bound (a Coulomb friction's Stribeck excess, 0) falls
+    below it half the time; only one that falls significantly contradicts the family's law."""
+    index = model.system.parameter_names.index(name)
+    tested = EquationTest().test(model.system, model.theta, [index], model.signals.sample_time_s)
+    return tested.p_value < 2.0 * ALPHA  # the two-sided p of |z|, halved for one side
+
+
 def implausible(effect: EffectInstance, model: FittedModel) -> str | None:
     """Why the fitted family cannot be what it says (None if it can)."""
     name = effect.name
@@ -96,6 +106,12 @@ def implausible(effect: EffectInstance, model: FittedModel) -> str | None:
         if sliding < 0.0 or sliding + excess < 0.0:
             static = sliding + excess
             return f"the friction would feed energy in (sliding {sliding:.0f} N, static {static:.0f} N)"
+        if excess < 0.0 and _below_zero(model, FRICTION_UNKNOWNS[1]):
+            # Stribeck's law falls from the breakaway level to the sliding one; a law that rises is viscous
+            return (
+                f"the force would rise with velocity (static {sliding + excess:.0f} N below sliding "
+                f"{sliding:.0f} N): a damper's, not friction"
+            )
     elif name is EffectName.TYRE_DAMPING and model.value("tyre_dashpot_Ns_per_m") < 0.0:
         return "the tyre dashpot would feed energy in"
     elif name is EffectName.ANTI_ROLL_BAR and model.value("anti_roll_bar_N_per_m") < 0.0:
