@@ -45,7 +45,7 @@ from scipy.optimize import minimize
 from scipy.stats import binomtest
 
 from simulators.foreign.draws import CLASSES, SIZE_UNITS
-from simulators.foreign.manifest import draw_files, load_manifest, namespace_entropy
+from simulators.foreign.manifest import MANIFEST, draw_files, load_manifest, namespace_entropy
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -151,15 +151,18 @@ def doctor_digest() -> str:
     return digest.hexdigest()[:16]
 
 
-def run_draw(split: str, label: str, index: int, cache: str, expected_sha256: str | None) -> Outcome:
-    """Simulate (or read), check against the frozen hash, read back, diagnose one draw (a worker process)."""
+def run_draw(
+    split: str, label: str, index: int, cache: str, expected_sha256: str | None, entropy: int
+) -> Outcome:
+    """Simulate (or read), check against the frozen hash, read back, diagnose one draw (a worker process);
+    entropy: the split's namespace (simulators.foreign.manifest.namespace_entropy)."""
     from daq.formats.recording_csv import read_recording_csv
     from daq.formats.vehicle_file import read_vehicle
     from estimator.doctor import DiagnoseOptions, diagnose
     from estimator.vehicle import TyreModel
     from simulators.foreign.world import channels_sha256
 
-    truth = draw_files(split, namespace_entropy(split), label, index, cache)
+    truth = draw_files(split, entropy, label, index, cache)
     recording, vehicle = read_recording_csv(truth["csv"]), read_vehicle(truth["toml"])
     if expected_sha256 is not None:
         digest = channels_sha256(recording.sample_time_s, recording.channels)
@@ -303,6 +306,12 @@ def main() -> None:
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--cache", type=Path, required=True, help="folder for recordings and outcomes")
     parser.add_argument("--classes", default=",".join(CLASSES))
+    parser.add_argument(
+        "--manifest",
+        type=Path,
+        default=MANIFEST,
+        help="held-out: the frozen manifest (a later freeze, e.g. manifest-2.json, needs its own --cache)",
+    )
     args = parser.parse_args()
     labels = [c.strip() for c in args.classes.split(",") if c.strip()]
     if unknown := [c for c in labels if c not in CLASSES]:
@@ -311,10 +320,11 @@ def main() -> None:
     if args.split == "heldout":
         if args.first_index:
             parser.error("--first-index is for the dev split: the held-out draws are the manifest's")
-        manifest = load_manifest()
+        manifest = load_manifest(args.manifest)
         if args.per_class > manifest["per_class"]:
             parser.error(f"the manifest freezes {manifest['per_class']} draws per class")
         hashes = {i: d["sha256"] for i, d in manifest["draws"].items()}
+    entropy = namespace_entropy(args.split, args.manifest)
     indices = range(args.first_index, args.first_index + args.per_class)
     work = [(label, i) for i in indices for label in labels]
     digest = doctor_digest()
@@ -334,7 +344,9 @@ def main() -> None:
     todo = [(label, i) for label, i in work if f"{args.split}/{label}/{i}" not in done]
     with ProcessPoolExecutor(args.jobs) as pool:
         futures = [
-            pool.submit(run_draw, args.split, label, i, str(args.cache), hashes.get(f"heldout/{label}/{i}"))
+            pool.submit(
+                run_draw, args.split, label, i, str(args.cache), hashes.get(f"heldout/{label}/{i}"), entropy
+            )
             for label, i in todo
         ]
         for count, future in enumerate(as_completed(futures), start=1):
