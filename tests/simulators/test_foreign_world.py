@@ -211,8 +211,9 @@ def test_a_force_effect_s_size_is_measured_on_its_recording() -> None:
     )
 
 
-def test_the_held_out_draws_reproduce_their_frozen_hashes() -> None:
-    manifest = load_manifest(MANIFEST)
+@pytest.mark.parametrize("frozen", [MANIFEST, MANIFEST.with_name("manifest-2.json")], ids=lambda p: p.name)
+def test_the_held_out_draws_reproduce_their_frozen_hashes(frozen: Path) -> None:
+    manifest = load_manifest(frozen)
     entropy = int(manifest["entropy"], 16)
     versions = f"frozen with numpy {manifest['frozen']['numpy']}, scipy {manifest['frozen']['scipy']}"
     probes = manifest["probes"]
