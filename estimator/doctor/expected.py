@@ -109,7 +109,9 @@ class Pchip:
 
 def increasing(values: np.ndarray) -> np.ndarray:
     """The non-decreasing sequence nearest to `values` in least squares (isotonic regression by pooling
-    adjacent violators: a run that falls is replaced by its mean, merged backwards until none falls)."""
+    adjacent violators: a run that falls is replaced by its mean, merged backwards until none falls). Not
+    scipy.optimize.isotonic_regression: importing scipy.optimize costs a diagnosis more than this (as for
+    small_nnls); the test checks the two agree."""
     means: list[float] = []
     sizes: list[int] = []
     for value in np.asarray(values, dtype=float):
