@@ -26,7 +26,7 @@ from estimator.doctor.catalog import (
     stribeck_velocity_m_s,
     with_columns,
 )
-from estimator.equations import LinearResiduals, build
+from estimator.equations import LinearResiduals, build, damper_grids
 from estimator.errors import InvalidValueError
 from estimator.laser_channels import ChannelCorrections
 from estimator.recording import Recording
@@ -206,10 +206,10 @@ class Reference:
             raise InvalidValueError(
                 f"the vehicle file is for a {kind} model but the recording's channels are not"
             )
-        base = build(recording, vehicle, TyreModel.SPRING, settings.points, settings.nsample)
+        filters, grids = damper_grids(recording, vehicle, settings.points, settings.nsample)
         knots = hinge_knots_m(recording, vehicle)
-        grids = low_speed_grids(base.grids_m_s, settings.low_speed_knots_m_s)
-        return Reference(recording, vehicle, settings, grids, base.filters, knots, identified)
+        grids = low_speed_grids(grids, settings.low_speed_knots_m_s)
+        return Reference(recording, vehicle, settings, grids, filters, knots, identified)
 
     def on(self, recording: Recording) -> Reference:
         """The Reference of another recording (a bootstrap draw): these settings, hinge knots, constants."""
