@@ -211,27 +211,28 @@ def reading_quantum_m(x: np.ndarray) -> float:
     return step
 
 
-def small_nnls(design: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, float]:
-    """x ≥ 0 minimising ||design·x − target||, and that norm, for a design of a few columns: the least
-    squares on every set of free columns (the rest at zero); on a tie the fewest and earliest columns win
-    (ρ = 0 makes the AR(1) shape white). Not scipy.optimize.nnls: importing it costs more than the fit."""
-    columns = design.shape[1]
-    best: tuple[float, np.ndarray] = (float(np.linalg.norm(target)), np.zeros(columns))
-    tie = 1e-12 * float(np.linalg.norm(target))
-    subsets = sorted(
-        (tuple(k for k in range(columns) if mask >> k & 1) for mask in range(1, 2**columns)),
-        key=lambda subset: (len(subset), subset),
-    )
-    for subset in subsets:
-        solution = np.linalg.lstsq(design[:, subset], target, rcond=None)[0]
-        if np.any(solution < 0.0):
-            continue
-        x = np.zeros(columns)
-        x[list(subset)] = solution
-        misfit = float(np.linalg.norm(design @ x - target))
-        if misfit < best[0] - tie:
-            best = (misfit, x)
-    return best[1], best[0]
+def small_nnls(designs: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per design of a stack (count, rows, a few columns): x ≥ 0 minimising ||design·x − target||, and that
+    norm: least squares on every set of free columns (the rest at zero; normal equations of unit columns
+    for the whole stack, by pseudo-inverse: ρ = 0 makes the AR(1) column the white one), the fewest and
+    earliest columns winning a tie. Not scipy's nnls: its import costs more than the fit, and it would loop
+    over the stack; the test checks the two agree."""
+    count, _, columns = designs.shape
+    scale = np.linalg.norm(designs, axis=1)
+    scale[scale == 0.0] = 1.0
+    scaled = designs / scale[:, None, :]
+    gram, moment = np.einsum("nrk,nrl->nkl", scaled, scaled), np.einsum("nrk,r->nk", scaled, target)
+    best_misfit, best = np.full(count, float(np.linalg.norm(target))), np.zeros((count, columns))
+    tie = 1e-12 * best_misfit[0]
+    subsets = [[k for k in range(columns) if mask >> k & 1] for mask in range(1, 2**columns)]
+    for free in sorted(subsets, key=lambda subset: (len(subset), subset)):
+        inverse = np.linalg.pinv(gram[:, free][:, :, free], rcond=1e-13, hermitian=True)
+        x = np.zeros((count, columns))
+        x[:, free] = np.einsum("nkl,nl->nk", inverse, moment[:, free])
+        misfit = np.linalg.norm(np.einsum("nrk,nk->nr", scaled, x) - target, axis=1)
+        better = np.all(x >= 0.0, axis=1) & (misfit < best_misfit - tie)
+        best_misfit, best = np.where(better, misfit, best_misfit), np.where(better[:, None], x, best)
+    return best / scale, best_misfit
 
 
 def measure_channel_noise(
@@ -256,12 +257,14 @@ def measure_channel_noise(
         return ChannelNoise(0.0, 0.0, 0.0, quantum_m)
     cos_omega = np.cos(2.0 * np.pi * f * sample_time_s)
 
-    def fitted(rho: float) -> tuple[float, float, float, float, float]:
-        shape = 1.0 / (1.0 - 2.0 * rho * cos_omega + rho * rho)
-        (a, b, c), misfit = small_nnls(np.column_stack([shape / p, 1.0 / p, 1.0 / (f * p)]), np.ones(f.size))
-        return float(misfit), rho, float(a), float(b), float(c)
-
-    _, rho, a, b, c = min(map(fitted, map(float, LAG1_GRID)), key=lambda fit: fit[0])
+    shapes = 1.0 / (1.0 - 2.0 * LAG1_GRID[:, None] * cos_omega[None, :] + LAG1_GRID[:, None] ** 2)
+    designs = np.stack(
+        [shapes / p, np.broadcast_to(1.0 / p, shapes.shape), np.broadcast_to(1.0 / (f * p), shapes.shape)],
+        axis=2,
+    )
+    coefficients, misfits = small_nnls(designs, np.ones(f.size))
+    best = int(np.argmin(misfits))  # the first of equal misfits, as min over the grid in order
+    rho, (a, b, c) = float(LAG1_GRID[best]), (float(v) for v in coefficients[best])
     # one-sided density of AR(1) with innovation variance s²: 2·s²·Δt / |1 − ρe^{−iω}|²; its variance
     # s²/(1 − ρ²); white noise of variance σ²: 2·σ²·Δt
     coloured_variance = a / (2.0 * sample_time_s) / (1.0 - rho * rho)

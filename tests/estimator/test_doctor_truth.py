@@ -4,7 +4,9 @@ non-decreasing in velocity) at twice the doctor's resolution, near zero velocity
 - increasing is the least-squares isotonic regression (checked against scipy's on random sequences);
 - a fitted curve that falls somewhere (the zig-zag a missing series compliance leaves) becomes a smooth curve
   that never falls, and a curve that already rises keeps its points;
-- the truth of a fitted model has knots at twice the resolution, the low-speed ones included.
+- the truth of a fitted model has knots at twice the resolution, the low-speed ones included;
+- small_nnls (the noise law's non-negative fit, one per lag-1 correlation of a stack) is scipy's nnls on each
+  design, singular ones (two equal columns, as ρ = 0 gives) included.
 
 The outcomes this is for are tested in test_doctor_independent.py (a compliant top mount is unexplained, a
 damper's dead band is not).
@@ -13,12 +15,19 @@ damper's dead band is not).
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from scipy.optimize import isotonic_regression
+from scipy.optimize import isotonic_regression, nnls
 
 from estimator.damper import PiecewiseLinearCurve
-from estimator.doctor.expected import TRUTH_POINTS_FACTOR, increasing, plausible_truth, smooth_curve
+from estimator.doctor.expected import (
+    TRUTH_POINTS_FACTOR,
+    increasing,
+    plausible_truth,
+    small_nnls,
+    smooth_curve,
+)
 from estimator.doctor.fitting import fit
 from estimator.doctor.model import LOW_SPEED_KNOTS_M_S, FitSettings, Reference, starting_structure
 from estimator.sweep import SweepSettings
@@ -32,6 +41,27 @@ def test_increasing_is_the_least_squares_isotonic_regression(values: list[float]
     fitted = increasing(np.array(values))
     assert np.all(np.diff(fitted) >= 0.0)
     np.testing.assert_allclose(fitted, isotonic_regression(values).x, rtol=1e-9, atol=1e-9)
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(1, 6), st.booleans())
+def test_small_nnls_is_scipys_nnls_on_every_design_of_the_stack(seed: int, count: int, equal: bool) -> None:
+    rng = np.random.default_rng(seed)
+    rows = int(rng.integers(4, 60))
+    # columns of very different sizes, as the noise law's (1/p, shape/p, 1/(f·p)) are
+    sizes = np.array([1.0, 1e3, 1e-2])
+    designs = rng.standard_normal((count, rows, 3)) * sizes
+    if equal:
+        designs[0, :, 0] = designs[0, :, 1]
+    target = rng.standard_normal(rows) + float(rng.uniform(-2.0, 2.0))
+    coefficients, misfits = small_nnls(designs, target)
+    for k in range(count):
+        expected, expected_misfit = nnls(designs[k], target)
+        assert np.all(coefficients[k] >= 0.0)
+        assert misfits[k] == pytest.approx(expected_misfit, rel=1e-7, abs=1e-9)
+        assert np.linalg.norm(designs[k] @ coefficients[k] - target) == pytest.approx(misfits[k], rel=1e-9)
+        if not (equal and k == 0):  # with two equal columns the split between them is not unique
+            np.testing.assert_allclose(coefficients[k] * sizes, expected * sizes, rtol=1e-6, atol=1e-9)
 
 
 def test_a_curve_that_falls_becomes_one_that_does_not() -> None:
