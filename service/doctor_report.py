@@ -253,7 +253,7 @@ def markdown(result: DiagnosisResult, title: str, images: dict[str, str]) -> str
                 str(c.unknowns),
                 f"{c.equation_statistic:.1f} (p {_p(c.equation_p)})",
                 "-" if c.gap_m is None else _micro(c.gap_m),
-                f"{c.simulation_statistic:.1f} (p {_p(c.simulation_p)})",
+                "-" if c.gap_m is None else f"{c.simulation_statistic:.1f} (p {_p(c.simulation_p)})",
                 _p(c.p_value),
                 c.verdict,
             ]

@@ -26,11 +26,9 @@ from __future__ import annotations
 
 import math
 import threading
-from collections.abc import Callable, Iterable
-from concurrent.futures import ThreadPoolExecutor
+from collections.abc import Callable
 from dataclasses import dataclass, replace
-from functools import cached_property
-from typing import TypeVar
+from functools import cached_property, partial
 
 import numpy as np
 
@@ -50,12 +48,10 @@ from estimator.doctor.parameters import implausible, report
 from estimator.doctor.residuals import effective_samples, locate, log_chi_square_survival, sweep_frequency_Hz
 from estimator.doctor.result import CandidateScore, DiagnosisResult, DiagnosisStep
 from estimator.doctor.simulation import simulate_models
+from estimator.forked_map import forked_map
 from estimator.identify import IdentifyOptions, identify
 from estimator.recording import Recording
 from estimator.vehicle import TyreModel, VehicleParameters
-
-Item = TypeVar("Item")
-Value = TypeVar("Value")
 
 DEFAULT_POINTS = {"quarter-car": 30, "axle": 15}
 """Damper curve points per side before the low-speed knots: 1.5 times identify's default, so that the curve's
@@ -75,7 +71,7 @@ class DiagnoseOptions:
     draws: int = 8
     max_steps: int = 6
     seed: int = 0  # of the bootstrap's noise (draw k uses seed + k)
-    workers: int = 2  # threads the fits of a round run in (the diagnosis does not depend on it)
+    workers: int = 2  # processes the fits of a round run in (the diagnosis does not depend on it)
 
 
 @dataclass(frozen=True)
@@ -113,11 +109,16 @@ class _Doctor:
     options: DiagnoseOptions
     progress: Callable[[DiagnoseProgress], object] | None
     cancel: threading.Event | None
-    pool: ThreadPoolExecutor | None = None
 
-    def map(self, function: Callable[[Item], Value], items: Iterable[Item]) -> list[Value]:
-        """function over items, in the pool's threads (the heavy parts of a fit release the GIL)."""
-        return [function(i) for i in items] if self.pool is None else list(self.pool.map(function, items))
+    def map(self, function: Callable, items: list) -> list:
+        """function over items in `workers` processes (estimator.forked_map: results must be small)."""
+        return forked_map(function, items, self.options.workers)
+
+    def refit(self, model: FittedModel, recording: Recording) -> tuple[float, float]:
+        """Step 5 on one synthetic recording: the objective and gap (m) of the structure fitted on it."""
+        refit = fit(self.reference.on(recording), model.structure, warm=model)
+        batch = simulate_models([refit], self.reference.recording, [recording])
+        return refit.objective, float(batch.gap_m()[0])
 
     def report(self, step: int, stage: str) -> None:
         if self.cancel is not None and self.cancel.is_set():
@@ -146,12 +147,8 @@ class _Doctor:
             ]
             if not candidates or step == options.max_steps:
                 break
-            stepped = self.map(lambda c, warm=current: one_step(reference, warm, c), candidates)
-            outcomes = _simulate([m for m, _ in stepped], recording)
-            scores = [  # step 3
-                score_candidate(c, current, simulated, m, test, o)
-                for c, (m, test), o in zip(candidates, stepped, outcomes, strict=True)
-            ]
+            round_of = partial(trial, reference, current, simulated, screen=options.alpha)
+            scores = self.map(round_of, candidates)  # steps 2 and 3
             log_p = {c: _log_p(s) for c, s in zip(candidates, scores, strict=True) if s.verdict == "tested"}
             bound = options.alpha / max(len(log_p), 1)
             # step 4: calibration can only raise a p-value (its scales are at least 1): only the candidates
@@ -171,7 +168,8 @@ class _Doctor:
                 break
             index = candidates.index(chosen)
             self.report(step, f"fitting {chosen.label}")
-            model = fit_added(reference, current, chosen, stepped[index][0])
+            stepped, _ = one_step(reference, current, chosen)  # (its worker's is not kept: see trial)
+            model = fit_added(reference, current, chosen, stepped)
             (outcome,) = _simulate([model], recording)
             steps.append(
                 DiagnosisStep(
@@ -190,10 +188,8 @@ class _Doctor:
         # step 5: the final structure re-identified on synthetic recordings of its plausible truth (started
         # from the final model: each is its response plus noise)
         final, synthetic = current, self.synthetic(current, simulated)
-        refits = self.map(lambda s: fit(reference.on(s), final.structure, warm=final), synthetic)
-        objectives = [m.objective for m in refits]
-        batch = simulate_models(refits, recording, list(synthetic)) if refits else None
-        gaps = [float(g) for g in batch.gap_m()] if batch else []
+        refits = self.map(lambda s: self.refit(final, s), synthetic)
+        objectives, gaps = [o for o, _ in refits], [g for _, g in refits]
         gof = GoodnessOfFit(options.alpha)
         p = gof.p_value(simulated.gap_m, gaps)
         unexplained = gof.unexplained(p)
@@ -280,13 +276,36 @@ class _Doctor:
         """Each candidate's Wald and likelihood-ratio statistics on one synthetic recording, as measured."""
         on = self.reference.on(recording)
         base = fit(on, current.structure, warm=current)
-        stepped = [one_step(on, base, c) for c in candidates]
-        outcomes = _simulate([base, *(m for m, _ in stepped)], recording)
-        statistics = {}
-        for c, (m, test), o in zip(candidates, stepped, outcomes[1:], strict=True):
-            score = score_candidate(c, base, outcomes[0], m, test, o)
-            statistics[c] = (score.equation_statistic, score.simulation_statistic)
-        return statistics
+        (simulated,) = _simulate([base], recording)
+        scores = {c: trial(on, base, simulated, c) for c in candidates}
+        return {c: (s.equation_statistic, s.simulation_statistic) for c, s in scores.items()}
+
+
+def trial(
+    reference: Reference,
+    current: FittedModel,
+    simulated: Simulated,
+    candidate: EffectInstance,
+    screen: float | None = None,
+) -> CandidateScore:
+    """Step 3 for one candidate: its one step from the current model and its tests. Both tests must
+    reject: with `screen` (α), one whose equations give p above it cannot be named, and is not simulated.
+    (Run in a worker: the score is returned, not the stepped model, which is large.)"""
+    model, wald = one_step(reference, current, candidate, screen)
+    tried = screen is None or _equations(candidate, current, model, wald).p_value <= screen
+    (outcome,) = _simulate([model], reference.recording) if tried else (None,)
+    return score_candidate(candidate, current, simulated, model, wald, outcome)
+
+
+def _equations(
+    candidate: EffectInstance, current: FittedModel, model: FittedModel, wald: TestResult
+) -> TestResult:
+    """The candidate's test in the equations: the Wald test of its unknowns; tyre_liftoff has none, and
+    passes when the equations hold better with it."""
+    if candidate.name is EffectName.TYRE_LIFTOFF:
+        better = model.objective < current.objective
+        return TestResult(current.objective - model.objective, 0, 0.0 if better else 1.0)
+    return wald
 
 
 def score_candidate(
@@ -294,29 +313,33 @@ def score_candidate(
     current: FittedModel,
     simulated: Simulated,
     model: FittedModel,
-    equations: TestResult,
-    outcome: Simulated,
+    wald: TestResult,
+    outcome: Simulated | None,
 ) -> CandidateScore:
     """A candidate's tests (module docstring, step 3): the one-step Wald test of its unknowns and the
-    likelihood ratio of its free simulation against the current model's."""
-    unknowns = equations.unknowns
-    if candidate.name is EffectName.TYRE_LIFTOFF:  # no unknown: the equations must hold better with it
-        better = model.objective < current.objective
-        equations = TestResult(current.objective - model.objective, 0, 0.0 if better else 1.0)
-    samples = simulated.effective_samples if np.isfinite(simulated.gap_m) else 0.0  # 0: diverged before
-    simulation = SimulationTest().test(samples, simulated.gap_m, outcome.gap_m, unknowns)
+    likelihood ratio of its free simulation against the current model's (outcome None: not simulated, the
+    equations decide: p above α there already)."""
+    equations = _equations(candidate, current, model, wald)
+    if outcome is None:
+        simulation, gap, ratio = TestResult(math.nan, wald.unknowns, math.nan), None, None
+        p_value = equations.p_value
+    else:
+        samples = simulated.effective_samples if np.isfinite(simulated.gap_m) else 0.0  # 0: diverged before
+        simulation = SimulationTest().test(samples, simulated.gap_m, outcome.gap_m, wald.unknowns)
+        gap, p_value = outcome.gap_m, intersection_union(equations, simulation)
+        ratio = outcome.gap_m / simulated.gap_m if np.isfinite(simulated.gap_m) else None
     reason = implausible(candidate, model)
     return CandidateScore(
         effect=candidate.label,
         objective_ratio=model.objective / current.objective,
-        gap_m=outcome.gap_m,
-        gap_ratio=outcome.gap_m / simulated.gap_m if np.isfinite(simulated.gap_m) else None,
+        gap_m=gap,
+        gap_ratio=ratio,
         equation_statistic=equations.statistic,
         simulation_statistic=simulation.statistic,
-        unknowns=unknowns,
+        unknowns=wald.unknowns,
         equation_p=equations.p_value,
         simulation_p=simulation.p_value,
-        p_value=intersection_union(equations, simulation),
+        p_value=p_value,
         parameters=report(candidate, model),
         verdict=reason or "tested",
     )
@@ -365,7 +388,9 @@ def _verdict(score: CandidateScore, chosen: EffectInstance | None, bound: float)
     if chosen is not None and score.effect == chosen.label:
         return replace(score, verdict="named")
     if score.p_value > bound:
-        return replace(score, verdict=f"not significant (p = {score.p_value:.2g} > α/m = {bound:.2g})")
+        untried = ": not simulated" if score.gap_m is None else ""
+        verdict = f"not significant (p = {score.p_value:.2g} > α/m = {bound:.2g}){untried}"
+        return replace(score, verdict=verdict)
     return replace(score, verdict="significant, but another candidate is more so")
 
 
@@ -395,8 +420,4 @@ def diagnose(
         vehicle = found.model.vehicle
     points = options.points or DEFAULT_POINTS[vehicle.model.value]
     reference = Reference.of(recording, vehicle, FitSettings(points, options.nsample), identified)
-    doctor = _Doctor(reference, options, progress, cancel)
-    if options.workers <= 1:
-        return doctor.diagnose()
-    with ThreadPoolExecutor(options.workers) as doctor.pool:
-        return doctor.diagnose()
+    return _Doctor(reference, options, progress, cancel).diagnose()

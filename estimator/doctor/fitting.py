@@ -15,6 +15,7 @@ from estimator.doctor.catalog import MAX_DELAY_S, EffectInstance, EffectName, wi
 from estimator.doctor.criteria import EquationTest, TestResult
 from estimator.doctor.model import FittedModel, ModelStructure, Reference, build_extended
 from estimator.equations import LinearResiduals
+from estimator.newton_refit import MAX_NEWTON_ITERATIONS, newton_refit
 from estimator.solvers.exact import solve_exact
 
 GAUSS_NEWTON_ITERATIONS = 4
@@ -46,7 +47,13 @@ def start_from(system: LinearResiduals, warm: FittedModel) -> np.ndarray:
 def minimise(
     system: LinearResiduals, initial: np.ndarray | None, tolerance: float = 1e-10
 ) -> tuple[np.ndarray, float]:
-    """θ minimising the paper's objective to `tolerance`, and the objective, as identify solves it."""
+    """θ minimising the paper's objective to `tolerance`, and the objective: from `initial` (a similar
+    model's θ: near the optimum) by Newton steps alone, else (or if they do not converge) as identify does."""
+    if initial is not None:
+        polished = newton_refit(system, np.asarray(initial, dtype=float), tolerance=tolerance)
+        if polished.iterations < MAX_NEWTON_ITERATIONS:
+            return polished.theta, float(system.objective(polished.theta))
+        initial = polished.theta
     solution = solve_exact(system, tolerance, initial=initial, certify=False)
     return solution.theta, solution.objective
 
@@ -149,10 +156,13 @@ def fit_added(
 
 
 def one_step(
-    reference: Reference, current: FittedModel, candidate: EffectInstance
+    reference: Reference, current: FittedModel, candidate: EffectInstance, screen: float | None = None
 ) -> tuple[FittedModel, TestResult]:
     """The current model with `candidate` added and its unknowns moved by one linearised step, and the Wald
-    test of those unknowns (their channel parameters' steps included) against zero."""
+    test of those unknowns (their channel parameters' steps included) against zero.
+
+    screen: a Wald p-value above which the candidate cannot be named; its channel step is then clipped into
+    the bounds, not solved again within them (the model is only reported, not simulated)."""
     structure = current.structure.with_effect(candidate)
     parameters = structure.channel_parameters
     vehicle, knots, values = reference.vehicle, reference.knots_m, current.channel_values_for(parameters)
@@ -167,14 +177,15 @@ def one_step(
     solution, objective = minimise(augmented, np.concatenate([start, np.zeros(len(jacobian))]))
     theta, steps = solution[: system.n_params], solution[system.n_params :]
     own_kinds = [parameters[k][1] for k in own]
-    if np.any(feasible(own_kinds, values[own] + steps) != values[own] + steps):
+    index = [k for k, n in enumerate(system.parameter_names) if n not in current.system.parameter_names]
+    index += range(system.n_params, system.n_params + len(own))  # and the steps of its channel parameters
+    test = EquationTest().test(augmented, solution, index, reference.recording.sample_time_s)
+    screened_out = screen is not None and test.p_value > screen
+    if screened_out or not np.any(feasible(own_kinds, values[own] + steps) != values[own] + steps):
+        values[own] = feasible(own_kinds, values[own] + steps)
+    else:
         # the test keeps the unbounded step; the model moves by the step within the bounds
         values[own] = bounded_step(system, start, jacobian, own_kinds, values[own], solution)
         system, signals, airborne = build_extended(reference, structure, values, current.tyre)
         theta, objective = minimise(system, start)
-    else:
-        values[own] = values[own] + steps
-    index = [k for k, n in enumerate(system.parameter_names) if n not in current.system.parameter_names]
-    index += range(system.n_params, system.n_params + len(own))  # and the steps of its channel parameters
-    test = EquationTest().test(augmented, solution, index, reference.recording.sample_time_s)
     return FittedModel(structure, vehicle, theta, system, signals, values, airborne, objective, knots), test

@@ -203,10 +203,17 @@ class CandidateOut(ResultPart):
 
     effect: str
     objective_ratio: MaybeNumber = Field(description="objective with the candidate / without")
-    gap_m: MaybeNumber = Field(description="output-error gap with it (m); null: diverged")
-    gap_ratio: MaybeNumber = Field(description="gap with it / without; null: diverged without it")
+    gap_m: MaybeNumber = Field(
+        description="output-error gap with it (m); null: diverged, or not simulated (its Wald test's p is "
+        "above α already: both tests must reject)"
+    )
+    gap_ratio: MaybeNumber = Field(
+        description="gap with it / without; null: diverged without it, or not simulated"
+    )
     equation_statistic: MaybeNumber = Field(None, description="Wald statistic of its unknowns")
-    simulation_statistic: MaybeNumber = Field(None, description="likelihood ratio of the free simulation")
+    simulation_statistic: MaybeNumber = Field(
+        None, description="likelihood ratio of the free simulation; null: not simulated"
+    )
     unknowns: int | None = Field(None, description="how many unknowns it adds (degrees of freedom)")
     equation_p: MaybeNumber = Field(None, description="p-value of the equations' Wald test")
     simulation_p: MaybeNumber = Field(None, description="p-value of the simulation's likelihood ratio")

@@ -138,14 +138,16 @@ def test_the_friction_is_a_step_with_a_stribeck_peak() -> None:
 
 
 def test_a_force_family_one_step_is_its_full_fit() -> None:
-    """The force families enter the equations linearly: one step from the current model is the fit."""
+    """The force families enter the equations linearly: one step from the current model is the fit (the
+    same optimum: the objective to rounding; θ to 2e-5 relative, as flat as the objective is along its
+    least determined direction, a hinge rate, at the solver's tolerance)."""
     for family in (SPRING, FRICTION):
         stepped, test = one_step(reference(), starting(), family)
         full = fit(reference(), START.with_effect(family))
         np.testing.assert_allclose(
-            stepped.theta, full.theta, rtol=1e-6, atol=1e-9 * np.max(np.abs(full.theta))
+            stepped.theta, full.theta, rtol=2e-5, atol=1e-9 * np.max(np.abs(full.theta))
         )
-        assert stepped.objective == pytest.approx(full.objective, rel=1e-9)
+        assert stepped.objective == pytest.approx(full.objective, rel=1e-12)
         assert test.unknowns == len(
             CATALOG[family.name].columns(family, stepped.signals, [], stepped.knots_m, frozenset())
         )
