@@ -90,3 +90,11 @@ def test_a_diagnosis_that_cannot_run_is_refused_at_submit(client: httpx.Client, 
     assert response.status_code == 422 and response.json()["error"]["field"] == "max_steps", response.text
     response = submit(client, files, "vehicle.toml", generations="10")
     assert response.status_code == 422 and response.json()["error"]["field"] == "generations", response.text
+
+
+def test_a_diagnosis_job_names_as_many_effects_as_the_command_line_by_default() -> None:
+    """The page's and the lane's diagnoses are the CLI's for the same recording: the same default options."""
+    from estimator.doctor.diagnose import DiagnoseOptions
+    from service.jobs.diagnose_job import DiagnoseJobOptions
+
+    assert DiagnoseJobOptions().max_steps == DiagnoseOptions().max_steps
