@@ -7,12 +7,12 @@ leaves more than its own noise would.
    identified first and then held like stated ones.
 2. *A round*: every family of the catalogue the model lacks (estimator.doctor.catalog) is added in turn and
    its unknowns moved by one linearised step from the current model (fitting.one_step: the paper's
-   objective, exact solver; channel parameters by a Gauss-Newton step); all of them are simulated from the
-   measured plate in one run.
+   objective, exact solver; channel parameters by a Gauss-Newton step), side by side in forked processes.
 3. *Each candidate is tested* (estimator.doctor.criteria, score_candidate): in the equations (a Wald test of
-   its unknowns) and in the free simulation (a likelihood ratio of the gap); its p-value is the larger of the
-   two. A candidate whose fitted values are physically impossible (estimator.doctor.parameters.implausible)
-   is not named whatever its p-value.
+   its unknowns) and in the free simulation from the measured plate (a likelihood ratio of the gap); its
+   p-value is the larger of the two (one with p > α in the equations is not simulated). A candidate whose
+   fitted values are physically impossible (estimator.doctor.parameters.implausible) is not named whatever
+   its p-value.
 4. *Calibrate*: a candidate significant as it stands has both statistics divided by their mean over bootstrap
    draws of the current model (a scaled χ²; calibrate). *Select*: the candidate with the smallest p-value is
    named when it is at most α/m (Bonferroni over the m candidates of the round); it is then fitted fully
