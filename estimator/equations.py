@@ -455,6 +455,32 @@ def build_axle(
     )
 
 
+def default_points(vehicle: VehicleParameters) -> int:
+    """Damper curve points per side when none are asked for: 20 for a quarter car, 10 per side for an axle."""
+    return 10 if vehicle.is_axle else 20
+
+
+def damper_grids(
+    recording: Recording,
+    vehicle: VehicleParameters,
+    points: int | None = None,
+    nsample: int | None = 5000,
+    filters: FilterChoice | None = None,
+) -> tuple[FilterChoice, list[np.ndarray]]:
+    """The filters and damper velocity grids `build` chooses from the recording (default points as build's),
+    without building the system (for callers that only need them, e.g. each bootstrap draw of the doctor)."""
+    filters = filters or choose_filters(recording.channels, recording.sample_time_s)
+    index = select_samples(recording.time_s.size, recording.sample_time_s, nsample)
+    sides = [f"_{s}" for s in "lr"] if vehicle.is_axle else [""]
+    recording.require(AXLE_CHANNELS if vehicle.is_axle else QUARTER_CAR_CHANNELS)
+    grids, cutoff_Hz, dt = [], filters.kinematics_cutoff_Hz, recording.sample_time_s
+    for side in sides:
+        body, wheel = (kinematics(recording.channels[f"{n}{side}"], cutoff_Hz, dt) for n in ("x_s", "x_t"))
+        velocity = body.velocity_m_s - wheel.velocity_m_s
+        grids.append(velocity_grid(velocity[index], points or default_points(vehicle)))
+    return filters, grids
+
+
 def build(
     recording: Recording,
     vehicle: VehicleParameters,
@@ -465,9 +491,10 @@ def build(
     grids: list[np.ndarray] | None = None,
     free: frozenset[VehicleConstant] = frozenset(),
 ) -> LinearResiduals:
-    """The residual system for the vehicle's model (default points: 20 for a quarter car, 10 for an axle).
+    """The residual system for the vehicle's model (default points: default_points).
     filters and grids, when given, are used instead of being chosen from the recording; the stiffnesses the
     vehicle does not state, and those in `free`, are unknowns (free_stiffnesses)."""
+    points = points or default_points(vehicle)
     if vehicle.is_axle:
-        return build_axle(recording, vehicle, tyre, points or 10, nsample, filters, grids, free)
-    return build_quarter_car(recording, vehicle, tyre, points or 20, nsample, filters, grids, free)
+        return build_axle(recording, vehicle, tyre, points, nsample, filters, grids, free)
+    return build_quarter_car(recording, vehicle, tyre, points, nsample, filters, grids, free)

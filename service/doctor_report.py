@@ -4,7 +4,9 @@ Contents: the conclusion; the gap before and after each step (plot and table); p
 fitted parameters, the gap before and after and the evidence in words; measured-versus-simulated overlays
 of the starting and the final model; the output-error residual's spectra and its RMS per band of the sweep
 before and after each step; where the starting model disagrees (residual against suspension velocity,
-deflection and tyre deflection); every candidate's score per round; the catalog.
+deflection and tyre deflection); the fitted spring curve when spring_curve was named; the goodness-of-fit
+test (p-value, and where the final model disagrees when unexplained); every candidate's tests per round;
+the catalog.
 """
 
 from __future__ import annotations
@@ -19,9 +21,11 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from daq.formats.atomic import atomic_write
-from estimator.doctor.catalog import CATALOG
+from estimator.doctor.catalog import CATALOG, EffectName
+from estimator.doctor.parameters import spring_curve_points
 from estimator.doctor.residuals import Localisation
 from estimator.doctor.result import DiagnosisResult
+from service.doctor_words import fit_verdict, shape
 
 REPORT_NAME = "report.md"
 ZOOM_S = 0.6
@@ -68,7 +72,8 @@ def gap_figure(result: DiagnosisResult) -> plt.Figure:
     for k, g in enumerate(gaps):
         label = "diverged" if np.isnan(g) else f"{g:.1f}"
         ax.text(k, floor if np.isnan(g) else g, label, ha="center", va="bottom", fontsize=8)
-    ax.axhline(result.expected_gap_m * 1e6, color="0.3", ls="--", lw=1, label="expected of a complete model")
+    if np.isfinite(result.expected_gap_m):
+        ax.axhline(result.expected_gap_m * 1e6, color="0.3", ls="--", lw=1, label="final model's own draws")
     ax.axhline(result.noise_floor_m * 1e6, color="0.6", ls=":", lw=1, label="sensor noise")
     if finite and max(finite) > 20 * min(finite):
         ax.set_yscale("log")  # a gap that falls a hundredfold stays readable
@@ -125,7 +130,7 @@ def spectra_figure(result: DiagnosisResult) -> plt.Figure:
                 axes[row, 0].semilogy(f, p, color=colour, lw=0.9, label=label)
             bands = located.output_bands
             if name in bands.values:
-                centres = 0.5 * (bands.edges_Hz[:-1] + bands.edges_Hz[1:])
+                centres = 0.5 * (bands.edges[:-1] + bands.edges[1:])
                 axes[row, 1].plot(centres, bands.values[name] * 1e6, "o-", color=colour, ms=3, label=label)
         axes[row, 0].set_xlim(0, 60)
         axes[row, 0].set_ylabel(f"{name}: m²/Hz")
@@ -141,10 +146,30 @@ def spectra_figure(result: DiagnosisResult) -> plt.Figure:
     return fig
 
 
-def _parameters(parameters: dict[str, float | str]) -> str:
-    return ", ".join(
-        f"{k} = {v:.4g}" if isinstance(v, float) else f"{k} = {v}" for k, v in parameters.items()
-    )
+def spring_figure(result: DiagnosisResult) -> plt.Figure | None:
+    """The final model's suspension spring force against deflection beside the stated rate's line, when
+    the diagnosis named spring_curve (None otherwise)."""
+    model = result.final_model
+    if model is None or EffectName.SPRING_CURVE.value not in model.structure.labels:
+        return None
+    deflection, force = spring_curve_points(model)
+    stated = float(model.vehicle.spring_stiffness_N_per_m or 0.0) * deflection
+    fig, ax = plt.subplots(figsize=(6.0, 3.6))
+    ax.plot(deflection * 1e3, force, "o-", color="tab:blue", label="fitted spring curve")
+    ax.plot(deflection * 1e3, stated, "--", color="0.4", label="stated rate")
+    for knot in model.knots_m:
+        ax.axvline(knot * 1e3, color="0.8", lw=0.8)
+    ax.set_xlabel("suspension deflection (mm, extension > 0)")
+    ax.set_ylabel("spring force change from static (N)")
+    ax.set_title("Suspension spring curve (knots: grey lines)")
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    return fig
+
+
+def _p(value: float | None) -> str:
+    return "-" if value is None or not np.isfinite(value) else f"{value:.2g}"
 
 
 def _table(header: list[str], rows: list[list[str]]) -> list[str]:
@@ -178,9 +203,12 @@ def markdown(result: DiagnosisResult, title: str, images: dict[str, str]) -> str
         f"Starting model: {', '.join(result.starting_effects) or 'the vehicle file with a spring tyre'}; "
         f"final model: {', '.join(result.final_effects) or 'the same'}. "
         f"Gap before {_micro(result.gap_before_m)}, "
-        f"after {_micro(result.gap_after_m)}; a model without missing effects reaches "
-        f"{_micro(result.expected_gap_m)} on this sweep; sensor noise {_micro(result.noise_floor_m)}. "
+        f"after {_micro(result.gap_after_m)}; sensor noise {_micro(result.noise_floor_m)}. "
         f"Unexplained: {'yes' if result.unexplained else 'no'}.",
+        "",
+        f"Goodness of fit of the final model against {_micro(result.expected_gap_m)}, the mean gap of "
+        f"itself re-identified on synthetic recordings with this recording's noise: "
+        f"{fit_verdict(result.p_value, result.alpha, result.unexplained, result.where)}.",
         "",
         f"![gap per step]({images['gap']})",
         "",
@@ -191,41 +219,48 @@ def markdown(result: DiagnosisResult, title: str, images: dict[str, str]) -> str
         [
             str(n),
             s.effect,
-            _parameters(s.parameters),
+            shape(s.effect, s.parameters),
             _micro(s.gap_before_m),
             _micro(s.gap_after_m),
+            _p(s.p_value),
             s.evidence,
         ]
         for n, s in enumerate(result.steps, start=1)
     ]
     lines += (
-        _table(["step", "effect", "fitted parameters", "gap before", "gap after", "evidence"], rows)
+        _table(["step", "effect", "fitted shape", "gap before", "gap after", "p", "evidence"], rows)
         if rows
         else ["No effect named."]
     )
+    if "spring" in images:
+        lines += ["", f"![spring curve]({images['spring']})"]
     lines += ["", "## Measured and simulated", "", f"![overlays]({images['overlay']})", ""]
     lines += ["## Residual spectra before and after", "", f"![residual spectra]({images['spectra']})", ""]
     lines += ["## Where the starting model disagrees", "", *_locate_lines(result.located_before), ""]
     if result.steps:
         lines += ["## Where the final model disagrees", "", *_locate_lines(result.located_after), ""]
     lines += ["## Candidates judged", ""]
+    lines += [
+        f"Each candidate's p-value is the larger of its two tests' (both must reject); a round names the "
+        f"smallest when it is at most α/m, m the candidates tested (α = {result.alpha:g}).",
+        "",
+    ]
     for number, round_ in enumerate(result.rounds, start=1):
         lines += [f"Round {number}:", ""]
         rows = [
             [
                 c.effect,
-                f"{c.objective_ratio:.3f}",
-                "-" if c.heldout_ratio is None else f"{c.heldout_ratio:.3f}",
+                str(c.unknowns),
+                f"{c.equation_statistic:.1f} (p {_p(c.equation_p)})",
                 "-" if c.gap_m is None else _micro(c.gap_m),
-                "-" if c.bic_change is None or not np.isfinite(c.bic_change) else f"{c.bic_change:.1f}",
-                "-" if c.correlation is None else f"{c.correlation:.2f}",
+                "-" if c.gap_m is None else f"{c.simulation_statistic:.1f} (p {_p(c.simulation_p)})",
+                _p(c.p_value),
                 c.verdict,
             ]
             for c in round_
         ]
-        lines += _table(
-            ["candidate", "objective ratio", "held-out ratio", "gap", "ΔBIC", "correlation", "verdict"], rows
-        )
+        header = ["candidate", "unknowns", "Wald (equations)", "gap", "likelihood ratio (gap)", "p"]
+        lines += _table([*header, "verdict"], rows)
         lines.append("")
     lines += ["## Catalog", ""]
     lines += _table(
@@ -244,6 +279,9 @@ def write_report(result: DiagnosisResult, folder: Path | str, title: str = "diag
         "overlay": _save(overlay_figure(result), folder / "measured_vs_simulated.png"),
         "spectra": _save(spectra_figure(result), folder / "residual_spectra.png"),
     }
+    spring = spring_figure(result)
+    if spring is not None:
+        images["spring"] = _save(spring, folder / "spring_curve.png")
     path = folder / REPORT_NAME
     with atomic_write(path, "w") as handle:
         handle.write(markdown(result, title, images))

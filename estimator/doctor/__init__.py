@@ -1,16 +1,15 @@
-"""The model doctor (issue 6): find where the identified model and the measurement disagree, name the
-missing effect from a catalog, add it, re-identify and show the gap shrink; say "unexplained" when a clear
-disagreement remains that no candidate explains.
+"""The model doctor (issue 29); its procedure, top to bottom, is estimator.doctor.diagnose's docstring.
 
-- catalog.py: the candidate effects, each a model extension the estimator can fit, with its signature;
-- columns.py: the signals effects are made of and how a force enters the equations of motion;
-- model.py: a model with effects added (ModelStructure) and its identification (fit);
+- catalog.py: the effect families, each a shape with a bounded number of unknowns, and their columns;
+- model.py: a model with families added (ModelStructure) and the equations it is fitted on;
+- fitting.py: its identification (fit), channel parameters by bounded Gauss-Newton steps, and a candidate
+  moved by one linearised step from the current model with its Wald test (one_step);
+- criteria.py: the tests (equations, free simulation, selection, goodness of fit), one object each;
 - simulation.py: output error of many fitted models in one Runge-Kutta run;
-- residuals.py: locating a disagreement (sweep bands, velocity and deflection bins, spectra, whiteness);
-- evidence.py: what a candidate explains, in numbers and in words;
-- expected.py: the gap and residual a model without missing effects reaches (parametric bootstrap);
-- diagnose.py: the loop; result.py: what it returns and its JSON.
-
+- expected.py: the bootstrap: a model's plausible truth, the recording's own noise, synthetic recordings;
+- residuals.py: locating a disagreement (sweep bands, velocity and deflection bins, spectra);
+- parameters.py: what a fitted family reports, and when its values are physically impossible;
+- diagnose.py: the procedure; result.py: what it returns and its JSON.
 
 Must not import daq, drivers, service or simulators (the estimator's layer rule), and does no I/O."""
 

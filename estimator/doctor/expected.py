@@ -1,91 +1,295 @@
-"""The gap and equation residual a model without missing effects reaches on this sweep: a parametric
-bootstrap.
+"""The goodness of fit's parametric bootstrap: what a model without missing effects leaves on this sweep.
 
-A fitted model is turned into a plausible truth, driven by the measured plate; its predicted readings plus
+A fitted model is turned into a plausible truth driven by the measured plate; its predicted readings plus
 noise like the measured one make synthetic recordings, on which the model's structure is identified and
-simulated again. The gap and objective of those re-identified models contain everything a complete model
-still shows on this sweep (sensor noise, the piecewise-linear curve's discretisation of a smooth damper,
-identification errors) and nothing a missing effect adds.
+simulated again. Their gaps hold what a complete model still shows on this sweep (sensor noise, the curve's
+discretisation of a smooth damper, identification errors) and nothing a missing effect adds.
 
-The truth. A real damper is smooth but not a curve of the doctor's resolution: a dyno table's knee near zero
-velocity falls between the knots, and what the knots miss there is what dominates the gap of a complete
-model. Measured on the independent world's clean recordings (simulators/independent, noise-free: the gap of
-the 30-point starting model 41.8 µm, 1.4 µm with the world's own damper in its place, 13 µm with 60 points;
-benchmarks/bench_doctor_independent.py): the smooth curve through the fitted points alone (the earlier
-truth) is followed by the same knots almost exactly, so its expected gap missed that error altogether
-(5 µm against 42). The truth is therefore the same structure identified with TRUTH_POINTS_FACTOR times the
-points, its curve made smooth (a monotone cubic through the points, linear beyond them, as the simulator
-treats tables): the finest curve the data supports, of which the doctor's knots miss what they miss on the
-measurement.
+The truth is the same structure identified at TRUTH_POINTS_FACTOR times the curve's resolution (the uniform
+points and the low-speed knots, where a valve's dead band or bleed acts), its curve made smooth (a monotone
+cubic through the points, linear beyond them). A truth at the doctor's own resolution is followed by the same
+knots almost exactly, so the bootstrap would miss what the knots miss of a real damper's knee, which is most
+of a complete model's gap. The truth's damper force rises with velocity (the points made non-decreasing
+first): a curve that falls somewhere stands in for something the structure lacks (a zig-zag for a compliant
+top mount), is not reproducible on its own response, and would excuse any gap. The hypothesis tested is "a
+vehicle of this structure with a possible damper", not "this fit, whatever its shape".
 
-The noise: per channel, the AR(1)-plus-white law and the reading resolution measured from the final model's
-output residual (estimator.doctor.noise), not white noise of the top-band level.
+The noise, per channel: a laser's filter colours it (AR(1)), so the density at the top of the band
+understates it where the vehicle responds. The smaller of the output residual's and the measured reading's
+densities bounds it per frequency (misfit and response are each independent of it); above NOISE_BAND_FROM ×
+the excitation's top frequency it is fitted by S(f) = a/(1 − 2ρ·cos ω + ρ²) + b + c/f (a, b, c ≥ 0, ρ on a
+grid; AR(1), white and 1/f parts), extrapolated to the whole band, and read at the measured resolution.
 """
 
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from estimator.damper import PiecewiseLinearCurve
-from estimator.doctor.model import FitSettings, FittedModel, Reference, fit
-from estimator.doctor.noise import ChannelNoise
-from estimator.doctor.pchip import Pchip
+from estimator.digital_filters import first_order_filter, welch_density
+from estimator.doctor.fitting import fit
+from estimator.doctor.model import FittedModel, Reference
+from estimator.doctor.simulation import diverged
 from estimator.recording import Recording
 
-SMOOTH_POINTS = 240
-"""Knots of the dense table that represents the smooth truth's damper curve."""
-TRUTH_POINTS_FACTOR = 2
-"""The plausible truth's damper curve has this many times the doctor's points (module docstring)."""
+SMOOTH_POINTS = 240  # knots of the dense table of the smooth truth's damper curve
+TRUTH_POINTS_FACTOR = 2  # the plausible truth's curve has this many times the doctor's resolution
+
+
+def _end_slope(h0: float, h1: float, m0: float, m1: float) -> float:
+    """Moler's one-sided three-point slope at an end, kept shape-preserving (scipy's _edge_case)."""
+    d = ((2 * h0 + h1) * m0 - h0 * m1) / (h0 + h1)
+    if np.sign(d) != np.sign(m0):
+        return 0.0
+    if np.sign(m0) != np.sign(m1) and abs(d) > 3.0 * abs(m0):
+        return 3.0 * m0
+    return d
+
+
+def _knot_slopes(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """PCHIP's slope at every knot (scipy's PchipInterpolator._find_derivatives for a 1-D y)."""
+    hk = x[1:] - x[:-1]
+    mk = (y[1:] - y[:-1]) / hk
+    if y.size == 2:
+        return np.array([mk[0], mk[0]])
+    smk = np.sign(mk)
+    condition = (smk[1:] != smk[:-1]) | (mk[1:] == 0) | (mk[:-1] == 0)
+    w1, w2 = 2 * hk[1:] + hk[:-1], hk[1:] + 2 * hk[:-1]
+    with np.errstate(divide="ignore", invalid="ignore"):  # where it divides by zero, condition holds
+        whmean = (w1 / mk[:-1] + w2 / mk[1:]) / (w1 + w2)
+    dk = np.zeros_like(y)
+    dk[1:-1][~condition] = 1.0 / whmean[~condition]
+    dk[0] = _end_slope(hk[0], hk[1], mk[0], mk[1])
+    dk[-1] = _end_slope(hk[-1], hk[-2], mk[-1], mk[-2])
+    return dk
+
+
+@dataclass(frozen=True)
+class Pchip:
+    """scipy.interpolate.PchipInterpolator(x, y, extrapolate=False) in numpy to the last bit (importing scipy
+    would cost a diagnosis more than its one curve): value and slope inside the knots, else NaN."""
+
+    knots_x: np.ndarray
+    coefficients: np.ndarray
+    """(4, intervals): the cubic's coefficients of (v − x_i)³, ², ¹, ⁰ on each interval (scipy's PPoly.c)."""
+
+    @classmethod
+    def through(cls, x: np.ndarray, y: np.ndarray) -> Pchip:
+        x, y = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
+        if x.ndim != 1 or x.shape != y.shape or x.size < 2 or not np.all(np.diff(x) > 0):
+            raise ValueError("PCHIP needs at least two points with strictly increasing x")
+        dydx = _knot_slopes(x, y)
+        dx = np.diff(x)
+        slope = np.diff(y) / dx
+        t = (dydx[:-1] + dydx[1:] - 2 * slope) / dx
+        return cls(x, np.stack((t / dx, (slope - dydx[:-1]) / dx - t, dydx[:-1], y[:-1])))
+
+    def value(self, v: np.ndarray | float) -> np.ndarray:
+        return self._evaluate(v, self.coefficients)
+
+    def slope(self, v: np.ndarray | float) -> np.ndarray:
+        """The first derivative (scipy's PPoly.derivative())."""
+        return self._evaluate(v, self.coefficients[:-1] * np.array([3.0, 2.0, 1.0])[:, None])
+
+    def _evaluate(self, v: np.ndarray | float, c: np.ndarray) -> np.ndarray:
+        v, x = np.asarray(v, dtype=float), self.knots_x
+        # [x_i, x_i+1), the last interval closed
+        interval = np.clip(np.searchsorted(x, v, side="right") - 1, 0, x.size - 2)
+        s = v - x[interval]
+        result = np.zeros(v.shape)
+        power = np.ones(v.shape)
+        for k in range(c.shape[0]):  # scipy's evaluate_poly1: the lowest power first
+            result = result + c[c.shape[0] - k - 1, interval] * power
+            if k < c.shape[0] - 1:
+                power = power * s
+        return np.where((v >= x[0]) & (v <= x[-1]), result, np.nan)
+
+
+def increasing(values: np.ndarray) -> np.ndarray:
+    """The non-decreasing sequence nearest to `values` in least squares (isotonic regression by pooling
+    adjacent violators: a run that falls is replaced by its mean, merged backwards until none falls). Not
+    scipy.optimize.isotonic_regression: importing scipy.optimize costs a diagnosis more than this (as for
+    small_nnls); the test checks the two agree."""
+    means: list[float] = []
+    sizes: list[int] = []
+    for value in np.asarray(values, dtype=float):
+        means.append(float(value))
+        sizes.append(1)
+        while len(means) > 1 and means[-2] > means[-1]:
+            size = sizes[-2] + sizes[-1]
+            means[-2] = (means[-2] * sizes[-2] + means[-1] * sizes[-1]) / size
+            sizes[-2] = size
+            del means[-1], sizes[-1]
+    return np.repeat(means, sizes)
 
 
 def smooth_curve(curve: PiecewiseLinearCurve) -> PiecewiseLinearCurve:
-    """A monotone cubic (PCHIP) through the curve's points, linear beyond them with the end slopes,
-    tabulated densely over three times the curve's velocity span."""
+    """A monotone cubic (PCHIP) through the curve's points made non-decreasing (increasing), linear beyond
+    them with the end slopes, tabulated densely over three times the curve's velocity span."""
     lo, hi = float(curve.velocity_m_s[0]), float(curve.velocity_m_s[-1])
     span = hi - lo
-    interpolator = Pchip.through(curve.velocity_m_s, curve.force_N)
+    cubic = Pchip.through(curve.velocity_m_s, increasing(curve.force_N))
     inside = np.linspace(lo, hi, SMOOTH_POINTS)
-    outside = np.array([lo - span, hi + span])
-    grid = np.concatenate([outside[:1], inside, outside[1:]])
-    force = np.concatenate(
-        [
-            [float(interpolator.value(lo)) - float(interpolator.slope(lo)) * span],
-            interpolator.value(inside),
-            [float(interpolator.value(hi)) + float(interpolator.slope(hi)) * span],
-        ]
+    below = float(cubic.value(lo)) - float(cubic.slope(lo)) * span
+    above = float(cubic.value(hi)) + float(cubic.slope(hi)) * span
+    grid = np.concatenate([[lo - span], inside, [hi + span]])
+    return PiecewiseLinearCurve(grid, np.concatenate([[below], cubic.value(inside), [above]]))
+
+
+def plausible_truth(model: FittedModel, reference: Reference) -> FittedModel:
+    """The plausible truth of a model fitted on `reference` (module docstring): its structure identified at
+    TRUTH_POINTS_FACTOR times the points and low-speed knots, its damper curves non-decreasing and smooth."""
+    settings = reference.settings
+    points, low = settings.points, np.asarray(settings.low_speed_knots_m_s)
+    fine = replace(
+        settings,
+        points=None if points is None else TRUTH_POINTS_FACTOR * points,
+        low_speed_knots_m_s=tuple(np.linspace(low[0], low[-1], TRUTH_POINTS_FACTOR * (low.size - 1) + 1)),
     )
-    return PiecewiseLinearCurve(grid, force)
+    on = Reference.of(reference.recording, model.vehicle, fine, reference.identified)
+    truth = fit(on, model.structure, warm=model)
+    return replace(truth, curve_override=tuple(smooth_curve(c) for c in truth.curves))
 
 
-def smooth_truth(model: FittedModel) -> FittedModel:
-    """The fitted model with its damper curves made smooth."""
-    return replace(model, curve_override=tuple(smooth_curve(c) for c in model.curves))
+NOISE_BAND_FROM = 2.0
+"""The noise is fitted above this multiple of the excitation's top frequency (the vehicle responds below)."""
+LAG1_GRID = np.linspace(0.0, 0.98, 99)  # candidate lag-1 correlations of the AR(1) part
+MIN_BINS = 8
+"""Fewest density bins a fit uses; with fewer in the noise band the whole band above 0 Hz is used."""
 
 
-def plausible_truth(model: FittedModel, recording: Recording, settings: FitSettings) -> FittedModel:
-    """A plausible truth for `model` (module docstring): its structure identified on the recording with
-    TRUTH_POINTS_FACTOR times the points, the damper curves made smooth."""
-    points = settings.points
-    fine = replace(settings, points=None if points is None else TRUTH_POINTS_FACTOR * points)
-    return smooth_truth(fit(Reference.of(recording, model.vehicle, fine), model.structure, warm=model))
+@dataclass(frozen=True)
+class ChannelNoise:
+    """Noise of one channel: an AR(1) part e[n] = ρ·e[n−1] + w[n] of standard deviation coloured_m, white
+    noise of standard deviation white_m, 1/f noise of one-sided density pink_m2/f (drawn at sample_time_s;
+    0: none), readings rounded to quantum_m (0: not quantised)."""
+
+    coloured_m: float
+    lag1_correlation: float
+    white_m: float
+    quantum_m: float = 0.0
+    pink_m2: float = 0.0
+    sample_time_s: float = 0.0
+
+    @property
+    def rms_m(self) -> float:
+        return float(np.hypot(self.coloured_m, self.white_m))
+
+    def pink(self, samples: int, rng: np.random.Generator) -> np.ndarray:
+        """The 1/f part: white noise shaped to the density pink_m2/f (flat below 1/(samples·Δt))."""
+        if self.pink_m2 <= 0.0 or self.sample_time_s <= 0.0:
+            return np.zeros(samples)
+        dt = self.sample_time_s
+        density = self.pink_m2 / np.maximum(np.fft.rfftfreq(samples, dt), 1.0 / (samples * dt))
+        # unit white noise has the one-sided density 2·Δt
+        spectrum = np.fft.rfft(rng.standard_normal(samples)) * np.sqrt(density / (2.0 * dt))
+        return np.fft.irfft(spectrum, samples)
+
+    def draw(self, samples: int, rng: np.random.Generator) -> np.ndarray:
+        """A stationary sequence of this noise (the AR(1) part started from its stationary law)."""
+        rho = self.lag1_correlation
+        innovation = rng.standard_normal(samples) * self.coloured_m * np.sqrt(1.0 - rho * rho)
+        innovation[0] = innovation[0] / np.sqrt(1.0 - rho * rho)
+        coloured = first_order_filter((1.0, 0.0), -rho, innovation)
+        return coloured + rng.standard_normal(samples) * self.white_m + self.pink(samples, rng)
+
+    def read(self, true_m: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        """What a sensor with this noise and resolution reads of `true_m`."""
+        reading = true_m + self.draw(true_m.size, rng)
+        q = self.quantum_m
+        return np.round(reading / q) * q if q > 0.0 else reading
 
 
-def synthetic_recording(
-    recording: Recording, predicted: dict[str, np.ndarray], noise: dict[str, ChannelNoise], seed: int
-) -> Recording:
-    """Predicted body and wheel readings as sensors with the measured noise read them; the plate as
-    measured."""
-    rng = np.random.default_rng(seed)
-    channels = dict(recording.channels)
-    for name, x in predicted.items():
-        channels[name] = noise[name].read(x, rng)
-    return Recording(recording.time_s, channels, {"source": "model doctor: expected gap"})
+def reading_quantum_m(x: np.ndarray) -> float:
+    """The smallest step between distinct readings when every reading is a whole multiple of it, else 0."""
+    values = np.unique(x)
+    step = float(np.min(np.diff(values))) if values.size >= 3 else 0.0
+    if step <= 0.0 or np.max(np.abs(x / step - np.round(x / step))) > 1e-3:
+        return 0.0
+    return step
 
 
-def refit_on(synthetic: Recording, model: FittedModel, settings: FitSettings) -> FittedModel:
-    """The model's structure identified on the synthetic recording, started from the model's own unknowns
-    and channel parameters (the synthetic recording is the model's response plus noise, so its optimum lies
-    near them: a few Newton steps instead of a solve from scratch, the same convex optimum)."""
-    return fit(Reference.of(synthetic, model.vehicle, settings), model.structure, warm=model)
+def small_nnls(designs: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per design of a stack (count, rows, a few columns): x ≥ 0 minimising ||design·x − target||, and that
+    norm: least squares on every set of free columns (the rest at zero; normal equations of unit columns
+    for the whole stack, by pseudo-inverse: ρ = 0 makes the AR(1) column the white one), the fewest and
+    earliest columns winning a tie. Not scipy's nnls: its import costs more than the fit, and it would loop
+    over the stack; the test checks the two agree."""
+    count, _, columns = designs.shape
+    scale = np.linalg.norm(designs, axis=1)
+    scale[scale == 0.0] = 1.0
+    scaled = designs / scale[:, None, :]
+    gram, moment = np.einsum("nrk,nrl->nkl", scaled, scaled), np.einsum("nrk,r->nk", scaled, target)
+    best_misfit, best = np.full(count, float(np.linalg.norm(target))), np.zeros((count, columns))
+    tie = 1e-12 * best_misfit[0]
+    subsets = [[k for k in range(columns) if mask >> k & 1] for mask in range(1, 2**columns)]
+    for free in sorted(subsets, key=lambda subset: (len(subset), subset)):
+        inverse = np.linalg.pinv(gram[:, free][:, :, free], rcond=1e-13, hermitian=True)
+        x = np.zeros((count, columns))
+        x[:, free] = np.einsum("nkl,nl->nk", inverse, moment[:, free])
+        misfit = np.linalg.norm(np.einsum("nrk,nk->nr", scaled, x) - target, axis=1)
+        better = np.all(x >= 0.0, axis=1) & (misfit < best_misfit - tie)
+        best_misfit, best = np.where(better, misfit, best_misfit), np.where(better[:, None], x, best)
+    return best / scale, best_misfit
+
+
+def measure_channel_noise(
+    residual_m: np.ndarray,
+    sample_time_s: float,
+    band_from_Hz: float,
+    quantum_m: float = 0.0,
+    measured_m: np.ndarray | None = None,
+) -> ChannelNoise:
+    """The noise law of the residual's density above band_from_Hz, bounded by the measured reading's."""
+    fs = 1.0 / sample_time_s
+    x = residual_m - np.mean(residual_m)
+    nperseg = int(min(x.size, max(256, 2 ** int(np.log2(fs)))))
+    frequency, density = welch_density(x, fs, nperseg)
+    if measured_m is not None:
+        density = np.minimum(density, welch_density(measured_m - np.mean(measured_m), fs, nperseg)[1])
+    band = (frequency >= band_from_Hz) & (density > 0.0)
+    if np.count_nonzero(band) < MIN_BINS:
+        band = (frequency > 0.0) & (density > 0.0)
+    f, p = frequency[band], density[band]
+    if f.size == 0:
+        return ChannelNoise(0.0, 0.0, 0.0, quantum_m)
+    cos_omega = np.cos(2.0 * np.pi * f * sample_time_s)
+
+    shapes = 1.0 / (1.0 - 2.0 * LAG1_GRID[:, None] * cos_omega[None, :] + LAG1_GRID[:, None] ** 2)
+    designs = np.stack(
+        [shapes / p, np.broadcast_to(1.0 / p, shapes.shape), np.broadcast_to(1.0 / (f * p), shapes.shape)],
+        axis=2,
+    )
+    coefficients, misfits = small_nnls(designs, np.ones(f.size))
+    best = int(np.argmin(misfits))  # the first of equal misfits, as min over the grid in order
+    rho, (a, b, c) = float(LAG1_GRID[best]), (float(v) for v in coefficients[best])
+    # one-sided density of AR(1) with innovation variance s²: 2·s²·Δt / |1 − ρe^{−iω}|²; its variance
+    # s²/(1 − ρ²); white noise of variance σ²: 2·σ²·Δt
+    coloured_variance = a / (2.0 * sample_time_s) / (1.0 - rho * rho)
+    # the rounding of the synthetic readings adds the quantisation's own q²/12 again
+    white_variance = max(0.0, b / (2.0 * sample_time_s) - quantum_m * quantum_m / 12.0)
+    return ChannelNoise(
+        float(np.sqrt(coloured_variance)), rho, float(np.sqrt(white_variance)), quantum_m, c, sample_time_s
+    )
+
+
+def synthetic_recordings(
+    reference: Reference, predicted: dict[str, np.ndarray], residual: dict[str, np.ndarray], seeds: range
+) -> list[Recording]:
+    """Per seed, the predicted body and wheel readings read with the noise of the output residual (of the
+    measured reading where it diverged) at the measured resolution; the plate as measured."""
+    recording, noise = reference.recording, {}
+    dt, band_from = recording.sample_time_s, NOISE_BAND_FROM * reference.filters.excitation_top_Hz
+    for name, r in residual.items():
+        measured = recording.channels[name]
+        r = measured if diverged(r, measured) else r
+        noise[name] = measure_channel_noise(r, dt, band_from, reading_quantum_m(measured), measured)
+    recordings = []
+    for seed in seeds:
+        rng, read = np.random.default_rng(seed), dict(recording.channels)
+        for name, x in predicted.items():
+            read[name] = noise[name].read(x, rng)
+        recordings.append(Recording(recording.time_s, read, {"source": "model doctor: expected gap"}))
+    return recordings

@@ -1,15 +1,7 @@
-"""Locate a disagreement: which channel, which part of the sweep, which range of suspension velocity,
-deflection and tyre deflection, and whether what is left looks like noise.
-
-Two residuals are analysed:
-
-- the *output error* (m): the model simulated from the measured plate, minus the measured readings, per
-  channel (estimator.doctor.simulation);
-- the *equation error* (N): the equations of motion evaluated with the fitted unknowns, per equation
-  (body/wheel, or left wheel/right wheel/heave/roll), at the samples the fit used.
-
-The sweep's instantaneous frequency at every sample is read from the plate channel itself (peak of a
-short-time spectrum), so a time in the recording maps to a frequency band of the sweep.
+"""Locate a disagreement: which channel, part of the sweep, range of suspension velocity, deflection and tyre
+deflection, and whether what is left is white. Two residuals: the output error (m, per channel: the model
+simulated from the measured plate, estimator.doctor.simulation) and the equation error (N, per equation at the
+fitted samples). A time maps to a band of the sweep by the plate's instantaneous frequency.
 """
 
 from __future__ import annotations
@@ -24,8 +16,7 @@ from estimator.doctor.model import FittedModel
 from estimator.doctor.simulation import diverged
 
 BAND_WIDTH_HZ = 2.0
-WINDOW_S = 0.5
-"""Short-time spectrum window for the sweep frequency."""
+WINDOW_S = 0.5  # short-time spectrum window for the sweep frequency
 REST_FRACTION = 0.1
 """Where the plate's amplitude is below this fraction of its largest, the plate rests (no sweep frequency)."""
 BINS = 8
@@ -38,9 +29,8 @@ def short_time_magnitude(
     x: np.ndarray, sample_rate_Hz: float, segment: int, fft_size: int
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Frequencies, segment centre times and |STFT| (frequencies, segments) as scipy.signal.stft(x, fs,
-    nperseg=segment, noverlap=3·segment//4, nfft=fft_size) has them, up to its constant scale 1/Σwindow:
-    periodic Hann window, segment//2 zeros at either end, zeros after to fill the last segment. Here in
-    numpy so that a diagnosis does not import scipy.signal (1-2 s a process)."""
+    nperseg=segment, noverlap=3·segment//4, nfft=fft_size) has them up to its scale 1/Σwindow, in numpy
+    (importing scipy.signal costs a diagnosis 1-2 s): periodic Hann window, segment//2 zeros either end."""
     step = segment - 3 * segment // 4
     half = segment // 2
     padded = np.concatenate([np.zeros(half), np.asarray(x, dtype=float), np.zeros(half)])
@@ -70,94 +60,93 @@ def sweep_frequency_Hz(plate_m: np.ndarray, sample_time_s: float) -> np.ndarray:
 
 
 @dataclass(frozen=True)
-class BandProfile:
-    """RMS of named series per frequency band of the sweep (NaN: no samples in the band)."""
-
-    edges_Hz: np.ndarray
-    values: dict[str, np.ndarray]
-
-    def labels(self) -> list[str]:
-        return [f"{lo:g}-{hi:g} Hz" for lo, hi in zip(self.edges_Hz[:-1], self.edges_Hz[1:], strict=True)]
-
-
-@dataclass(frozen=True)
-class BinProfile:
-    """RMS of named series in quantile bins of a variable (edges in the variable's unit)."""
+class Profile:
+    """RMS of named series per bin of a variable (edges in its unit; NaN: too few samples in the bin)."""
 
     variable: str
     unit: str
     edges: np.ndarray
     values: dict[str, np.ndarray]
 
-
-@dataclass(frozen=True)
-class Whiteness:
-    """Ljung-Box test of a residual decimated to its bandwidth: white when the p-value is above
-    WHITENESS_LEVEL."""
-
-    statistic: float
-    lags: int
-    p_value: float
-
-    @property
-    def white(self) -> bool:
-        return self.p_value > WHITENESS_LEVEL
+    def worst(self, name: str) -> tuple[float, float]:
+        """The edges of the bin where the series `name` is largest (NaN: none has samples enough)."""
+        values = self.values[name]
+        if not np.any(np.isfinite(values)):
+            return float("nan"), float("nan")
+        k = int(np.nanargmax(values))
+        return float(self.edges[k]), float(self.edges[k + 1])
 
 
-def band_rms(series: dict[str, np.ndarray], frequency_Hz: np.ndarray, top_Hz: float) -> BandProfile:
+def _profile(
+    variable: str, unit: str, edges: np.ndarray, which: np.ndarray, series: dict[str, np.ndarray], least: int
+) -> Profile:
+    """which: each sample's bin (none outside 0 … edges.size − 2); a bin needs `least` samples."""
+    bins = range(edges.size - 1)
+    values = {
+        name: np.array(
+            [np.sqrt(np.mean(x[which == k] ** 2)) if np.sum(which == k) >= least else np.nan for k in bins]
+        )
+        for name, x in series.items()
+    }
+    return Profile(variable, unit, edges, values)
+
+
+def band_rms(series: dict[str, np.ndarray], frequency_Hz: np.ndarray, top_Hz: float) -> Profile:
+    """Per band of the sweep (at least 10 samples)."""
     edges = np.arange(0.0, top_Hz + BAND_WIDTH_HZ, BAND_WIDTH_HZ)
-    values = {}
-    for name, x in series.items():
-        rms = np.full(edges.size - 1, np.nan)
-        for k in range(edges.size - 1):
-            inside = (frequency_Hz >= edges[k]) & (frequency_Hz < edges[k + 1])
-            if np.count_nonzero(inside) >= 10:
-                rms[k] = float(np.sqrt(np.mean(x[inside] ** 2)))
-        values[name] = rms
-    return BandProfile(edges, values)
+    which = np.searchsorted(edges, frequency_Hz, side="right") - 1
+    return _profile("sweep frequency", "Hz", edges, which, series, 10)
 
 
-def binned_rms(variable: np.ndarray, series: dict[str, np.ndarray], name: str, unit: str) -> BinProfile:
+def binned_rms(variable: np.ndarray, series: dict[str, np.ndarray], name: str, unit: str) -> Profile:
+    """Per BINS quantile bins of the variable."""
     edges = np.unique(np.quantile(variable, np.linspace(0.0, 1.0, BINS + 1)))
     which = np.clip(np.searchsorted(edges, variable, side="right") - 1, 0, edges.size - 2)
-    values = {
-        key: np.array(
-            [
-                np.sqrt(np.mean(x[which == k] ** 2)) if np.any(which == k) else np.nan
-                for k in range(edges.size - 1)
-            ]
-        )
-        for key, x in series.items()
-    }
-    return BinProfile(name, unit, edges, values)
+    return _profile(name, unit, edges, which, series, 1)
 
 
-def ljung_box(residual: np.ndarray, sample_time_s: float, bandwidth_Hz: float) -> Whiteness:
-    """Ljung-Box Q over WHITENESS_LAGS lags of the residual decimated to twice its bandwidth."""
+def ljung_box(residual: np.ndarray, sample_time_s: float, bandwidth_Hz: float) -> float:
+    """p of the Ljung-Box Q over WHITENESS_LAGS lags of the residual decimated to twice its bandwidth."""
     step = max(1, int(1.0 / (2.0 * bandwidth_Hz * sample_time_s)))
     x = residual[::step] - np.mean(residual[::step])
     n = x.size
     denominator = float(np.dot(x, x))
     if n <= WHITENESS_LAGS + 1 or denominator == 0.0:
-        return Whiteness(0.0, WHITENESS_LAGS, 1.0)
+        return 1.0
     lags = np.arange(1, WHITENESS_LAGS + 1)
     rho = np.array([np.dot(x[:-k], x[k:]) / denominator for k in lags])
-    q = float(n * (n + 2) * np.sum(rho**2 / (n - lags)))
-    return Whiteness(q, WHITENESS_LAGS, chi_square_survival(q, WHITENESS_LAGS))  # the χ² law's upper tail
+    return chi_square_survival(float(n * (n + 2) * np.sum(rho**2 / (n - lags))), WHITENESS_LAGS)
 
 
 def chi_square_survival(statistic: float, degrees: int) -> float:
-    """P(χ² > statistic) for an even number of degrees of freedom (scipy.special.chdtrc for those): the
-    Poisson sum e^(−s/2)·Σ_{k<degrees/2} (s/2)^k / k!, each term taken in logarithms so that large
-    statistics underflow to 0 instead of overflowing. Why not scipy: importing scipy.special costs a
-    diagnosis some 0.1 s for this one tail."""
-    if degrees <= 0 or degrees % 2:
-        raise ValueError(f"chi_square_survival takes an even, positive number of degrees, not {degrees}")
+    """P(χ² > statistic) with `degrees` degrees of freedom (log_chi_square_survival)."""
+    return min(1.0, math.exp(log_chi_square_survival(statistic, degrees)))
+
+
+def log_chi_square_survival(statistic: float, degrees: int) -> float:
+    """ln P(χ² > s), d = `degrees` (scipy.special.chdtrc's tail without its 0.1 s import), in logarithms
+    so that p-values that underflow to 0 still compare. Even d: e^(−s/2)·Σ_{k<d/2} (s/2)^k / k!; odd d:
+    erfc(√(s/2)) + e^(−s/2)·Σ_{k=1}^{(d−1)/2} (s/2)^(k−1/2) / Γ(k + 1/2), erfc(x) ≈ e^(−x²)/(x√π) above 25."""
+    if degrees <= 0:
+        raise ValueError(f"chi_square_survival takes a positive number of degrees, not {degrees}")
     if statistic <= 0:
-        return 1.0
+        return 0.0
+    if not math.isfinite(statistic):
+        return -math.inf
     half = statistic / 2.0
+    if half == 0.0:  # a statistic so small that half of it underflows: P = 1
+        return 0.0
     log_half = math.log(half)
-    return min(1.0, sum(math.exp(k * log_half - half - math.lgamma(k + 1)) for k in range(degrees // 2)))
+    if degrees % 2 == 0:
+        terms = [k * log_half - half - math.lgamma(k + 1) for k in range(degrees // 2)]
+    else:
+        root = math.sqrt(half)
+        tail = math.log(math.erfc(root)) if root < 25.0 else -half - math.log(root * math.sqrt(math.pi))
+        terms = [tail] + [
+            (k - 0.5) * log_half - half - math.lgamma(k + 0.5) for k in range(1, (degrees + 1) // 2)
+        ]
+    top = max(terms)
+    return min(0.0, top + math.log(sum(math.exp(t - top) for t in terms)))
 
 
 def effective_samples(residual: np.ndarray) -> float:
@@ -182,10 +171,11 @@ class Localisation:
     gap_m: float
     channel_rms_m: dict[str, float]
     equation_rms_N: dict[str, float]
-    output_bands: BandProfile
-    equation_bands: BandProfile
-    by_variable: list[BinProfile]
-    whiteness: dict[str, Whiteness]
+    output_bands: Profile
+    equation_bands: Profile
+    by_variable: list[Profile]
+    whiteness: dict[str, float]
+    """Channel -> Ljung-Box p-value of the output-error residual (white above WHITENESS_LEVEL)."""
     spectra: dict[str, tuple[np.ndarray, np.ndarray]]
     """Channel -> (frequency Hz, one-sided power density m²/Hz) of the output-error residual."""
     worst_time_s: tuple[float, float]
@@ -194,83 +184,61 @@ class Localisation:
     def worst_channel(self) -> str:
         return max(self.channel_rms_m, key=lambda c: self.channel_rms_m[c])
 
-    def worst_band(self, profile: BandProfile, name: str) -> tuple[float, float]:
-        values = profile.values[name]
-        if not np.any(np.isfinite(values)):
-            return float("nan"), float("nan")
-        k = int(np.nanargmax(values))
-        return float(profile.edges_Hz[k]), float(profile.edges_Hz[k + 1])
+    @property
+    def white(self) -> list[str]:
+        return [c for c, p in self.whiteness.items() if p > WHITENESS_LEVEL]
 
     def describe(self) -> str:
-        """One sentence: which channel, which time and band of the sweep, which equation and range of
-        suspension velocity, white or not."""
+        """One sentence: channel, time and band of the sweep, equation and suspension velocity, whiteness."""
         if not np.isfinite(self.gap_m):
             return "the model diverges when driven by the measured plate"
         channel = self.worst_channel()
-        lo, hi = self.worst_band(self.output_bands, channel)
+        lo, hi = self.output_bands.worst(channel)
         equation = max(self.equation_rms_N, key=lambda e: self.equation_rms_N[e])
-        elo, ehi = self.worst_band(self.equation_bands, equation)
-        velocity = self.by_variable[0]
-        k = int(np.nanargmax(velocity.values[equation]))
-        white = [c for c, w in self.whiteness.items() if w.white]
+        elo, ehi = self.equation_bands.worst(equation)
+        vlo, vhi = self.by_variable[0].worst(equation)
         start, stop = self.worst_time_s
         return (
             f"gap {self.gap_m * 1e6:.1f} µm; largest on {channel} "
             f"({self.channel_rms_m[channel] * 1e6:.1f} µm RMS), at {start:.1f}-{stop:.1f} s, "
             f"in the {lo:g}-{hi:g} Hz part of the sweep; largest equation residual: {equation} "
             f"({self.equation_rms_N[equation]:.1f} N RMS, {elo:g}-{ehi:g} Hz, most at suspension velocities "
-            f"{velocity.edges[k]:+.3f}..{velocity.edges[k + 1]:+.3f} m/s); output error "
-            + ("white on " + ", ".join(white) if white else "not white on any channel")
+            f"{vlo:+.3f}..{vhi:+.3f} m/s); output error "
+            + ("white on " + ", ".join(self.white) if self.white else "not white on any channel")
         )
 
 
 def locate(model: FittedModel, output_residual: dict[str, np.ndarray], gap_m: float) -> Localisation:
-    """Residual analysis of one fitted model; output_residual: its output error per channel (m). A model
-    whose simulation diverged has residuals near the float range's end: their squares overflow to inf,
-    which is what the localisation should say of it, without numpy's overflow warnings on a user's
-    terminal."""
+    """Residual analysis of one fitted model; output_residual: its output error per channel (m). A diverged
+    simulation's residuals overflow to inf when squared, which is what it should say (without warnings)."""
     with np.errstate(over="ignore", invalid="ignore"):
-        return _locate(model, output_residual, gap_m)
-
-
-def _locate(model: FittedModel, output_residual: dict[str, np.ndarray], gap_m: float) -> Localisation:
-    signals = model.signals
-    dt = signals.sample_time_s
-    index = model.system.sample_index
-    filters = model.system.filters
-    plate = model.signals.recording.channels["x_r_l" if model.vehicle.is_axle else "x_r"]
-    frequency = sweep_frequency_Hz(plate, dt)
-    measured = model.signals.recording.channels
-    finite = {c: r for c, r in output_residual.items() if not diverged(r, measured[c])}
-    equation_residual = model.residuals()
-    equations = dict(zip(signals.equations, equation_residual, strict=True))
-    by_variable = []  # of the first corner (the left one of an axle)
-    for label, unit, pick in (
-        ("suspension velocity", "m/s", lambda c: c.velocity_m_s),
-        ("suspension deflection", "m", lambda c: c.deflection_m),
-        ("tyre deflection", "m", lambda c: c.tyre_deflection_smooth_m),
-    ):
-        corner = signals.corners[0]
-        by_variable.append(binned_rms(pick(corner)[index], equations, label, unit))
-    worst_time = (float("nan"), float("nan"))
-    if finite:
-        power = np.mean([r**2 for r in finite.values()], axis=0)
-        window = max(1, round(TIME_WINDOW_S / dt))
-        running = np.convolve(power, np.ones(window) / window, mode="valid")
-        start = int(np.argmax(running)) * dt
-        worst_time = (start, start + window * dt)
-    spectra = {}
-    for channel, r in finite.items():
-        f, p = welch_density(r - np.mean(r), 1.0 / dt, min(r.size, 2048))
-        spectra[channel] = (f, p)
-    return Localisation(
-        gap_m=gap_m,
-        channel_rms_m={c: float(np.sqrt(np.mean(r**2))) for c, r in output_residual.items()},
-        equation_rms_N={e: float(np.sqrt(np.mean(r**2))) for e, r in equations.items()},
-        output_bands=band_rms(finite, frequency, filters.excitation_top_Hz),
-        equation_bands=band_rms(equations, frequency[index], filters.excitation_top_Hz),
-        by_variable=by_variable,
-        whiteness={c: ljung_box(r, dt, filters.equation_cutoff_Hz) for c, r in finite.items()},
-        spectra=spectra,
-        worst_time_s=worst_time,
-    )
+        signals, index, filters = model.signals, model.system.sample_index, model.system.filters
+        dt, measured = signals.sample_time_s, signals.recording.channels
+        frequency = sweep_frequency_Hz(measured["x_r_l" if model.vehicle.is_axle else "x_r"], dt)
+        finite = {c: r for c, r in output_residual.items() if not diverged(r, measured[c])}
+        equations = dict(zip(signals.equations, model.residuals(), strict=True))
+        corner = signals.corners[0]  # the left one of an axle
+        variables = (
+            ("suspension velocity", "m/s", corner.velocity_m_s),
+            ("suspension deflection", "m", corner.deflection_m),
+            ("tyre deflection", "m", corner.tyre_deflection_smooth_m),
+        )
+        worst_time = (float("nan"), float("nan"))
+        if finite:
+            power = np.mean([r**2 for r in finite.values()], axis=0)
+            window = max(1, round(TIME_WINDOW_S / dt))
+            start = int(np.argmax(np.convolve(power, np.ones(window) / window, mode="valid"))) * dt
+            worst_time = (start, start + window * dt)
+        return Localisation(
+            gap_m=gap_m,
+            channel_rms_m={c: float(np.sqrt(np.mean(r**2))) for c, r in output_residual.items()},
+            equation_rms_N={e: float(np.sqrt(np.mean(r**2))) for e, r in equations.items()},
+            output_bands=band_rms(finite, frequency, filters.excitation_top_Hz),
+            equation_bands=band_rms(equations, frequency[index], filters.excitation_top_Hz),
+            by_variable=[binned_rms(x[index], equations, label, unit) for label, unit, x in variables],
+            whiteness={c: ljung_box(r, dt, filters.equation_cutoff_Hz) for c, r in finite.items()},
+            spectra={
+                c: welch_density(r - np.mean(r), 1.0 / dt, min(r.size, 2048)) for c, r in finite.items()
+            },
+            worst_time_s=worst_time,
+        )

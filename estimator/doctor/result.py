@@ -1,15 +1,13 @@
-"""What a diagnosis returns: the steps taken (effect, fitted parameters, gap before and after, evidence), the
-candidates judged at every step, the residual analysis before and after, and the stable JSON shape of
-`shockbench diagnose --json`."""
+"""What a diagnosis returns, and its stable JSON shape (`shockbench diagnose --json`)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from dataclasses import dataclass, field, fields
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from estimator.doctor.catalog import EffectName
+from estimator.doctor.catalog import FRICTION_UNKNOWNS, EffectName
 from estimator.doctor.residuals import Localisation
 from estimator.vehicle import TyreModel
 
@@ -17,98 +15,101 @@ if TYPE_CHECKING:
     from estimator.doctor.model import FittedModel
 
 
-def _finite_or_none(value: float) -> float | None:
+def _finite_or_none(value: float | None) -> float | None:
     return float(value) if value is not None and np.isfinite(value) else None
+
+
+def _json(item: Any, finite: tuple[str, ...], count: int | None = None) -> dict[str, object]:
+    """The first `count` fields of a dataclass by name, those in `finite` as _finite_or_none has them."""
+    values = ((f.name, getattr(item, f.name)) for f in fields(item)[:count])
+    return {name: _finite_or_none(value) if name in finite else value for name, value in values}
+
+
+def _range(low: float, high: float) -> list[float | None]:
+    return [_finite_or_none(low), _finite_or_none(high)]
+
+
+def localisation_json(located: Localisation | None) -> dict[str, object] | None:
+    """Localisation.describe as numbers; None without a localisation or when the model diverged."""
+    if located is None or not np.isfinite(located.gap_m) or not located.channel_rms_m:
+        return None
+    channel = located.worst_channel()
+    equation = max(located.equation_rms_N, key=lambda e: located.equation_rms_N[e])
+    velocity, deflection = (p.worst(equation) for p in located.by_variable[:2])
+    has_band = channel in located.output_bands.values
+    return {
+        "channel": channel,
+        "channel_rms_m": _finite_or_none(located.channel_rms_m[channel]),
+        "band_Hz": _range(*located.output_bands.worst(channel)) if has_band else None,
+        "time_s": _range(*located.worst_time_s),
+        "equation": equation,
+        "equation_rms_N": _finite_or_none(located.equation_rms_N[equation]),
+        "equation_band_Hz": _range(*located.equation_bands.worst(equation)),
+        "velocity_m_s": _range(*velocity) if np.isfinite(velocity[0]) else None,
+        "deflection_m": _range(*deflection) if np.isfinite(deflection[0]) else None,
+        "white": sorted(located.white),
+    }
 
 
 @dataclass(frozen=True)
 class CandidateScore:
-    """How one candidate fared at one step.
-
-    objective_ratio: the paper's objective with the candidate over without (all samples);
-    heldout_ratio: the same on the held-out blocks, each model fitted on the other blocks;
-    gap_m: output-error gap with the candidate (None if not simulated: screened out);
-    bic_change: change of the information criterion (negative favours the candidate);
-    correlation: of the residual with what the candidate explains; parameter_spread: how much the effect's
-    parameter differs when fitted on the first and on the second half of the sweep, relative to its value
-    (None when not checked); verdict: "named" or why not.
-    """
+    """One candidate in one round (estimator.doctor.criteria): objective and gap with it over without, the
+    Wald test of its unknowns (equation_), the likelihood ratio of the gap (simulation_), the larger p."""
 
     effect: str
     objective_ratio: float
-    heldout_ratio: float | None
     gap_m: float | None
     gap_ratio: float | None
-    bic_change: float | None
-    correlation: float | None
+    equation_statistic: float
+    simulation_statistic: float
+    unknowns: int
+    equation_p: float
+    simulation_p: float
+    p_value: float
     parameters: dict[str, float | str]
     verdict: str
-    parameter_spread: float | None = None
 
     def to_json(self) -> dict[str, object]:
-        return {
-            "effect": self.effect,
-            "objective_ratio": self.objective_ratio,
-            "heldout_ratio": self.heldout_ratio,
-            "gap_m": _finite_or_none(self.gap_m) if self.gap_m is not None else None,
-            "gap_ratio": _finite_or_none(self.gap_ratio) if self.gap_ratio is not None else None,
-            "bic_change": _finite_or_none(self.bic_change) if self.bic_change is not None else None,
-            "correlation": self.correlation,
-            "parameter_spread": self.parameter_spread,
-            "parameters": self.parameters,
-            "verdict": self.verdict,
-        }
+        finite = ("objective_ratio", "gap_m", "gap_ratio", "equation_statistic", "simulation_statistic")
+        return _json(self, finite)
 
 
 @dataclass
 class DiagnosisStep:
-    """One effect added: its stable name, the channel for channel effects, fitted parameters, the gap
-    before and after (m; inf = the model diverged), and the evidence in words."""
+    """One effect added: its label, the gap before and after (m; inf: the model diverged), its fitted
+    parameters and the evidence in words."""
 
     effect: str
-    parameters: dict[str, float | str]
     gap_before_m: float
     gap_after_m: float
+    parameters: dict[str, float | str]
     evidence: str
-    bic_change: float
-    heldout_ratio: float
+    p_value: float
     located_after: Localisation
     predicted_after: dict[str, np.ndarray] = field(repr=False)
 
     def to_json(self) -> dict[str, object]:
-        return {
-            "effect": self.effect,
-            "gap_before_m": _finite_or_none(self.gap_before_m),
-            "gap_after_m": _finite_or_none(self.gap_after_m),
-            "parameters": self.parameters,
-            "evidence": self.evidence,
-        }
+        return _json(self, ("gap_before_m", "gap_after_m"), 6)
 
 
 @dataclass
 class DiagnosisResult:
-    """The whole diagnosis.
-
-    starting_effects / final_effects: the model's effects beyond the vehicle file's constants before and
-    after (the tyre option counts: maxwell = tyre_viscoelastic); expected_gap_m: the gap a model without
-    missing effects reaches on this sweep and noise (the final model re-identified on its own simulated
-    response with the measured noise added); unexplained: a clear disagreement remains that no candidate
-    explains (see estimator.doctor.diagnose: residual_ratio or gap_after_m / expected_gap_m too large, or
-    a diverging model)."""
+    """The whole diagnosis: expected_gap_m, the mean gap of the final structure re-identified on its bootstrap
+    draws, p_value the goodness-of-fit test's (criteria.GoodnessOfFit); where: what is left, in words."""
 
     starting_effects: list[str]
     final_effects: list[str]
     gap_before_m: float
     gap_after_m: float
     steps: list[DiagnosisStep]
-    rounds: list[list[CandidateScore]]
-    """Per round of candidates (one per step, plus the last round that named nothing)."""
+    rounds: list[list[CandidateScore]]  # one per step, and the last round, which named nothing
     unexplained: bool
     conclusion: str
     expected_gap_m: float
-    residual_ratio: float
-    """The paper's objective of the final model over that of the same structure re-identified on its own
-    simulated response with the measured noise: about 1 when the equations hold as well as they can."""
+    residual_ratio: float  # the final model's objective over the bootstrap draws' mean
+    p_value: float
+    alpha: float
+    where: str | None
     noise_floor_m: float
     located_before: Localisation
     measured: dict[str, np.ndarray] = field(repr=False)
@@ -116,7 +117,6 @@ class DiagnosisResult:
     time_s: np.ndarray = field(repr=False)
     sweep_frequency_Hz: np.ndarray = field(repr=False)
     final_model: FittedModel | None = field(default=None, repr=False)
-    """The model after the effects named (None when the diagnosis did not keep it)."""
 
     @property
     def effects_named(self) -> list[str]:
@@ -131,10 +131,8 @@ class DiagnosisResult:
         return self.steps[-1].predicted_after if self.steps else self.predicted_before
 
     def to_json(self) -> dict[str, object]:
-        """The stable JSON shape: gap_before_m, steps [{effect, gap_before_m, gap_after_m, parameters,
-        evidence}], gap_after_m, unexplained; plus the starting and final effects, the expected gap, the
-        conclusion in words, every candidate's score per round and `model`: the final model in the form of
-        identify --json's (model_json), which `shockbench validate --model` takes."""
+        """The stable JSON shape; `model` is the final model as identify --json has it (model_json), which
+        `shockbench validate --model` takes."""
         return {
             "gap_before_m": _finite_or_none(self.gap_before_m),
             "steps": [s.to_json() for s in self.steps],
@@ -144,77 +142,70 @@ class DiagnosisResult:
             "starting_effects": self.starting_effects,
             "final_effects": self.final_effects,
             "expected_gap_m": _finite_or_none(self.expected_gap_m),
-            "residual_ratio": self.residual_ratio,
+            "residual_ratio": _finite_or_none(self.residual_ratio),
+            "p_value": self.p_value,
+            "alpha": self.alpha,
+            "where": self.where,
+            "located": localisation_json(self.located_after) if self.unexplained else None,
             "noise_floor_m": self.noise_floor_m,
             "candidates": [[c.to_json() for c in round_] for round_ in self.rounds],
             "model": model_json(self.final_model) if self.final_model is not None else None,
         }
 
 
-def _rate_N_per_m(model: FittedModel, name: str) -> float:
-    """A rate as the model has it: the stated one plus the correction a stiffness effect fitted (the
-    FittedModel property of that name where it has one), else the vehicle's."""
-    value = getattr(model, name, None)
-    return float(value if value is not None else getattr(model.vehicle, name))
-
-
 def model_json(model: FittedModel) -> dict[str, object]:
-    """A fitted model of the doctor in the form of identify --json's result (curves, masses_kg,
-    stiffness_N_per_m, tyre_model, tyre damping, ϑ and τ, roll inertia and track for an axle) plus `effects`:
-    what that form has no key for (estimator.model_io's docstring), so that estimator.model_io rebuilds it
-    whole. The tyre: Maxwell when the model has tyre_viscoelastic (a dashpot beside it is an effect),
-    Kelvin-Voigt when it has only the dashpot, a spring otherwise."""
-    vehicle = model.vehicle
-    axle = vehicle.is_axle
-    corners = ["left", "right"] if axle else ["single"]
-    maxwell = model.structure.has(EffectName.TYRE_VISCOELASTIC)
+    """A fitted model as identify --json has it plus `effects` (what that form has no key for), which
+    estimator.model_io rebuilds whole. The tyre: Maxwell with tyre_viscoelastic (a dashpot beside it is an
+    effect), Kelvin-Voigt with only the dashpot, a spring otherwise."""
+    vehicle, structure, corrections = model.vehicle, model.structure, model.corrections
+    maxwell, sprung = structure.has(EffectName.TYRE_VISCOELASTIC), model.sprung_mass_kg
     dashpot = model.value("tyre_dashpot_Ns_per_m")
     if maxwell:
-        tyre, damping = TyreModel.MAXWELL, model.maxwell_damping_Ns_per_m
+        tyre, damping = TyreModel.MAXWELL, model.value("maxwell_damping_Ns_per_m")
     elif dashpot:
         tyre, damping, dashpot = TyreModel.KELVIN_VOIGT, dashpot, 0.0
     else:
         tyre, damping = TyreModel.SPRING, 0.0
-    effects: dict[str, object] = {}
-    for key, value in (
-        ("coulomb_friction_N", model.value("coulomb_friction_N")),
-        ("cubic_spring_N_per_m3", model.value("cubic_spring_N_per_m3")),
-        ("tyre_dashpot_Ns_per_m", dashpot),
-    ):
-        if value:
-            effects[key] = value
-    if model.structure.has(EffectName.TYRE_LIFTOFF):
-        effects["tyre_liftoff"] = True
-    corrections = model.corrections
-    if corrections.delay_s:
-        effects["channel_delay_s"] = dict(corrections.delay_s)
-    if corrections.offset_m:
-        effects["sensor_offset_m"] = dict(corrections.offset_m)
+    friction, peak = (model.value(n) for n in FRICTION_UNKNOWNS)
+    hinges = zip(model.knots_m, model.hinge_rates_N_per_m, strict=True)
+    effects: dict[str, object] = {
+        "coulomb_friction_N": friction,
+        "tyre_dashpot_Ns_per_m": dashpot,
+        "stribeck_peak_N": peak,
+        "stribeck_velocity_m_s": model.stribeck_velocity_m_s if peak else 0.0,
+        "spring_hinges": [{"knot_m": float(k), "rate_N_per_m": float(r)} for k, r in hinges if r],
+        "tyre_liftoff": structure.has(EffectName.TYRE_LIFTOFF),
+    }
+    tables = ("channel_delay_s", "sensor_offset_m", "sensor_lag_s", "sensor_average_s", "sensor_gain_error")
+    for key, table in zip(tables, fields(corrections), strict=True):
+        effects[key] = {channel: v for channel, v in getattr(corrections, table.name).items() if v}
     stiffness: dict[str, object] = {
-        "spring": _rate_N_per_m(model, "spring_stiffness_N_per_m"),
-        "tyre": _rate_N_per_m(model, "tyre_stiffness_N_per_m"),
-        # the rates the doctor found the stated ones contradict (effects spring_stiffness, tyre_stiffness)
-        "identified": [n for n in ("spring", "tyre") if f"{n}_stiffness" in model.structure.labels],
+        "spring": model.spring_stiffness_N_per_m,
+        "tyre": model.tyre_stiffness_N_per_m,
+        # the rates the doctor found the stated ones contradict
+        "identified": [
+            n for n, f in (("spring", "spring_curve"), ("tyre", "tyre_stiffness")) if f in structure.labels
+        ],
     }
     out: dict[str, object] = {
         "curves": [
             {"corner": corner, "velocity_m_s": curve.velocity_m_s.tolist(), "force_N": curve.force_N.tolist()}
-            for corner, curve in zip(corners, model.curves, strict=True)
+            for corner, curve in zip(
+                ["left", "right"] if vehicle.is_axle else ["single"], model.curves, strict=True
+            )
         ],
-        "masses_kg": {
-            "sprung": model.sprung_mass_kg,
-            "unsprung": vehicle.unsprung_mass_kg(model.sprung_mass_kg),
-        },
+        "masses_kg": {"sprung": sprung, "unsprung": vehicle.unsprung_mass_kg(sprung)},
         "stiffness_N_per_m": stiffness,
         "tyre_model": tyre.value,
         "tyre_damping_Ns_per_m": float(damping),
         "tyre_viscoelastic_coefficient": vehicle.tyre_viscoelastic_coefficient if maxwell else None,
         "tyre_relaxation_time_s": vehicle.tyre_relaxation_time_s if maxwell else None,
-        "effects": effects,
+        "effects": {key: value for key, value in effects.items() if value},
     }
-    if axle:
-        bar = vehicle.anti_roll_bar_stiffness_N_per_m + model.value("anti_roll_bar_N_per_m")
-        stiffness["anti_roll_bar"] = bar
+    if vehicle.is_axle:
+        stiffness["anti_roll_bar"] = vehicle.anti_roll_bar_stiffness_N_per_m + model.value(
+            "anti_roll_bar_N_per_m"
+        )
         out["roll_inertia_kg_m2"] = model.roll_inertia_kg_m2
         out["track_m"] = vehicle.track_m
     return out

@@ -1,13 +1,6 @@
-"""Output error of many fitted models at once: each model is driven by the measured plate motion (as its
-channel effects correct it) and its predicted sensor readings are compared with the measured ones.
-
-The models become the columns of one population (estimator.dynamics takes arrays of parameters), so one
-Runge-Kutta run at the sample time (estimator.simulation_kernel, compiled) simulates them all, as
-estimator.output_error does for one model. Every model is written with the general tyre (a Maxwell element
-and a parallel dashpot, either of which may be zero), so that models of different structure share one set
-of equations.
-
-The gap (m) is the RMS over every measured body and wheel channel of predicted minus measured reading.
+"""Output error of many fitted models driven by the measured plate, as the columns of one population in one
+Runge-Kutta run (each with the general tyre: a Maxwell element beside a dashpot). The gap (m) is the RMS
+over the body and wheel channels of predicted minus measured reading.
 """
 
 from __future__ import annotations
@@ -17,44 +10,25 @@ from dataclasses import dataclass
 import numpy as np
 
 from estimator.damper import CurveBatch
-from estimator.doctor.catalog import EffectName
+from estimator.doctor.catalog import FRICTION_UNKNOWNS, EffectName
 from estimator.doctor.model import FittedModel
-from estimator.dynamics import (
-    AxlePhysics,
-    CornerPhysics,
-    QuarterCarPhysics,
-    model_substeps,
-    sample_substeps,
-)
+from estimator.dynamics import AxlePhysics, CornerPhysics, QuarterCarPhysics, model_substeps, sample_substeps
 from estimator.output_error import DIVERGED_GAP_M, measured_drive
 from estimator.recording import Recording
 from estimator.simulation_kernel import integrate_compiled
 from estimator.vehicle import TyreModel
 
 MAX_SUBSTEPS = 256
-"""Runge-Kutta steps per sample beyond which a model is reported as diverged instead of simulated (substeps):
-|λ|·dt above 500, a damper segment steeper than about 10⁶ N·s/m on a motorcycle's wheel at 1 ms, where real
-dampers stay below 10⁵. Found on a fresh independent draw (friction 84, a van at 2 ms): the complete model
-re-identified with twice the points for the expected gap had knots of 10⁷-10⁸ N at velocities the sweep
-hardly reaches, its smooth curve a 2·10¹¹ N·s/m segment, and 4·10⁶ steps per sample asked for 339 GiB. Of
-530 cached independent recordings, 5 had a model beyond 256 (377-2470 steps, 10⁶-10⁷ N·s/m; simulated at that
-cost before), and one verdict moved: friction 35, where one of the two expected-gap draws now counts as
-diverged."""
-
-
+"""Runge-Kutta steps per sample beyond which a model counts as diverged, unsimulated: |λ|·dt above 500, a
+damper segment of 10⁶ N·s/m on a motorcycle's wheel at 1 ms (real dampers stay below 10⁵)."""
 RUNAWAY_GAP_RATIO = 3.0
-"""A model whose gap is at least this many times the RMS of the measured motion it predicts (body and wheel
-channels about their means, validate's response_rms_m) has run away, and counts as diverged: predicting no
-motion at all would be a third as far off. With the curves extended dissipatively
-(estimator.damper.dissipative_table) a model that once grew without bound swings instead, bounded but metres
-or tens of millimetres off (the complete models re-identified for the expected gap of three recordings with
-a top mount outside the catalog: 44, 274 and 689 mm against motions of a few millimetres)."""
+"""A model whose gap is at least this many times the RMS of the measured motion it predicts (about its
+mean) has run away, and counts as diverged: predicting no motion at all would be a third as far off."""
 
 
 def diverged(residual_m: np.ndarray, measured_m: np.ndarray | None = None) -> bool:
     """A channel's output error (m) from a simulation that diverged: its RMS infinite or at least
-    DIVERGED_GAP_M (the bench moves millimetres), or, given the channel's measured readings, at least
-    RUNAWAY_GAP_RATIO times their RMS about their mean, as BatchOutputError.gap_m counts a model."""
+    DIVERGED_GAP_M, or RUNAWAY_GAP_RATIO times the RMS of `measured_m` (given), as BatchOutputError.gap_m."""
     limit = DIVERGED_GAP_M
     if measured_m is not None:
         limit = min(limit, RUNAWAY_GAP_RATIO * float(np.std(measured_m)))
@@ -65,17 +39,16 @@ def diverged(residual_m: np.ndarray, measured_m: np.ndarray | None = None) -> bo
 
 @dataclass
 class BatchOutputError:
-    """Per model (column): predicted readings and their residuals, channel -> (samples, models), m; and the
-    RMS of the measured motion each is compared with (response_m, per model)."""
+    """Predicted readings and residuals, channel -> (samples, models), m; response_m: per model, the RMS of
+    the measured motion it is compared with."""
 
     predicted: dict[str, np.ndarray]
     residual: dict[str, np.ndarray]
     response_m: np.ndarray
 
-    def gap_m(self, samples: np.ndarray | None = None) -> np.ndarray:
-        """RMS over all channels of the residual, per model, on the samples where `samples` is True (all
-        when None); infinite where a model diverged or ran away (RUNAWAY_GAP_RATIO)."""
-        stacked = np.stack([r if samples is None else r[samples] for r in self.residual.values()])
+    def gap_m(self) -> np.ndarray:
+        """RMS over all channels of the residual, per model; infinite where a model diverged or ran away."""
+        stacked = np.stack(list(self.residual.values()))
         with np.errstate(over="ignore", invalid="ignore"):
             gap = np.sqrt(np.mean(stacked**2, axis=(0, 1)))
         limit = np.minimum(DIVERGED_GAP_M, RUNAWAY_GAP_RATIO * self.response_m)
@@ -100,86 +73,77 @@ def _corner(models: list[FittedModel], side: int, sample_time_s: float) -> Corne
 
     return CornerPhysics(
         damper=CurveBatch(grid, forces),
-        # per model: the stated rates plus the corrections spring_stiffness and tyre_stiffness fitted
         spring_stiffness_N_per_m=np.array([m.spring_stiffness_N_per_m for m in models]),
         tyre_stiffness_N_per_m=np.array([m.tyre_stiffness_N_per_m for m in models]),
         tyre_model=TyreModel.MAXWELL,
-        tyre_damping_Ns_per_m=np.array([m.maxwell_damping_Ns_per_m for m in models]),
+        tyre_damping_Ns_per_m=np.array([m.value("maxwell_damping_Ns_per_m") for m in models]),
         maxwell_time_constant_s=vehicle.maxwell_time_constant_s(sample_time_s),
-        coulomb_friction_N=each("coulomb_friction_N"),
-        cubic_spring_N_per_m3=each("cubic_spring_N_per_m3"),
+        coulomb_friction_N=each(FRICTION_UNKNOWNS[0]),
+        stribeck_peak_N=each(FRICTION_UNKNOWNS[1]),
+        stribeck_velocity_m_s=np.array([m.stribeck_velocity_m_s for m in models]),
+        spring_hinge_knots_m=np.stack([np.asarray(m.knots_m) for m in models], axis=1),
+        spring_hinge_rates_N_per_m=np.stack([m.hinge_rates_N_per_m for m in models], axis=1),
         tyre_liftoff=np.array([m.structure.has(EffectName.TYRE_LIFTOFF) for m in models]),
         static_wheel_load_N=vehicle.static_wheel_load_N,
         tyre_dashpot_Ns_per_m=each("tyre_dashpot_Ns_per_m"),
     )
 
 
-def _drive(model: FittedModel) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Plate position and rate (the model's corrected plate channel(s), low-passed) and the initial state,
-    as validate and identify's output error take them (estimator.output_error.measured_drive)."""
-    return measured_drive(
-        model.system.kinematics,
-        model.signals.recording.channels,
-        model.signals.sample_time_s,
-        model.system.filters.noise_floor_m,
-        model.vehicle,
-    )
-
-
 def substeps(model: FittedModel, sample_time_s: float) -> int:
-    """Runge-Kutta steps per sample for the model's fastest decay (estimator.dynamics.decay_rate_per_s):
-    its steepest damper segment, its friction and tyre dashpot. The smoothed friction step acts on the wheel
-    like a dashpot of F / COULOMB_SMOOTHING_M_S near zero velocity: 207 N on a motorcycle's wheel at 2 ms is
-    |λ|·dt of about 5, beyond RK4's stability, and the simulated wheel chattered at every velocity zero (on
-    an independent recording with 207 N of friction the friction model's gap was 2.2x the model's without
-    it although its equations fitted 12% better)."""
+    """Runge-Kutta steps per sample for the model's fastest decay: its steepest damper segment, its friction
+    (near zero velocity a steep dashpot on the wheel) and its tyre dashpot."""
     return model_substeps(
         model.curves,
         model.sprung_mass_kg,
         float(model.vehicle.unsprung_mass_kg(model.sprung_mass_kg)),
         2 if model.vehicle.is_axle else 1,
         sample_time_s,
-        coulomb_friction_N=model.value("coulomb_friction_N"),
+        coulomb_friction_N=model.value(FRICTION_UNKNOWNS[0]),
         wheel_dashpot_Ns_per_m=model.value("tyre_dashpot_Ns_per_m"),
+        stribeck_peak_N=model.value(FRICTION_UNKNOWNS[1]),
+        stribeck_velocity_m_s=model.stribeck_velocity_m_s,
     )
 
 
 def simulate_models(
     models: list[FittedModel], recording: Recording, references: list[Recording | None] | None = None
 ) -> BatchOutputError:
-    """Simulate every model from the measured plate; compare with `recording` (or, per model, with its own
-    reference recording where one is given). Models that need more Runge-Kutta steps per sample (substeps)
-    are run in their own population, so that every model is simulated the same whatever it is batched with."""
-    dt = recording.sample_time_s
-    counts = [substeps(m, dt) for m in models]
-    if len(set(counts)) == 1:
-        return _simulate(models, recording, references, counts[0])
+    """Every model driven by the measured plate, compared with `recording` (or its own reference, if given),
+    in populations of one number of steps per sample (each is simulated the same whatever its batch)."""
+    counts = [substeps(m, recording.sample_time_s) for m in models]
     refs = references or [None] * len(models)
-    parts = {}
-    for count in sorted(set(counts)):
-        chosen = [k for k, c in enumerate(counts) if c == count]
-        batch = _simulate([models[k] for k in chosen], recording, [refs[k] for k in chosen], count)
-        parts[count] = (chosen, batch)
-    order = np.argsort(np.concatenate([parts[c][0] for c in sorted(parts)]), kind="stable")
+    if len(set(counts)) == 1:  # (joined below, the arrays' layout and so the sums' rounding would differ)
+        return _simulate(models, recording, refs, counts[0])
+    groups = [[k for k, c in enumerate(counts) if c == count] for count in sorted(set(counts))]
+    batches = [
+        _simulate([models[k] for k in g], recording, [refs[k] for k in g], counts[g[0]]) for g in groups
+    ]
+    order = np.argsort(np.concatenate(groups), kind="stable")
 
-    def joined(field: str) -> dict[str, np.ndarray]:
-        names = getattr(parts[counts[0]][1], field)
-        return {
-            name: np.concatenate([getattr(parts[c][1], field)[name] for c in sorted(parts)], axis=1)[:, order]
-            for name in names
-        }
+    def joined(parts: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
+        return {name: np.concatenate([p[name] for p in parts], axis=1)[:, order] for name in parts[0]}
 
-    response = np.concatenate([parts[c][1].response_m for c in sorted(parts)])[order]
-    return BatchOutputError(joined("predicted"), joined("residual"), response)
+    response = np.concatenate([b.response_m for b in batches])[order]
+    return BatchOutputError(
+        joined([b.predicted for b in batches]), joined([b.residual for b in batches]), response
+    )
 
 
 def _simulate(
-    models: list[FittedModel], recording: Recording, references: list[Recording | None] | None, steps: int
+    models: list[FittedModel], recording: Recording, references: list[Recording | None], steps: int
 ) -> BatchOutputError:
     """simulate_models for models that share the number of Runge-Kutta steps per sample."""
-    vehicle = models[0].vehicle
-    dt = recording.sample_time_s
-    drives = [_drive(m) for m in models]
+    vehicle, dt = models[0].vehicle, recording.sample_time_s
+    drives = [
+        measured_drive(
+            m.system.kinematics,
+            m.signals.recording.channels,
+            m.signals.sample_time_s,
+            m.system.filters.noise_floor_m,
+            m.vehicle,
+        )
+        for m in models
+    ]
     axis = 1 if vehicle.is_axle else 0
     plate = np.stack([d[0] for d in drives], axis=axis)
     rate = np.stack([d[1] for d in drives], axis=axis)
@@ -206,28 +170,21 @@ def _simulate(
         else:
             states = integrate_compiled(
                 physics, state0, dt / steps, sample_substeps(plate, steps), sample_substeps(rate, steps)
-            )
-            states = states[::steps]
+            )[::steps]
         outputs = physics.outputs(np.moveaxis(states, 0, 1))
+    sources = [ref if ref is not None else recording for ref in references]
     predicted: dict[str, np.ndarray] = {}
     residual: dict[str, np.ndarray] = {}
     motion: list[np.ndarray] = []
     for name, simulated in outputs.items():
-        columns = []
-        for index, model in enumerate(models):
-            column = simulated[:, index]
-            if not np.all(np.isfinite(column)):
-                columns.append(np.full_like(column, np.inf))
-                continue
-            columns.append(model.corrections.distort(name, column, dt))
+        columns = [
+            m.corrections.distort(name, column, dt)
+            if np.all(np.isfinite(column))
+            else np.full_like(column, np.inf)
+            for m, column in zip(models, simulated.T, strict=True)
+        ]
         predicted[name] = np.stack(columns, axis=1)
-        measured = np.stack(
-            [
-                (ref if ref is not None else recording).channels[name]
-                for ref in (references or [None] * len(models))
-            ],
-            axis=1,
-        )
+        measured = np.stack([source.channels[name] for source in sources], axis=1)
         with np.errstate(over="ignore", invalid="ignore"):
             residual[name] = predicted[name] - measured
         motion.append(measured - np.mean(measured, axis=0))

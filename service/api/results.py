@@ -186,26 +186,38 @@ ParameterValue = float | str
 class DiagnosisStepOut(ResultPart):
     """One effect the doctor added to the model."""
 
-    effect: str = Field(description="stable name of the effect, e.g. sensor_offset")
+    effect: str = Field(description="stable name of the effect, e.g. sensor_offset(x_r)")
     gap_before_m: MaybeNumber = Field(description="output-error gap before adding it (m)")
     gap_after_m: MaybeNumber = Field(description="output-error gap after adding it (m); null: diverged")
-    parameters: dict[str, ParameterValue] = Field(description="the effect's fitted parameters")
+    parameters: dict[str, ParameterValue] = Field(
+        description="the effect's fitted shape (estimator.doctor.parameters.report): e.g. the spring "
+        "curve's rate at static load and extra rates beyond its knots, the friction's sliding and static "
+        "levels, a sensor's filter and constants, a gain error"
+    )
     evidence: str = Field(description="why, in words")
+    p_value: MaybeNumber = Field(None, description="its p-value in the round that named it")
 
 
 class CandidateOut(ResultPart):
-    """How one candidate effect fared in one round."""
+    """How one candidate effect fared in one round (estimator.doctor.criteria)."""
 
     effect: str
     objective_ratio: MaybeNumber = Field(description="objective with the candidate / without")
-    heldout_ratio: MaybeNumber = Field(description="the same on held-out blocks")
-    gap_m: MaybeNumber = Field(description="output-error gap with it (m); null: screened out or diverged")
-    gap_ratio: MaybeNumber
-    bic_change: MaybeNumber = Field(description="change of the information criterion (negative favours it)")
-    correlation: MaybeNumber = Field(description="of the residual with what the candidate explains")
-    parameter_spread: MaybeNumber = Field(
-        description="relative spread of its parameter, first vs second half"
+    gap_m: MaybeNumber = Field(
+        description="output-error gap with it (m); null: diverged, or not simulated (its Wald test's p is "
+        "above α already: both tests must reject)"
     )
+    gap_ratio: MaybeNumber = Field(
+        description="gap with it / without; null: diverged without it, or not simulated"
+    )
+    equation_statistic: MaybeNumber = Field(None, description="Wald statistic of its unknowns")
+    simulation_statistic: MaybeNumber = Field(
+        None, description="likelihood ratio of the free simulation; null: not simulated"
+    )
+    unknowns: int | None = Field(None, description="how many unknowns it adds (degrees of freedom)")
+    equation_p: MaybeNumber = Field(None, description="p-value of the equations' Wald test")
+    simulation_p: MaybeNumber = Field(None, description="p-value of the simulation's likelihood ratio")
+    p_value: MaybeNumber = Field(None, description="the larger of the two: both tests must reject")
     parameters: dict[str, ParameterValue]
     verdict: str = Field(description="named, or why not")
 
@@ -216,15 +228,44 @@ class ModelCurveOut(ResultPart):
     force_N: list[float] = Field(description="damper force at each point (N)")
 
 
-class ModelEffectsOut(ResultPart):
-    """The final model's effects that identify's form has no key for (absent: not in the model)."""
+class SpringHingeOut(ResultPart):
+    knot_m: float = Field(description="suspension deflection where the extra rate starts (m, extension > 0)")
+    rate_N_per_m: float = Field(description="extra rate beyond the knot (N/m)")
 
-    coulomb_friction_N: float | None = Field(None, description="strut friction at every corner (N)")
+
+class ModelEffectsOut(ResultPart):
+    """The final model's effects that identify's form has no key for (absent: not in the model;
+    estimator.model_io's docstring)."""
+
+    coulomb_friction_N: float | None = Field(None, description="sliding friction at every corner (N)")
+    stribeck_peak_N: float | None = Field(None, description="static peak above the sliding level (N)")
+    stribeck_velocity_m_s: float | None = Field(None, description="over which the peak decays (m/s)")
     cubic_spring_N_per_m3: float | None = Field(None, description="progressive spring k3 (N/m³)")
+    spring_hinges: list[SpringHingeOut] | None = Field(None, description="the spring curve's extra rates")
     tyre_dashpot_Ns_per_m: float | None = Field(None, description="tyre dashpot beside the Maxwell element")
     tyre_liftoff: bool | None = Field(None, description="the tyre can leave the plate")
     channel_delay_s: dict[str, float] | None = Field(None, description="channel -> how much it lags (s)")
     sensor_offset_m: dict[str, float] | None = Field(None, description="channel -> its zero error (m)")
+    sensor_lag_s: dict[str, float] | None = Field(None, description="channel -> first-order lag τ (s)")
+    sensor_average_s: dict[str, float] | None = Field(None, description="channel -> averaging window (s)")
+    sensor_gain_error: dict[str, float] | None = Field(
+        None, description="channel -> scale error ε: it reads (1 + ε)·x"
+    )
+
+
+class LocalisationOut(ResultPart):
+    """Where the final model's disagreement is largest (estimator.doctor.result.localisation_json)."""
+
+    channel: str = Field(description="the channel whose output error is largest")
+    channel_rms_m: MaybeNumber = Field(description="its output-error RMS (m)")
+    band_Hz: list[MaybeNumber] | None = Field(description="the band of the sweep where it is largest (Hz)")
+    time_s: list[MaybeNumber] = Field(description="the time window where the output error is largest (s)")
+    equation: str = Field(description="the equation whose residual is largest")
+    equation_rms_N: MaybeNumber = Field(description="its residual RMS (N)")
+    equation_band_Hz: list[MaybeNumber] = Field(description="the band where that residual is largest (Hz)")
+    velocity_m_s: list[MaybeNumber] | None = Field(description="suspension velocities where it is largest")
+    deflection_m: list[MaybeNumber] | None = Field(description="suspension deflections where it is largest")
+    white: list[str] = Field(description="channels whose output error is white")
 
 
 class DiagnosisModelOut(ResultPart):
@@ -248,11 +289,22 @@ class DiagnoseResult(ResultPart):
     gap_before_m: MaybeNumber = Field(description="output-error gap of the starting model (m)")
     steps: list[DiagnosisStepOut] = Field(description="the effects added, in order")
     gap_after_m: MaybeNumber = Field(description="output-error gap of the final model (m)")
-    unexplained: bool = Field(description="a clear disagreement remains that no candidate explains")
+    unexplained: bool = Field(
+        description="the goodness-of-fit test rejects the final model: p_value < alpha (a false alarm in a "
+        "fraction alpha of recordings that hide nothing)"
+    )
     conclusion: str = Field(description="the diagnosis in words")
+    p_value: MaybeNumber = Field(
+        None, description="goodness of fit: chance of a gap this large if the final model were the truth"
+    )
+    alpha: MaybeNumber = Field(None, description="the test's false-alarm rate (and each round's)")
+    where: str | None = Field(None, description="when unexplained: where, in words")
+    located: LocalisationOut | None = Field(None, description="when unexplained: where, as numbers")
     starting_effects: list[str]
     final_effects: list[str]
-    expected_gap_m: MaybeNumber = Field(description="the gap a model without missing effects reaches here")
+    expected_gap_m: MaybeNumber = Field(
+        description="the mean gap of the final model re-identified on bootstrap draws of itself (m)"
+    )
     residual_ratio: MaybeNumber
     noise_floor_m: MaybeNumber
     candidates: list[list[CandidateOut]] = Field(description="every candidate's score, per round")

@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING
 from estimator.vehicle import TyreModel
 from service.cli.errors import CliError
 from service.cli.recording_input import RECORDING_HELP, VEHICLE_HELP, read_recording_and_vehicle
+from service.doctor_words import fit_verdict, shape
 
 if TYPE_CHECKING:
     from estimator.doctor.diagnose import DiagnoseProgress
@@ -36,17 +37,15 @@ def summary(result: DiagnosisResult) -> str:
         f"where: {result.located_before.describe()}",
     ]
     for number, step in enumerate(result.steps, start=1):
-        parameters = ", ".join(
-            f"{k} = {v:.4g}" if isinstance(v, float) else f"{k} = {v}" for k, v in step.parameters.items()
-        )
         lines += [
-            f"\nstep {number}: {step.effect} ({parameters})",
+            f"\nstep {number}: {step.effect} (p = {step.p_value:.2g}): {shape(step.effect, step.parameters)}",
             f"  gap {_micro(step.gap_before_m)} -> {_micro(step.gap_after_m)}",
             f"  evidence: {step.evidence}",
         ]
     lines += [
-        f"\ngap after: {_micro(result.gap_after_m)}; a model without missing effects reaches "
-        f"{_micro(result.expected_gap_m)} on this sweep",
+        f"\ngap after: {_micro(result.gap_after_m)}; the final model re-identified on synthetic recordings "
+        f"of itself with this recording's noise reaches {_micro(result.expected_gap_m)}",
+        f"goodness of fit: {fit_verdict(result.p_value, result.alpha, result.unexplained, result.where)}",
         f"conclusion: {result.conclusion}",
     ]
     return "\n".join(lines)
@@ -88,9 +87,10 @@ def register(sub: argparse._SubParsersAction) -> None:
         "diagnose",
         help="find what the identified model lacks, name it, add it and show the gap shrink",
         description="The model doctor: simulate the identified model from the measured plate, locate where "
-        "it disagrees with the measured x_s and x_t, fit every effect of the catalog, name the one that "
-        "explains the disagreement (information criterion, held-out data, signature), add it and repeat; "
-        "say 'unexplained' when a clear disagreement remains that no candidate explains.",
+        "it disagrees with the measured x_s and x_t, test every effect family of the catalog (a Wald test "
+        "of its unknowns and a likelihood ratio of the gap), name the most significant one when it passes "
+        "a family-wise error rate of 5%, add it and repeat; then test the final model against bootstrap "
+        "draws of itself with the recording's own noise and say 'unexplained', and where, when p < 5%.",
     )
     p.add_argument("recording", help=RECORDING_HELP)
     p.add_argument("--vehicle", default=None, help=VEHICLE_HELP)

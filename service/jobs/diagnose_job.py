@@ -31,7 +31,9 @@ class DiagnoseJobOptions(BaseModel):
         description="damper curve points (default 30; axle 15 per side; at least "
         f"{IdentifyOptions.MIN_POINTS})",
     )
-    max_steps: int = Field(4, ge=1, le=8, description="at most this many effects are added")
+    max_steps: int = Field(
+        6, ge=1, le=8, description="at most this many effects are added (default as `shockbench diagnose`'s)"
+    )
 
 
 def check_diagnose_inputs(options: BaseModel, recording: Recording, vehicle: VehicleParameters) -> None:

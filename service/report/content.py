@@ -24,6 +24,7 @@ from estimator.verdict import (
     relative_difference_percent,
 )
 from service.api.results import AxleInspectionOut, CurveOut, DiagnoseResult, IdentifyResult, InspectionOut
+from service.doctor_words import fit_verdict, shape
 
 if TYPE_CHECKING:
     from estimator.recording import Recording
@@ -358,21 +359,24 @@ def doctor_section(source: ReportInput) -> Section:
         return "diverged" if value is None else number(value * 1e6, "µm")
 
     job = f" (job {source.diagnosis_job_id})" if source.diagnosis_job_id is not None else ""
+    verdict = fit_verdict(diagnosis.p_value, diagnosis.alpha, diagnosis.unexplained, diagnosis.where)
     blocks: list[Block] = [
         Paragraph(f"Conclusion{job}: {diagnosis.conclusion}"),
         Paragraph(
-            f"Gap before {micro(diagnosis.gap_before_m)}, after {micro(diagnosis.gap_after_m)}; a model "
-            f"without missing effects reaches {micro(diagnosis.expected_gap_m)}. Final model: "
+            f"Gap before {micro(diagnosis.gap_before_m)}, after {micro(diagnosis.gap_after_m)}; the final "
+            f"model on synthetic recordings of itself reaches {micro(diagnosis.expected_gap_m)}. Goodness "
+            f"of fit: {verdict}. Final model: "
             f"{', '.join(diagnosis.final_effects) or 'the vehicle file with a spring tyre'}.",
             "note",
         ),
     ]
     if diagnosis.steps:
         rows = tuple(
-            (str(n), step.effect, micro(step.gap_after_m), step.evidence)
+            (str(n), step.effect, micro(step.gap_after_m), step.evidence, shape(step.effect, step.parameters))
             for n, step in enumerate(diagnosis.steps, start=1)
         )
-        blocks.append(Table(rows, ("step", "effect added", "gap after", "evidence"), (0.4, 1.2, 0.9, 3.5)))
+        header = ("step", "effect added", "gap after", "evidence", "fitted shape")
+        blocks.append(Table(rows, header, (0.4, 1.2, 0.9, 2.2, 2.2)))
     return Section("Model doctor", tuple(blocks))
 
 

@@ -3,9 +3,11 @@ motorcycle corner, van corner or car axle, parameters drawn over plausible range
 real tables and the valve model), a random test (1 or 2 ms sampling, white or AR(1) noise of 2-10 µm), and
 the hidden effect(s) of the class at a random plausible size.
 
-Classes: "clean"; one catalog effect (the model doctor's names: coulomb_friction, progressive_spring,
-tyre_liftoff, channel_delay, sensor_offset, anti_roll_bar) or a wrong stiffness in the vehicle file
-(spring_stiffness, tyre_stiffness); "pair" (two of PAIRABLE at once); "outside" (a compliant damper top
+Classes: "clean"; one effect in the forms of the doctor's first catalogue (coulomb_friction,
+progressive_spring, tyre_liftoff, channel_delay, sensor_offset, anti_roll_bar; today's doctor names them
+low_speed_friction, spring_curve, tyre_liftoff, sensor_dynamics, sensor_offset, anti_roll_bar:
+benchmarks/bench_doctor_independent.py) or a wrong stiffness in the vehicle file (spring_stiffness,
+tyre_stiffness); "pair" (two of PAIRABLE at once); "outside" (a compliant damper top
 mount, which no catalog entry describes).
 """
 

@@ -19,7 +19,8 @@ from independent_recordings import recorded
 from estimator.damper import PiecewiseLinearCurve
 from estimator.doctor import DiagnoseOptions, diagnose
 from estimator.doctor.catalog import EffectInstance, EffectName
-from estimator.doctor.model import FitSettings, Reference, fit, starting_structure
+from estimator.doctor.fitting import fit
+from estimator.doctor.model import FitSettings, Reference, starting_structure
 from estimator.dynamics import CornerPhysics
 from estimator.recording import Recording
 from estimator.vehicle import TyreModel, VehicleParameters

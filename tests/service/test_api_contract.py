@@ -274,12 +274,24 @@ def test_diagnose_results_read_into_the_typed_model_unchanged() -> None:
         gap_before_m=2e-4,
         gap_after_m=float("inf"),  # a model that diverged: stored as null
         evidence="the plate reads high",
-        bic_change=-120.0,
-        heldout_ratio=0.4,
+        p_value=1e-9,
         located_after=None,  # type: ignore[arg-type]  # not part of the JSON
         predicted_after={},
     )
-    score = CandidateScore("sensor_offset", 0.3, 0.4, 1e-4, 0.5, -120.0, 0.9, {"offset_m": 0.0005}, "named")
+    score = CandidateScore(
+        effect="sensor_offset(x_r)",
+        objective_ratio=0.3,
+        gap_m=1e-4,
+        gap_ratio=0.5,
+        equation_statistic=120.0,
+        simulation_statistic=float("inf"),  # stored as null
+        unknowns=1,
+        equation_p=1e-9,
+        simulation_p=0.0,
+        p_value=1e-9,
+        parameters={"channel": "x_r", "offset_m": 0.0005},
+        verdict="named",
+    )
     result = DiagnosisResult(
         starting_effects=["tyre_viscoelastic"],
         final_effects=["tyre_viscoelastic", "sensor_offset"],
@@ -291,6 +303,9 @@ def test_diagnose_results_read_into_the_typed_model_unchanged() -> None:
         conclusion="the model diverged",
         expected_gap_m=3e-5,
         residual_ratio=1.1,
+        p_value=0.001,
+        alpha=0.05,
+        where="the model diverges when driven by the measured plate",
         noise_floor_m=5e-6,
         located_before=None,  # type: ignore[arg-type]  # not part of the JSON
         measured={},
@@ -302,6 +317,7 @@ def test_diagnose_results_read_into_the_typed_model_unchanged() -> None:
     typed = DiagnoseResult.model_validate(raw)
     assert same_json(raw, typed) == []
     assert typed.gap_after_m is None and typed.steps[0].gap_after_m is None
+    assert typed.candidates[0][0].simulation_statistic is None and typed.p_value == 0.001
     # the final model (estimator.doctor.result.model_json's form), effects included
     raw["model"] = {
         "curves": [{"corner": "single", "velocity_m_s": [-1.0, 1.0], "force_N": [-900.0, 1500.0]}],
@@ -311,7 +327,15 @@ def test_diagnose_results_read_into_the_typed_model_unchanged() -> None:
         "tyre_damping_Ns_per_m": 1100.0,
         "tyre_viscoelastic_coefficient": 0.97,
         "tyre_relaxation_time_s": 0.0323,
-        "effects": {"coulomb_friction_N": 95.0, "sensor_offset_m": {"x_r": 0.0005}},
+        "effects": {
+            "coulomb_friction_N": 95.0,
+            "stribeck_peak_N": 40.0,
+            "stribeck_velocity_m_s": 0.005,
+            "spring_hinges": [{"knot_m": -0.03, "rate_N_per_m": 9000.0}],
+            "sensor_offset_m": {"x_r": 0.0005},
+            "sensor_lag_s": {"x_s": 0.004},
+            "sensor_gain_error": {"x_t": 0.03},
+        },
     }
     assert same_json(raw, DiagnoseResult.model_validate(raw)) == []
 

@@ -7,6 +7,7 @@ import json
 from pathlib import Path
 
 import pytest
+from doctor_steps import tyre_deflection_zero_error_m
 
 from service.cli import main as main_module
 
@@ -43,15 +44,17 @@ def test_json_names_the_plate_offset_and_the_report_has_plots_and_tables(
     assert code == 0, captured.err
     out = json.loads(captured.out)
     assert {"gap_before_m", "steps", "gap_after_m", "unexplained"} <= set(out)
-    assert [s["effect"] for s in out["steps"]] == ["sensor_offset"]
+    assert len(out["steps"]) == 1
     step = out["steps"][0]
-    assert set(step) == {"effect", "gap_before_m", "gap_after_m", "parameters", "evidence"}
-    assert step["parameters"]["channel"] == "x_r"
-    assert step["parameters"]["offset_m"] == pytest.approx(plate_offset_m, rel=0.05)
+    assert set(step) == {"effect", "gap_before_m", "gap_after_m", "parameters", "evidence", "p_value"}
+    assert tyre_deflection_zero_error_m(step) == pytest.approx(-plate_offset_m, rel=0.05)
+    assert step["p_value"] < out["alpha"]
     assert out["gap_after_m"] <= 0.5 * out["gap_before_m"] and out["unexplained"] is False
+    assert out["alpha"] == 0.05 and out["p_value"] >= out["alpha"] and out["located"] is None
     text = (report / "report.md").read_text()
-    assert "| step | effect | fitted parameters | gap before | gap after | evidence |" in text
-    assert "sensor_offset" in text and "offset_m" in text
+    assert "| step | effect | fitted shape | gap before | gap after | p | evidence |" in text
+    assert "sensor_offset" in text and "zero off by" in text
+    assert f"p = {out['p_value']:.2g}: nothing left that the noise does not explain" in text
     for image in ("gap_per_step.png", "measured_vs_simulated.png", "residual_spectra.png"):
         assert f"]({image})" in text
         assert (report / image).read_bytes()[:8] == PNG
@@ -64,8 +67,10 @@ def test_readable_summary_and_progress(files: Path, cli, capsys: pytest.CaptureF
     )
     captured = capsys.readouterr()
     assert code == 0, captured.err
-    assert "step 1: sensor_offset" in captured.out and "conclusion: named sensor_offset" in captured.out
+    assert "step 1: sensor_offset(x_" in captured.out and "conclusion: named sensor_offset(x_" in captured.out
     assert "evidence:" in captured.out and "diagnose: step 0" in captured.err
+    assert "goodness of fit: p = " in captured.out
+    assert "nothing left that the noise does not explain" in captured.out
 
 
 @pytest.mark.parametrize(

@@ -138,7 +138,7 @@ def test_identify_with_stated_theta_imports_no_scipy_optimize_nor_linalg(tmp_pat
 def test_diagnose_imports_no_scipy(tmp_path) -> None:
     """A 12 s `shockbench diagnose` spent about a fifth of its run importing scipy (issue 15, item 2): the
     doctor's noise fit, its delayed channel's spline shift and its whiteness tail run in numpy instead
-    (estimator.doctor.noise, .spline_shift, .residuals)."""
+    (estimator.doctor.expected, .spline_shift, .residuals)."""
     recording, vehicle = _simulated_sweep(tmp_path)
     modules = _modules_after(["diagnose", str(recording), "--vehicle", str(vehicle), "--json"])
     assert "estimator.doctor.diagnose" in modules  # it did diagnose

@@ -244,7 +244,7 @@ def test_every_complete_sweep_of_a_database_with_the_doctor(
     rows = read_summary(out)
     assert set(rows) == {"sweep-1", "sweep-2"}  # the aborted sweep is left out
     assert rows["sweep-1"]["status"] == "ok", rows["sweep-1"]
-    assert "nothing missing" in rows["sweep-1"]["diagnosis"]
+    assert rows["sweep-1"]["diagnosis"].startswith("nothing named"), rows["sweep-1"]
     assert (out / "sweep-1.identify.json").is_file() and (out / "sweep-1.diagnose.json").is_file()
     assert rows["sweep-2"]["status"] == "failed" and "2.h5" in rows["sweep-2"]["reason"]
     assert rows["sweep-2"]["reason"].startswith("identify, diagnose: ")  # one reason, said once

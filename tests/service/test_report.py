@@ -43,20 +43,25 @@ DIAGNOSIS = {
     "gap_before_m": 2.1e-4,
     "steps": [
         {
-            "effect": "sensor_offset",
+            "effect": "sensor_offset(x_r)",
             "gap_before_m": 2.1e-4,
             "gap_after_m": 3.2e-5,
             "parameters": {"channel": "x_r", "offset_m": 0.0005},
             "evidence": "the plate laser reads high",
+            "p_value": 1e-12,
         }
     ],
     "gap_after_m": 3.2e-5,
     "unexplained": False,
     "conclusion": "The plate laser reads 0.5 mm high; with it the model explains the sweep.",
     "starting_effects": ["tyre_viscoelastic"],
-    "final_effects": ["tyre_viscoelastic", "sensor_offset"],
+    "final_effects": ["tyre_viscoelastic", "sensor_offset(x_r)"],
     "expected_gap_m": 3.0e-5,
     "residual_ratio": 1.05,
+    "p_value": 0.31,
+    "alpha": 0.05,
+    "where": None,
+    "located": None,
     "noise_floor_m": 5e-6,
     "candidates": [],
 }
@@ -154,7 +159,11 @@ def test_the_pdf_of_an_axle_names_every_field_with_its_stored_value(axle: tuple[
     assert "The sweep over time: plate, wheel and body displacement" in text
     assert "Transmissibility: wheel and body over plate amplitude, by frequency" in text
     assert f"Conclusion (job 58): {DIAGNOSIS['conclusion']}" in text
-    assert "1 sensor_offset 32 µm the plate laser reads high" in text
+    assert (
+        "1 sensor_offset(x_r) 32 µm the plate laser reads high" in text
+        and "x_r zero off by +500.0 µm" in text
+    )
+    assert "p = 0.31: nothing left that the noise does not explain" in re.sub(r"\s+", " ", text)
     assert f"lane lane-7 sequence 12 job 57 result hash {HASH}" in text
     assert "shockbench verify --lane lane-7" in text
 

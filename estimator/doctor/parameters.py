@@ -1,0 +1,127 @@
+"""A fitted family as the user reads it (report: SI units in the names) and whether its fitted values are
+physically possible (implausible: signs and limits of physics, not thresholds)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from estimator.doctor.catalog import (
+    FRICTION_UNKNOWNS,
+    SPRING_RATE_UNKNOWN,
+    TYRE_RATE_UNKNOWN,
+    EffectInstance,
+    EffectName,
+    hinge,
+)
+from estimator.doctor.criteria import ALPHA, EquationTest
+from estimator.doctor.model import FittedModel
+
+
+def spring_curve_points(model: FittedModel) -> tuple[np.ndarray, np.ndarray]:
+    """The model's suspension spring force (N) at its hinge knots and beyond (m of deflection): the stated
+    rate, its change and the hinges (what the report plots)."""
+    knots = np.array(model.knots_m)
+    span = 1.5 * float(np.max(np.abs(knots))) / 0.7 if knots.size else 0.01
+    deflection = np.unique(np.concatenate([[-span, 0.0, span], knots]))
+    force = model.spring_stiffness_N_per_m * deflection
+    for knot, rate in zip(knots, model.hinge_rates_N_per_m, strict=True):
+        force = force + rate * hinge(deflection, knot)
+    return deflection, force
+
+
+def report(effect: EffectInstance, model: FittedModel) -> dict[str, float | str]:
+    """The fitted parameters of one family as shown to the user."""
+    name = effect.name
+    if name is EffectName.SPRING_CURVE:
+        stated = float(model.vehicle.spring_stiffness_N_per_m or 0.0)
+        out: dict[str, float | str] = {
+            "rate_at_static_load_N_per_m": model.spring_stiffness_N_per_m,
+            "stated_rate_N_per_m": stated,
+            "rate_change_percent": 100.0 * model.value(SPRING_RATE_UNKNOWN) / stated if stated else 0.0,
+        }
+        for knot, rate in zip(model.knots_m, model.hinge_rates_N_per_m, strict=True):
+            side = "extension" if knot > 0 else "compression"
+            out[f"extra_rate_beyond_{abs(knot) * 1e3:.1f}_mm_{side}_N_per_m"] = float(rate)
+        return out
+    if name is EffectName.LOW_SPEED_FRICTION:
+        sliding, excess = (model.value(n) for n in FRICTION_UNKNOWNS)
+        return {
+            "sliding_friction_N": sliding,
+            "static_friction_N": sliding + excess,
+            "stribeck_velocity_m_s": model.stribeck_velocity_m_s,
+        }
+    if name is EffectName.TYRE_STIFFNESS:
+        stated = float(model.vehicle.tyre_stiffness_N_per_m or 0.0)
+        change = model.value(TYRE_RATE_UNKNOWN)
+        return {
+            "tyre_stiffness_N_per_m": stated + change,
+            "stated_tyre_stiffness_N_per_m": stated,
+            "change_percent": 100.0 * change / stated if stated else 0.0,
+        }
+    if name is EffectName.TYRE_DAMPING:
+        return {"tyre_dashpot_Ns_per_m": model.value("tyre_dashpot_Ns_per_m")}
+    if name is EffectName.TYRE_VISCOELASTIC:
+        return {
+            "tyre_damping_Ns_per_m": model.value("maxwell_damping_Ns_per_m"),
+            "relaxation_time_s": model.vehicle.maxwell_time_constant_s(model.signals.sample_time_s),
+        }
+    if name is EffectName.TYRE_LIFTOFF:
+        return {
+            "static_wheel_load_N": model.vehicle.static_wheel_load_N,
+            "airborne_fraction": model.airborne_fraction,
+        }
+    if name is EffectName.ANTI_ROLL_BAR:
+        return {"anti_roll_bar_stiffness_N_per_m": model.value("anti_roll_bar_N_per_m")}
+    channel = str(effect.channel)
+    if name is EffectName.SENSOR_DYNAMICS:
+        kind = str(effect.variant)
+        delay, filter_s = model.channel_value(effect, "delay"), model.channel_value(effect, kind)
+        equivalent = delay + (filter_s if kind == "lag" else 0.5 * filter_s)
+        return {
+            "channel": channel,
+            "filter": "first-order lag" if kind == "lag" else "moving average",
+            "delay_s": delay,
+            ("lag_time_constant_s" if kind == "lag" else "averaging_window_s"): filter_s,
+            "equivalent_delay_s": equivalent,
+        }
+    if name is EffectName.SENSOR_GAIN:
+        return {"channel": channel, "gain_error_percent": 100.0 * model.channel_value(effect, "gain")}
+    return {"channel": channel, "offset_m": model.channel_value(effect, "offset")}
+
+
+def _below_zero(model: FittedModel, name: str) -> bool:
+    """Is the unknown `name` of θ below zero beyond chance: a one-sided Wald test at level ALPHA (the
+    equations' sandwich covariance). An estimate at a bound (a Coulomb friction's Stribeck excess, 0) falls
+    below it half the time; only one that falls significantly contradicts the family's law."""
+    index = model.system.parameter_names.index(name)
+    tested = EquationTest().test(model.system, model.theta, [index], model.signals.sample_time_s)
+    return tested.p_value < 2.0 * ALPHA  # the two-sided p of |z|, halved for one side
+
+
+def implausible(effect: EffectInstance, model: FittedModel) -> str | None:
+    """Why the fitted family cannot be what it says (None if it can)."""
+    name = effect.name
+    if name is EffectName.LOW_SPEED_FRICTION:
+        sliding, excess = (model.value(n) for n in FRICTION_UNKNOWNS)
+        if sliding < 0.0 or sliding + excess < 0.0:
+            static = sliding + excess
+            return f"the friction would feed energy in (sliding {sliding:.0f} N, static {static:.0f} N)"
+        if excess < 0.0 and _below_zero(model, FRICTION_UNKNOWNS[1]):
+            # Stribeck's law falls from the breakaway level to the sliding one; a law that rises is viscous
+            return (
+                f"the force would rise with velocity (static {sliding + excess:.0f} N below sliding "
+                f"{sliding:.0f} N): a damper's, not friction"
+            )
+    elif name is EffectName.TYRE_DAMPING and model.value("tyre_dashpot_Ns_per_m") < 0.0:
+        return "the tyre dashpot would feed energy in"
+    elif name is EffectName.ANTI_ROLL_BAR and model.value("anti_roll_bar_N_per_m") < 0.0:
+        return "the bar's stiffness is negative"
+    elif name is EffectName.TYRE_STIFFNESS and model.tyre_stiffness_N_per_m <= 0.0:
+        return "the tyre rate is not positive"
+    elif name is EffectName.SPRING_CURVE:
+        _, force = spring_curve_points(model)
+        if np.any(np.diff(force) <= 0.0):
+            return "the spring curve is not monotone: the spring would push the wrong way somewhere"
+    elif name is EffectName.TYRE_LIFTOFF and model.airborne_fraction <= 0.0:
+        return "the tyre never leaves the plate in the fitted model"
+    return None

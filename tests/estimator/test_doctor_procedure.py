@@ -1,0 +1,147 @@
+"""The doctor's procedure as a caller sees it (estimator.doctor.diagnose): the catalogue's stable names, a
+round's candidates and their verdicts, the JSON shape of `shockbench diagnose --json`, progress and
+cancellation, bad input; and the tools it is built from (the damper curve's low-speed knots, a step's share
+of a sample interval, the residual tools of the localisation).
+
+One recording: the default quarter car (estimator's own simulator, 8 s sweep) with a stated spring rate
+25% soft, which the doctor names.
+"""
+
+from __future__ import annotations
+
+import threading
+from dataclasses import replace
+from functools import cache
+
+import numpy as np
+import pytest
+from cases import random_axle
+
+from estimator.doctor import DiagnoseOptions, DiagnosisResult, diagnose
+from estimator.doctor.catalog import CATALOG, EffectName, interval_mean
+from estimator.doctor.model import LOW_SPEED_KNOTS_M_S, low_speed_grids
+from estimator.doctor.residuals import WHITENESS_LEVEL, effective_samples, ljung_box, sweep_frequency_Hz
+from estimator.recording import Recording
+from estimator.sweep import SweepSettings
+from estimator.vehicle import VehicleParameters
+from simulators.vehicle_sim import SimulationSettings, default_quarter_car, simulate
+
+OPTIONS = DiagnoseOptions(workers=1)
+
+
+@cache
+def soft_spring() -> tuple[Recording, VehicleParameters]:
+    car = default_quarter_car()
+    recording = simulate(car, SimulationSettings(sweep=SweepSettings(duration_s=8.0), seed=2)).recording
+    return recording, replace(car.known, spring_stiffness_N_per_m=0.75 * car.known.spring_stiffness_N_per_m)
+
+
+@cache
+def diagnosed() -> DiagnosisResult:
+    return diagnose(*soft_spring(), OPTIONS)
+
+
+def test_the_catalog_has_stable_names() -> None:
+    assert {name.value for name in EffectName} == {
+        "spring_curve",
+        "low_speed_friction",
+        "tyre_stiffness",
+        "tyre_damping",
+        "tyre_viscoelastic",
+        "tyre_liftoff",
+        "anti_roll_bar",
+        "sensor_dynamics",
+        "sensor_gain",
+        "sensor_offset",
+    }
+    assert all(CATALOG[name].summary and CATALOG[name].signature for name in EffectName)
+
+
+def test_a_round_judges_every_candidate_and_names_one() -> None:
+    result = diagnosed()
+    assert result.effects_named == ["spring_curve"]
+    first, last = result.rounds[0], result.rounds[-1]
+    assert len(result.rounds) == len(result.steps) + 1
+    assert [c.effect for c in first if c.verdict == "named"] == ["spring_curve"]
+    tested = [
+        c for c in first if c.verdict == "named" or c.verdict.startswith(("not significant", "significant"))
+    ]
+    bound = result.alpha / len(tested)
+    named = next(c for c in first if c.verdict == "named")
+    assert named.p_value == max(named.equation_p, named.simulation_p) <= bound
+    assert named.p_value == min(c.p_value for c in tested)
+    assert all(c.p_value > bound for c in last if c.verdict.startswith("not significant"))
+    assert not any(c.verdict == "named" for c in last)
+    assert "spring_curve" not in {c.effect for c in last}  # a family the model has is no candidate
+
+
+def test_the_json_shape() -> None:
+    result = diagnosed()
+    out = result.to_json()
+    assert {"gap_before_m", "steps", "gap_after_m", "unexplained", "p_value", "alpha", "where"} <= set(out)
+    assert isinstance(out["unexplained"], bool) and isinstance(out["gap_before_m"], float)
+    for step in out["steps"]:  # type: ignore[union-attr]
+        assert set(step) == {"effect", "gap_before_m", "gap_after_m", "parameters", "evidence", "p_value"}
+        assert step["gap_after_m"] < step["gap_before_m"] and "equations: W = " in step["evidence"]
+    assert out["steps"][-1]["gap_after_m"] == out["gap_after_m"]  # type: ignore[index]
+    candidates = out["candidates"]
+    assert len(candidates) == len(out["steps"]) + 1  # type: ignore[arg-type]
+    assert all(c["verdict"] and 0.0 <= c["p_value"] <= 1.0 for r in candidates for c in r)  # type: ignore[union-attr]
+    assert out["model"]["stiffness_N_per_m"]["identified"] == ["spring"]  # type: ignore[index]
+
+
+def test_progress_is_reported_and_a_diagnosis_can_be_cancelled() -> None:
+    stages: list[str] = []
+    cancel = threading.Event()
+
+    def progress(p) -> None:
+        stages.append(p.stage)
+        if len(stages) == 2:
+            cancel.set()
+
+    with pytest.raises(InterruptedError):
+        diagnose(*soft_spring(), OPTIONS, progress=progress, cancel=cancel)
+    assert stages[0] == "identifying the starting model" and len(stages) == 2
+
+
+def test_a_vehicle_file_of_the_wrong_kind_is_an_error() -> None:
+    with pytest.raises(ValueError, match="axle"):
+        diagnose(soft_spring()[0], random_axle(1).known)
+
+
+def test_low_speed_knots_join_the_uniform_ones() -> None:
+    """model.low_speed_grids: knots at 0 and ± LOW_SPEED_KNOTS_M_S; a uniform knot too close to one gives
+    way; the ends stay; an axle's two grids keep one size."""
+    quarter = np.linspace(-0.3, 0.5, 30)
+    (grid,) = low_speed_grids([quarter])
+    low = {round(s * v, 9) for v in LOW_SPEED_KNOTS_M_S for s in (-1.0, 1.0)}
+    assert low <= {round(float(v), 9) for v in grid}
+    assert grid[0] == quarter[0] and grid[-1] == quarter[-1] and np.all(np.diff(grid) > 0)
+    axle = low_speed_grids([np.linspace(-0.3, 0.5, 15), np.linspace(-0.0012, 0.6, 15)])
+    assert axle[0].size == axle[1].size
+    assert all(np.all(np.diff(g) > 0) for g in axle)
+
+
+def test_a_step_counts_by_its_share_of_each_sample_interval() -> None:
+    """catalog.interval_mean: velocity -3, -1, 3, 5 (per sample) crosses zero a quarter sample after the
+    second sample, so over that sample's interval a sign is -1 for three quarters and +1 for one: -0.5,
+    where the sample instant says -1. For a function linear in the series the mean is the value."""
+    velocity = np.array([-3.0, -1.0, 3.0, 5.0])
+    assert np.allclose(interval_mean(np.sign, velocity), [-1.0, -0.5, 1.0, 1.0])
+    ramp = np.linspace(-2.0, 2.0, 9)
+    assert np.allclose(interval_mean(lambda v: 3.0 * v + 1.0, ramp)[1:-1], 3.0 * ramp[1:-1] + 1.0)
+
+
+def test_locate_tools_whiteness_effective_samples_and_sweep_frequency() -> None:
+    rng = np.random.default_rng(0)
+    noise = rng.normal(size=20_000)
+    t = np.arange(20_000) * 0.001
+    assert ljung_box(noise, 0.001, 50.0) > WHITENESS_LEVEL
+    assert ljung_box(np.sin(2 * np.pi * 3.0 * t) + 0.1 * noise, 0.001, 50.0) <= WHITENESS_LEVEL
+    assert 0.8 * noise.size < effective_samples(noise) < 1.2 * noise.size
+    smooth = np.convolve(noise, np.ones(50) / 50, mode="same")
+    assert effective_samples(smooth) < 0.1 * noise.size
+    chirp = 0.004 * np.sin(2 * np.pi * (0.5 * t**2))  # 0 -> 20 Hz in 20 s
+    found = sweep_frequency_Hz(chirp, 0.001)
+    inside = (t > 2.0) & (t < 18.0)
+    assert np.max(np.abs(found[inside] - t[inside])) < 0.5
