@@ -112,15 +112,37 @@ def payload_of(item: Item) -> Payload:
 
 
 _FOLDER: list[Path] = []
+SCRATCH_PREFIX = "shockbench-reanalyse-"
 
 
 def _scratch() -> Path:
-    """This process's folder for the recordings it reads (removed when the process ends normally)."""
+    """This process's folder for the recordings it reads, named by its process id: removed when the process
+    ends normally, and on POSIX by the next worker to start when it was killed (remove_orphaned_scratch)."""
     if not _FOLDER:
-        folder = Path(tempfile.mkdtemp(prefix="shockbench-reanalyse-"))
+        if os.name == "posix":  # (Windows's os.kill(pid, 0) would send the process Ctrl+C)
+            remove_orphaned_scratch(Path(tempfile.gettempdir()))
+        folder = Path(tempfile.mkdtemp(prefix=f"{SCRATCH_PREFIX}{os.getpid()}-"))
         atexit.register(shutil.rmtree, folder, True)
         _FOLDER.append(folder)
     return _FOLDER[0]
+
+
+def remove_orphaned_scratch(root: Path) -> list[Path]:
+    """Remove the scratch folders under `root` whose process no longer runs (a worker killed before its
+    atexit); a folder of a running process, or of another user's, is kept. Returns those removed."""
+    removed = []
+    for folder in root.glob(f"{SCRATCH_PREFIX}*-*"):
+        pid = folder.name[len(SCRATCH_PREFIX) :].split("-", 1)[0]
+        if not pid.isdigit() or not folder.is_dir():
+            continue
+        try:
+            os.kill(int(pid), 0)
+        except ProcessLookupError:
+            shutil.rmtree(folder, ignore_errors=True)
+            removed.append(folder)
+        except PermissionError:
+            continue  # another user's process runs under that id
+    return removed
 
 
 def analyse(task: Task, path: Path, payload: Payload) -> dict[str, Any]:
