@@ -250,3 +250,23 @@ def identify(
         warnings,
         intervals,
     )
+
+
+def identify_unstated(
+    recording: Recording,
+    vehicle: VehicleParameters,
+    also_free: frozenset[VehicleConstant],
+    points: int | None = None,
+) -> VehicleParameters:
+    """The vehicle with the constants its file does not state identified from the recording, those of
+    `also_free` it states identified beside them and then put back as stated. The model doctor starts so:
+    an identified ϑ must not absorb a wrong stated rate that it will test (a Maxwell element relaxing more
+    slowly than the sweep's periods acts as a spring). Where the recording does not determine `also_free`
+    (one comes out not positive), they are held as stated throughout."""
+    options = IdentifyOptions(points=points, output_error=False, intervals=False)
+    try:
+        found = identify(recording, vehicle, replace(options, free=also_free)).model.vehicle
+    except InvalidValueError:
+        return identify(recording, vehicle, options).model.vehicle
+    stated = {STIFFNESS_NAMES[c]: getattr(vehicle, STIFFNESS_NAMES[c]) for c in also_free - vehicle.unknown}
+    return replace(found, **stated)

@@ -4,7 +4,7 @@ leaves more than its own noise would.
 
 1. *Start* from what `identify` fits (the paper's model with the `--tyre` option's tyre), its damper curve
    resolved near zero velocity (estimator.doctor.model). Constants the vehicle file does not state are
-   identified first and then held like stated ones.
+   identified first (with the stated rates free meanwhile) and then held like stated ones.
 2. *A round*: every family of the catalogue the model lacks (estimator.doctor.catalog) is added in turn and
    its unknowns moved by one linearised step from the current model (fitting.one_step: the paper's
    objective, exact solver; channel parameters by a Gauss-Newton step), side by side in forked processes.
@@ -49,10 +49,11 @@ from estimator.doctor.residuals import effective_samples, locate, log_chi_square
 from estimator.doctor.result import CandidateScore, DiagnosisResult, DiagnosisStep
 from estimator.doctor.simulation import simulate_models
 from estimator.forked_map import forked_map
-from estimator.identify import IdentifyOptions, identify
+from estimator.identify import identify_unstated
 from estimator.recording import Recording
-from estimator.vehicle import TyreModel, VehicleParameters
+from estimator.vehicle import TyreModel, VehicleConstant, VehicleParameters
 
+TESTED_RATES = frozenset({VehicleConstant.SPRING, VehicleConstant.TYRE})  # by spring_curve, tyre_stiffness
 DEFAULT_POINTS = {"quarter-car": 30, "axle": 15}
 """Damper curve points per side before the low-speed knots: 1.5 times identify's default, so that the curve's
 own approximation of a smooth damper is not taken for an effect."""
@@ -416,8 +417,7 @@ def diagnose(
     if identified:
         if progress is not None:
             progress(DiagnoseProgress(0, "identifying the constants the vehicle file does not state"))
-        found = identify(recording, vehicle, IdentifyOptions(points=options.points, output_error=False))
-        vehicle = found.model.vehicle
+        vehicle = identify_unstated(recording, vehicle, TESTED_RATES, options.points)
     points = options.points or DEFAULT_POINTS[vehicle.model.value]
     reference = Reference.of(recording, vehicle, FitSettings(points, options.nsample), identified)
     return _Doctor(reference, options, progress, cancel).diagnose()

@@ -8,6 +8,9 @@ resolution, 8 s sweeps), each class drawn at random with fixed seeds, hit rates 
 - a lagging laser (a first-order lag of 2-5 ms on the body or the wheel channel, the foreign world's
   sensor filter, simulators.foreign.sensors, not the doctor's own): sensor_dynamics named on that channel,
   reading about τ late, the gap shrinking;
+- a wrong stated tyre rate (40-70% low) in a file that does not state ϑ: tyre_stiffness named, its rate
+  the true one (a Maxwell element identified with the stated rate held relaxed so slowly that it stood in
+  for the missing stiffness, and hid it);
 - an engine on its mounts (outside the catalogue): "unexplained", with where.
 """
 
@@ -69,6 +72,11 @@ def drawn(kind: str, seed: int) -> Drawn:
         factor = rng.uniform(0.7, 0.8) if rng.random() < 0.5 else rng.uniform(1.2, 1.3)
         known = replace(car.known, spring_stiffness_N_per_m=factor * car.known.spring_stiffness_N_per_m)
         return Drawn(recorded(car, seed), known, car, f"spring stated ×{factor:.2f}")
+    if kind == "tyre":
+        factor = rng.uniform(0.3, 0.6)
+        stated = factor * car.known.tyre_stiffness_N_per_m
+        known = replace(car.known, tyre_stiffness_N_per_m=stated, tyre_viscoelastic_coefficient=None)
+        return Drawn(recorded(car, seed), known, car, f"tyre stated ×{factor:.2f}, ϑ not stated")
     if kind == "lag":
         lag = (str(rng.choice(["x_s", "x_t"])), float(rng.uniform(0.002, 0.005)))
         return Drawn(
@@ -126,6 +134,19 @@ def test_a_wrong_stated_spring_rate_is_named_and_corrected(seed: int, hit_rate) 
     model = result.to_json()["model"]
     assert model["stiffness_N_per_m"]["identified"] == ["spring"]  # type: ignore[index]
     assert model["stiffness_N_per_m"]["spring"] == pytest.approx(rate)  # type: ignore[index]
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+def test_a_tyre_rate_stated_low_is_named_when_the_file_leaves_theta_to_identify(seed: int, hit_rate) -> None:
+    result, case = diagnosed("tyre", seed), drawn("tyre", seed)
+    named = [s for s in result.steps if s.effect == "tyre_stiffness"]
+    rate = float(named[0].parameters["tyre_stiffness_N_per_m"]) if named else float("nan")
+    true_rate = case.car.known.tyre_stiffness_N_per_m
+    hit = families(result) == ["tyre_stiffness"] and not result.unexplained
+    hit_rate("doctor v2, tyre rate stated low, ϑ identified: tyre_stiffness named", line("tyre", seed), hit)
+    assert hit, line("tyre", seed)
+    assert rate == pytest.approx(true_rate, rel=0.02)
+    assert named[0].parameters["stated_tyre_stiffness_N_per_m"] == case.known.tyre_stiffness_N_per_m
 
 
 @pytest.mark.parametrize("seed", SEEDS)

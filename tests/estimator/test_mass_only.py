@@ -11,6 +11,7 @@ one tyre stiffness from the mass alone."""
 
 from __future__ import annotations
 
+import importlib
 from dataclasses import replace
 
 import numpy as np
@@ -23,7 +24,8 @@ from cases import (
 )
 
 from estimator.equations import build
-from estimator.identify import STARTING_RELAXATION_TIME_S, IdentifyOptions, identify
+from estimator.errors import InvalidValueError
+from estimator.identify import STARTING_RELAXATION_TIME_S, IdentifyOptions, identify, identify_unstated
 from estimator.relaxation import fit_relaxation_time
 from estimator.solvers.exact import solve_exact
 from estimator.vehicle import (
@@ -151,6 +153,34 @@ def test_free_identifies_stated_values_and_without_it_they_are_used() -> None:
     assert freed.to_json()["tyre_viscoelastic_identified"] is True
     with pytest.raises(ValueError, match="axle only"):
         identify(recording, wrong, replace(OPTIONS, free=frozenset({VehicleConstant.BAR})))
+
+
+def test_identify_unstated_finds_theta_with_the_rates_free_and_keeps_the_stated_rates(monkeypatch) -> None:
+    """identify_unstated (the model doctor's start): ϑ from a fit with the stated rates free, so that a tyre
+    rate stated 40% low does not pull it to a Maxwell element that relaxes slowly enough to act as the
+    missing spring (identify with the rate held does); the stated rates kept. Where the free fit cannot
+    determine the rates, ϑ comes from the fit with them held."""
+    case = wide_quarter_car_case(DRAWS[2])
+    truth, recording = case.vehicle.known, case.result.recording
+    wrong = replace(
+        truth, tyre_stiffness_N_per_m=0.6 * truth.tyre_stiffness_N_per_m, tyre_viscoelastic_coefficient=None
+    )
+    rates = frozenset({VehicleConstant.SPRING, VehicleConstant.TYRE})
+    started = identify_unstated(recording, wrong, rates)
+    freed = identify(recording, wrong, replace(OPTIONS, free=rates, intervals=False)).model.vehicle
+    held = identify(recording, wrong, replace(OPTIONS, intervals=False)).model.vehicle
+    assert started == replace(wrong, tyre_viscoelastic_coefficient=freed.tyre_viscoelastic_coefficient)
+    true_tau, tau = truth.tyre_relaxation_time_s, started.tyre_relaxation_time_s
+    assert true_tau is not None and tau == pytest.approx(true_tau, rel=0.2)
+    assert held.tyre_relaxation_time_s > 3 * true_tau  # what the doctor started from before
+
+    def undetermined(recording, vehicle, options):  # type: ignore[no-untyped-def]
+        if options.free:
+            raise InvalidValueError("the identified tyre_stiffness_N_per_m is -1, not positive")
+        return identify(recording, vehicle, options)
+
+    monkeypatch.setattr(importlib.import_module("estimator.identify"), "identify", undetermined)
+    assert identify_unstated(recording, wrong, rates) == held
 
 
 @pytest.mark.parametrize("tyre", [TyreModel.KELVIN_VOIGT, TyreModel.SPRING])
