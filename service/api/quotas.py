@@ -122,11 +122,14 @@ def install_quotas(app: FastAPI, settings: ServiceSettings) -> None:
 
 def retention_policy(settings: ServiceSettings) -> RetentionPolicy | None:
     """None when retention is off (`--retain-days 0`). On a database shared by lanes, only this lane's
-    (and pre-lane) jobs and sweeps: the others' files are on their own machines."""
+    (and pre-lane) jobs and sweeps: the others' files are on their own machines; and the recordings stored
+    in it stay (the fleet's archive). On the data directory's own database (or local store), their stored
+    copies go too."""
     if settings.retain_days is None:
         return None
     shared = settings.database_url is not None and not settings.local_store
-    return RetentionPolicy(settings.retain_days, lanes=(settings.lane, "") if shared else None)
+    lanes = (settings.lane, "") if shared else None
+    return RetentionPolicy(settings.retain_days, lanes=lanes, stored_copies=not shared)
 
 
 class RetentionTask:

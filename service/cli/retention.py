@@ -25,7 +25,9 @@ def run_retention_command(args: argparse.Namespace) -> int:
         raise CliError("--retain-days must be > 0")
     from service.store.retention import RetentionPolicy, run_retention
 
-    policy = RetentionPolicy(args.retain_days, lanes=(args.lane, "") if args.lane is not None else None)
+    lanes = (args.lane, "") if args.lane is not None else None
+    # the data directory's own database only: a database named by URL may be the fleet's archive
+    policy = RetentionPolicy(args.retain_days, lanes=lanes, stored_copies=args.database is None)
     database = open_database(args.database, args.data)
     try:
         removals = run_retention(database, Path(args.data), policy, dry_run=args.dry_run)
@@ -33,7 +35,7 @@ def run_retention_command(args: argparse.Namespace) -> int:
         database.dispose()
     verb = "would delete" if args.dry_run else "deleted"
     for removal in removals:
-        print(f"{verb} {removal.path} ({removal.size_bytes} bytes): {removal.reason}")
+        print(f"{verb} {removal.what} ({removal.size_bytes} bytes): {removal.reason}")
     total = sum(r.size_bytes for r in removals)
     print(f"{len(removals)} file(s), {total / 2**20:.1f} MiB {'to free' if args.dry_run else 'freed'}")
     return 0
@@ -44,8 +46,10 @@ def register(sub: argparse._SubParsersAction) -> None:
         "retention",
         help="delete old uploaded inputs, old sweep recordings and stale partial uploads",
         description="Delete the uploaded inputs of jobs that finished more than --retain-days ago, the "
-        "recordings of sweeps that ended before then (never one a queued or running job needs) and "
-        "partial uploads left by a crash; results stay in the database (`shockbench verify` still passes).",
+        "recordings of sweeps that ended before then (never one a queued or running job needs; without "
+        "--database, their copies stored in the data directory's database too, once they reached the "
+        "central database) and partial uploads left by a crash; results stay in the database (`shockbench "
+        "verify` still passes).",
     )
     add_database_arguments(p)
     p.add_argument(

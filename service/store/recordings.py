@@ -72,7 +72,12 @@ class StoredRecording:
     @property
     def file_name(self) -> str:
         """The name with its format's suffix: what `archive export` writes, what messages name."""
-        return self.name if self.name.lower().endswith(f".{self.format}") else f"{self.name}.{self.format}"
+        return file_name(self.name, self.format)
+
+
+def file_name(name: str, file_format: str) -> str:
+    """A stored recording's name with its format's suffix."""
+    return name if name.lower().endswith(f".{file_format}") else f"{name}.{file_format}"
 
 
 @dataclass(frozen=True)

@@ -14,25 +14,27 @@ from pathlib import Path
 
 import pytest
 from live_server import LiveServer
+from sqlalchemy import delete, select
 
 from service.access import KeyRing, Role
 from service.api import ServiceSettings, create_app
+from service.api.quotas import retention_policy
 from service.cli import retention as retention_cli
 from service.cli.main import main
 from service.store import retention
 from service.store.database import Database
 from service.store.jobs import JobFiles, JobStore
-from service.store.models import SweepStatus, utcnow
+from service.store.models import RecordingRow, SweepRow, SweepStatus, SyncOutboxRow, utcnow
 from service.store.retention import RetentionPolicy, run_retention
 from service.store.sweeps import SweepStore
 
 DAY_S = 24 * 3600.0
 
 
-def put(path: Path, size: int, age_s: float = 0.0) -> Path:
+def put(path: Path, size: int, age_s: float = 0.0, fill: bytes = b"x") -> Path:
     """A file of `size` bytes, last modified `age_s` ago."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_bytes(b"x" * size)
+    path.write_bytes(fill * size)
     if age_s:
         stamp = time.time() - age_s
         os.utime(path, (stamp, stamp))
@@ -41,11 +43,12 @@ def put(path: Path, size: int, age_s: float = 0.0) -> Path:
 
 class Bench:
     """A data directory with its SQLite database: an uploaded job that succeeded, a sweep that ended, a
-    sweep whose identification is still queued, and a crash's partial upload."""
+    sweep whose identification is still queued, and a crash's partial upload. local_store: the database is
+    a lane's local store (its finished sweeps wait in the outbox for the central database)."""
 
-    def __init__(self, data_dir: Path) -> None:
+    def __init__(self, data_dir: Path, local_store: bool = False, url: str | None = None) -> None:
         self.data_dir = data_dir
-        self.database = Database(f"sqlite:///{data_dir / 'shockbench.sqlite3'}")
+        self.database = Database(url or f"sqlite:///{data_dir / 'shockbench.sqlite3'}", outbox=local_store)
         self.database.upgrade_schema()
         jobs, sweeps = JobStore(self.database, lane="L"), SweepStore(self.database, lane="L")
 
@@ -59,20 +62,22 @@ class Bench:
             job.id, {"answer": 42}, {"plot.png": "plot.png"}, None
         )
 
-        def sweep() -> tuple[int, Path]:
+        def sweep(fill: bytes) -> tuple[int, Path]:
             record = sweeps.create(
                 "bench",
                 {"vehicle_id": "AB-1"},
                 lambda i: (
-                    put(data_dir / "sweeps" / f"{i}.h5", 5000),
+                    put(data_dir / "sweeps" / f"{i}.h5", 5000, fill=fill),
                     put(data_dir / "sweeps" / f"{i}.vehicle.toml", 50),
                 ),
             )
             assert sweeps.finish(record.id, SweepStatus.COMPLETE, complete=True, reason=None)
             return record.id, Path(str(record.recording_path))
 
-        self.old_sweep, self.recording = sweep()
-        needed_sweep, self.needed = sweep()
+        self.old_sweep, self.recording = sweep(b"x")
+        # an old sweep whose recording has the same bytes as the needed one's: stored once, so kept
+        self.twin_sweep, self.twin = sweep(b"y")
+        self.needed_sweep, self.needed = needed_sweep, _ = sweep(b"y")
         vehicle = data_dir / "sweeps" / f"{needed_sweep}.vehicle.toml"
         jobs.create(  # queued, not run: its recording must stay
             "identify",
@@ -92,10 +97,53 @@ def bench(tmp_path: Path) -> Iterator[Bench]:
     made.database.dispose()
 
 
+def stored_sweeps(database: Database) -> list[int]:
+    """The ids of the sweeps that stored the recordings the database holds (a recording is stored once per
+    content, by the first sweep that recorded it)."""
+    with database.sessions() as session:
+        query = select(SweepRow.id).join(RecordingRow, RecordingRow.sweep_uid == SweepRow.uid)
+        return sorted(session.scalars(query).all())
+
+
+def test_a_local_store_keeps_a_recordings_copy_until_it_reached_the_central_database(
+    tmp_path: Path, database_url: str
+) -> None:
+    """In a lane's local store the copy goes only once its sweep has been pushed (left the outbox); a
+    central database (stored_copies off) is the fleet's archive and keeps every copy. The service and the
+    command choose stored_copies for the data directory's own database only. On SQLite and PostgreSQL."""
+    bench = Bench(tmp_path / "data", local_store=True, url=database_url)
+    later = lambda: utcnow() + timedelta(days=91)  # noqa: E731
+    try:
+        for policy in (RetentionPolicy(90, stored_copies=True), RetentionPolicy(90, lanes=("L", ""))):
+            removed = run_retention(bench.database, bench.data_dir, policy, now=later)
+            assert not any(r.stored for r in removed)
+            assert stored_sweeps(bench.database) == [bench.old_sweep, bench.twin_sweep]
+        with bench.database.transaction() as session:  # the old sweep pushed, as CentralSync does
+            session.execute(
+                delete(SyncOutboxRow).where(
+                    SyncOutboxRow.kind == "sweep", SyncOutboxRow.row_id == bench.old_sweep
+                )
+            )
+        central = RetentionPolicy(90, lanes=("L", ""))
+        assert run_retention(bench.database, bench.data_dir, central, now=later) == []
+        own = RetentionPolicy(90, stored_copies=True)
+        (copy,) = run_retention(bench.database, bench.data_dir, own, now=later)
+        assert copy.stored and copy.path == Path(f"sweep-{bench.old_sweep}.h5")
+        assert stored_sweeps(bench.database) == [bench.twin_sweep]
+    finally:
+        bench.database.dispose()
+    own, local, shared = (
+        retention_policy(ServiceSettings(data_dir=tmp_path, keys=KeyRing({}), retain_days=90.0, **more))
+        for more in ({}, {"database_url": "sqlite://", "local_store": True}, {"database_url": "sqlite://"})
+    )
+    assert own and local and shared
+    assert own.stored_copies and local.stored_copies and not shared.stored_copies
+
+
 def test_retention_deletes_old_inputs_and_recordings_keeps_what_is_needed_and_logs_each(
     bench: Bench, caplog: pytest.LogCaptureFixture
 ) -> None:
-    policy = RetentionPolicy(retain_days=90)
+    policy = RetentionPolicy(retain_days=90, stored_copies=True)
     caplog.set_level(logging.INFO, logger="shockbench.retention")
 
     today = run_retention(bench.database, bench.data_dir, policy, now=utcnow)
@@ -106,10 +154,16 @@ def test_retention_deletes_old_inputs_and_recordings_keeps_what_is_needed_and_lo
     dry = run_retention(bench.database, bench.data_dir, policy, now=later, dry_run=True)
     assert all(path.is_file() for path in [*bench.upload, bench.recording])  # a dry run deletes nothing
     caplog.clear()
+    assert stored_sweeps(bench.database) == [bench.old_sweep, bench.twin_sweep]  # a dry run keeps them
     removed = run_retention(bench.database, bench.data_dir, policy, now=later)
     assert removed == dry
-    assert [r.path for r in removed] == [*bench.upload, bench.recording, bench.fresh]
-    assert [r.size_bytes for r in removed] == [3000, 200, 5000, 900]
+    *files, copy = removed
+    assert [r.path for r in files] == [*bench.upload, bench.recording, bench.twin, bench.fresh]
+    assert [r.size_bytes for r in files] == [3000, 200, 5000, 5000, 900]
+    # the database's copy of the old sweep's recording goes too; the one the needed sweep shares stays
+    assert copy.stored and copy.path == Path(f"sweep-{bench.old_sweep}.h5") and copy.size_bytes > 0
+    assert f"stored copy of the recording of sweep {bench.old_sweep}," in copy.reason
+    assert stored_sweeps(bench.database) == [bench.twin_sweep]
     assert not any(path.exists() for path in [*bench.upload, bench.recording, bench.fresh])
     assert bench.needed.is_file()  # its sweep's identification is still queued
     assert bench.plot.is_file() and bench.recording.with_suffix(".vehicle.toml").is_file()
@@ -117,7 +171,9 @@ def test_retention_deletes_old_inputs_and_recordings_keeps_what_is_needed_and_lo
     assert f"recording of sweep {bench.old_sweep}" in removed[2].reason
 
     lines = [r.getMessage() for r in caplog.records if r.getMessage().startswith("retention: deleted")]
-    assert len(lines) == 4
+    assert len(lines) == 6
+    assert f"retention: deleted the database's copy of sweep-{bench.old_sweep}.h5 (" in lines[0]
+    lines = lines[1:]
     assert lines[0] == f"retention: deleted {bench.upload[0]} (3000 bytes): {removed[0].reason}"
     assert lines[2].startswith(f"retention: deleted {bench.recording} (5000 bytes): recording of sweep")
     assert run_retention(bench.database, bench.data_dir, policy, now=later) == []  # nothing left to do
