@@ -12,7 +12,8 @@ What goes, each file logged with its size and why (one line per file):
 - with `stored_copies`, on a database of this data directory alone (a standalone lane's, or a lane's local
   store), the copy of such a sweep's recording stored in it (service.store.recordings), which would
   otherwise grow the data directory by every recording the lane makes; in a local store only once the
-  sweep has reached the central database (it is no longer in the outbox), which keeps its copy.
+  sweep has reached the central database (it is no longer in the outbox), which keeps its copy. (SQLite
+  reuses the pages freed for the next recordings: its file stops growing rather than shrinking.)
 
 What never goes: a file a queued or running job reads (its recording or vehicle file), the recording of a
 sweep that a queued or running job analyses or a waiting or running scheduled test waits on, anything of a
