@@ -33,6 +33,12 @@ BLAS_THREADS = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_TH
 """The environment of a worker process the local cluster starts: one BLAS thread from the first import."""
 
 
+DOCTOR_PROCESSES = 1
+"""The model doctor's processes in a task (DiagnoseOptions.workers; the diagnosis does not depend on it):
+the cluster already runs a worker per core, so a doctor forking two more would share the cores four ways,
+and forking a worker, which runs Dask's threads, would risk a child waiting on a lock one of them held."""
+
+
 class Analysis(StrEnum):
     IDENTIFY = "identify"
     DIAGNOSE = "diagnose"
@@ -170,7 +176,8 @@ def analyse(task: Task, path: Path, payload: Payload) -> dict[str, Any]:
     else:
         from estimator.doctor.diagnose import DiagnoseOptions
 
-        result = diagnose_recording(recording, vehicle, DiagnoseOptions(tyre=tyre, points=points)).to_json()
+        options = DiagnoseOptions(tyre=tyre, points=points, workers=DOCTOR_PROCESSES)
+        result = diagnose_recording(recording, vehicle, options).to_json()
     return finite_json(result)
 
 

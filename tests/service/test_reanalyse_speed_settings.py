@@ -149,3 +149,26 @@ def test_the_help_states_the_batch_size_the_run_uses(capsys: pytest.CaptureFixtu
     with pytest.raises(SystemExit):
         main(["reanalyse", "--help"])
     assert f"up to {MAX_BATCH}," in " ".join(capsys.readouterr().out.split())
+
+
+def test_the_doctor_in_a_task_runs_in_the_workers_own_process(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A task's diagnosis forks no processes of its own (DiagnoseOptions.workers = 1): the cluster runs a
+    worker per core already, and a worker runs Dask's threads, which a fork would copy mid-lock."""
+    import service.analysis
+    from service.reanalyse.sources import Item
+    from service.reanalyse.task import Analysis, AnalysisOptions, Payload, Task, analyse
+
+    seen = []
+
+    def diagnosed(recording, vehicle, options):  # type: ignore[no-untyped-def]
+        seen.append(options)
+        return SimpleNamespace(to_json=lambda: {"diagnosed": True})
+
+    monkeypatch.setattr(service.analysis, "diagnose_recording", diagnosed)
+    monkeypatch.setattr("daq.formats.recording_file.read_recording_file", lambda path: None)
+    monkeypatch.setattr("daq.formats.vehicle_file.parse_vehicle", lambda text, source: None)
+    task = Task(Item("rec", Path("rec.csv"), None), Analysis.DIAGNOSE, AnalysisOptions(points=30))
+    payload = Payload("rec.csv", b"", False, "[vehicle]\n", "rec.toml")
+    assert analyse(task, Path("rec.csv"), payload) == {"diagnosed": True}
+    (options,) = seen
+    assert options.workers == 1 and options.points == 30
