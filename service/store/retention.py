@@ -277,14 +277,9 @@ def run_retention(
         stored = _old_stored_recordings(session, cutoff, policy, needed) if policy.stored_copies else []
         if stored and not dry_run:
             session.execute(delete(RecordingRow).where(RecordingRow.id.in_([i for i, _ in stored])))
-        for _, removal in stored:
-            log.info(
-                "retention: %s %s (%d bytes): %s",
-                _verb(dry_run),
-                removal.what,
-                removal.size_bytes,
-                removal.reason,
-            )
+    for _, removal in stored:  # logged once the deletion is committed
+        what, size = removal.what, removal.size_bytes
+        log.info("retention: %s %s (%d bytes): %s", _verb(dry_run), what, size, removal.reason)
     stale_files, stale_folders = _stale_uploads(uploads, policy, stale_before)
     candidates += stale_files
     in_use_resolved = {Path(p).resolve() for p in in_use}
