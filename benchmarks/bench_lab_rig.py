@@ -195,9 +195,10 @@ def run_rig(seed: int, folder: str, run_s: float) -> Outcome:
         in_sample, held_out = validate(model, run_a), validate(model, run_b)
         response = in_sample.response_rms_m
         rates = {
-            step.effect: float(step.parameters[RATE_EFFECTS[step.effect][1]])
+            effect: float(step.parameters[RATE_EFFECTS[effect][1]])
             for step in result.steps
-            if step.effect in RATE_EFFECTS
+            for effect in step.effect.split(" + ")  # the load path's families named together: each
+            if effect in RATE_EFFECTS
         }
         doctor = {
             "named": tuple(result.effects_named),

@@ -70,6 +70,29 @@ CHANNEL_PARAMETERS = {
 INTERVAL_POINTS = 16  # points per sample interval at which interval_mean evaluates its function
 
 
+Candidate = tuple[EffectInstance, ...]
+"""What a round tests (estimator.doctor.diagnose): one family, or a load path's families together."""
+LOAD_PATH = (EffectName.SPRING_CURVE, EffectName.TYRE_STIFFNESS)
+"""The rates in series between body and plate, also tested together: with both stated wrong, either correction
+alone can move the resonances the wrong way (its simulation worse, or a spring curve that is not monotone)."""
+
+
+def label(candidate: Candidate) -> str:
+    return " + ".join(e.label for e in candidate)
+
+
+def members(candidate: Candidate, names: list[str]) -> dict[str, list[int]]:
+    """The indices in `names` of each force family's unknowns (names a system has: spring_…, tyre_…)."""
+    prefix = {EffectName.SPRING_CURVE: "spring_", EffectName.TYRE_STIFFNESS: TYRE_RATE_UNKNOWN}
+    return {e.label: [k for k, n in enumerate(names) if n.startswith(prefix[e.name])] for e in candidate}
+
+
+def round_candidates(singles: list[EffectInstance]) -> list[Candidate]:
+    """Each family alone, and the load path's together when the model lacks all of them."""
+    together = tuple(e for name in LOAD_PATH for e in singles if e.name is name)
+    return [(e,) for e in singles] + ([together] if len(together) == len(LOAD_PATH) else [])
+
+
 @dataclass(frozen=True)
 class Corner:
     """One corner's signals (m, m/s): deflection ζ = x_s − x_t and its rate (kinematics low-pass), ζ and tyre

@@ -73,6 +73,24 @@ class SimulationTest:
         return TestResult(statistic, q, chi_square_survival(statistic, q) if statistic > 0 else 1.0)
 
 
+@dataclass(frozen=True)
+class EachMember:
+    """Families named together (a load path's, estimator.doctor.catalog.LOAD_PATH) must each be significant
+    given the others: the Wald test of each one's unknowns in their joint fit, at α. One the others make
+    redundant is not named with them (their joint test would carry it on the others' evidence)."""
+
+    alpha: float = ALPHA
+
+    def redundant(self, system, solution: np.ndarray, members: dict[str, list[int]], sample_time_s: float):
+        """Why a member is not significant given the others (None: each is); members: name -> unknowns."""
+        for name, index in members.items():
+            test = EquationTest().test(system, solution, index, sample_time_s)
+            if test.p_value > self.alpha:
+                w, q, p = test.statistic, test.unknowns, test.p_value
+                return f"{name} adds nothing given the others (W = {w:.1f} on {q} unknowns, p = {p:.2g})"
+        return None
+
+
 def intersection_union(*results: TestResult) -> float:
     """The p-value of "every test rejects": the largest of theirs."""
     return max(r.p_value for r in results)
@@ -80,16 +98,21 @@ def intersection_union(*results: TestResult) -> float:
 
 @dataclass(frozen=True)
 class Selection:
-    """The smallest p-value of a round wins if at most α/m. Given as logarithms: those of large effects
-    underflow to 0 together, and which is the most significant must still be decided."""
+    """Bonferroni over a round's m tested candidates, taken in tiers: the smallest p-value of the first tier
+    with one at most α/m wins (tiers order the models by size: a larger one only where no smaller one is
+    significant; the family-wise error stays at most α, as every candidate is held to α/m). Given as
+    logarithms: those of large effects underflow to 0 together, and which is the most significant must still
+    be decided."""
 
     alpha: float = ALPHA
 
-    def choose(self, log_p_values: dict) -> object | None:
-        if not log_p_values:
-            return None
-        best = min(log_p_values, key=lambda k: (log_p_values[k], str(k)))
-        return best if log_p_values[best] <= math.log(self.alpha / len(log_p_values)) else None
+    def choose(self, tiers: list[dict], tested: int) -> object | None:
+        bound = math.log(self.alpha / max(tested, 1))
+        for log_p in tiers:
+            best = min(log_p, key=lambda k: (log_p[k], str(k)), default=None)
+            if best is not None and log_p[best] <= bound:
+                return best
+        return None
 
 
 def student_upper_tail(t: float, degrees: int) -> float:

@@ -32,9 +32,10 @@ from functools import cached_property, partial
 
 import numpy as np
 
-from estimator.doctor.catalog import CATALOG, EffectInstance, EffectName
+from estimator.doctor.catalog import CATALOG, Candidate, EffectName, label, members, round_candidates
 from estimator.doctor.criteria import (
     ALPHA,
+    EachMember,
     GoodnessOfFit,
     Selection,
     SimulationTest,
@@ -140,12 +141,13 @@ class _Doctor:
             self.report(step, "fitting and testing the candidates")
             # step 2: the families the model lacks (a family with variants, per channel or v_s, in one only)
             present = {(e.name, e.channel) for e in current.structure.effects}
-            candidates = [
+            singles = [
                 c
                 for effect in CATALOG.values()
                 for c in effect.instances(reference.vehicle, recording, reference.identified)
                 if (c.name, c.channel) not in present
             ]
+            candidates = round_candidates(singles)
             if not candidates or step == options.max_steps:
                 break
             round_of = partial(trial, reference, current, simulated, screen=options.alpha)
@@ -162,20 +164,22 @@ class _Doctor:
                     k = candidates.index(candidate)
                     scores[k] = _calibrated(scores[k], *scales)
                     log_p[candidate] = _log_p(scores[k], *scales)
-            chosen = Selection(options.alpha).choose(log_p)
+            # a load path's families together only where none alone is significant (the smaller model first)
+            tiers = [{c: v for c, v in log_p.items() if (len(c) == 1) == alone} for alone in (True, False)]
+            chosen = Selection(options.alpha).choose(tiers, len(log_p))
             scores = [_verdict(s, chosen, bound) for s in scores]
             rounds.append(scores)
             if chosen is None:
                 break
             index = candidates.index(chosen)
-            self.report(step, f"fitting {chosen.label}")
+            self.report(step, f"fitting {label(chosen)}")
             stepped, _ = one_step(reference, current, chosen)  # (its worker's is not kept: see trial)
             model = fit_added(reference, current, chosen, stepped)
             (outcome,) = _simulate([model], recording)
             steps.append(
                 DiagnosisStep(
-                    effect=chosen.label,
-                    parameters=report(chosen, model),
+                    effect=label(chosen),
+                    parameters=_report(chosen, model),
                     gap_before_m=simulated.gap_m,
                     gap_after_m=outcome.gap_m,
                     evidence=_evidence(scores[index]),
@@ -242,9 +246,9 @@ class _Doctor:
         self,
         current: FittedModel,
         simulated: Simulated,
-        observed: dict[EffectInstance, CandidateScore],
+        observed: dict[Candidate, CandidateScore],
         bound: float,
-    ) -> dict[EffectInstance, tuple[float, float]]:
+    ) -> dict[Candidate, tuple[float, float]]:
         """Per candidate, the scales of its Wald and likelihood-ratio statistics under the current model:
         their mean over bootstrap draws of it (each tested as the measurement; below 0 counts as 0) over the
         degrees of freedom, at least 1 (a scaled χ²: the model's own approximation and the noise's colour
@@ -256,7 +260,7 @@ class _Doctor:
         synthetic = self.synthetic(current, simulated, plausible=False)
         if not synthetic:
             return {c: (1.0, 1.0) for c in observed}
-        values: dict[EffectInstance, tuple[list[float], list[float]]] = {c: ([], []) for c in observed}
+        values: dict[Candidate, tuple[list[float], list[float]]] = {c: ([], []) for c in observed}
         alive = list(observed)
         for first in range(0, len(synthetic), max(self.options.workers, 1)):
             chunk = synthetic[first : first + max(self.options.workers, 1)]
@@ -272,8 +276,8 @@ class _Doctor:
         return {c: _scales(observed[c], values[c]) for c in observed}
 
     def draw_statistics(
-        self, current: FittedModel, recording: Recording, candidates: tuple[EffectInstance, ...]
-    ) -> dict[EffectInstance, tuple[float, float]]:
+        self, current: FittedModel, recording: Recording, candidates: tuple[Candidate, ...]
+    ) -> dict[Candidate, tuple[float, float]]:
         """Each candidate's Wald and likelihood-ratio statistics on one synthetic recording, as measured."""
         on = self.reference.on(recording)
         base = fit(on, current.structure, warm=current)
@@ -286,7 +290,7 @@ def trial(
     reference: Reference,
     current: FittedModel,
     simulated: Simulated,
-    candidate: EffectInstance,
+    candidate: Candidate,
     screen: float | None = None,
 ) -> CandidateScore:
     """Step 3 for one candidate: its one step from the current model and its tests. Both tests must
@@ -299,18 +303,18 @@ def trial(
 
 
 def _equations(
-    candidate: EffectInstance, current: FittedModel, model: FittedModel, wald: TestResult
+    candidate: Candidate, current: FittedModel, model: FittedModel, wald: TestResult
 ) -> TestResult:
     """The candidate's test in the equations: the Wald test of its unknowns; tyre_liftoff has none, and
     passes when the equations hold better with it."""
-    if candidate.name is EffectName.TYRE_LIFTOFF:
+    if candidate[0].name is EffectName.TYRE_LIFTOFF:
         better = model.objective < current.objective
         return TestResult(current.objective - model.objective, 0, 0.0 if better else 1.0)
     return wald
 
 
 def score_candidate(
-    candidate: EffectInstance,
+    candidate: Candidate,
     current: FittedModel,
     simulated: Simulated,
     model: FittedModel,
@@ -329,9 +333,13 @@ def score_candidate(
         simulation = SimulationTest().test(samples, simulated.gap_m, outcome.gap_m, wald.unknowns)
         gap, p_value = outcome.gap_m, intersection_union(equations, simulation)
         ratio = outcome.gap_m / simulated.gap_m if np.isfinite(simulated.gap_m) else None
-    reason = implausible(candidate, model)
+    reason = next(filter(None, (implausible(e, model) for e in candidate)), None)
+    if len(candidate) > 1 and reason is None and outcome is not None:
+        old = set(current.system.parameter_names)
+        index = members(candidate, [n if n not in old else "" for n in model.system.parameter_names])
+        reason = EachMember().redundant(model.system, model.theta, index, model.signals.sample_time_s)
     return CandidateScore(
-        effect=candidate.label,
+        effect=label(candidate),
         objective_ratio=model.objective / current.objective,
         gap_m=gap,
         gap_ratio=ratio,
@@ -341,7 +349,7 @@ def score_candidate(
         equation_p=equations.p_value,
         simulation_p=simulation.p_value,
         p_value=p_value,
-        parameters=report(candidate, model),
+        parameters=_report(candidate, model),
         verdict=reason or "tested",
     )
 
@@ -383,15 +391,21 @@ def _scales(
     )
 
 
-def _verdict(score: CandidateScore, chosen: EffectInstance | None, bound: float) -> CandidateScore:
+def _report(candidate: Candidate, model: FittedModel) -> dict[str, float | str]:
+    return {key: value for effect in candidate for key, value in report(effect, model).items()}
+
+
+def _verdict(score: CandidateScore, chosen: Candidate | None, bound: float) -> CandidateScore:
     if score.verdict != "tested":
         return score
-    if chosen is not None and score.effect == chosen.label:
+    if chosen is not None and score.effect == label(chosen):
         return replace(score, verdict="named")
     if score.p_value > bound:
         untried = ": not simulated" if score.gap_m is None else ""
         verdict = f"not significant (p = {score.p_value:.2g} > α/m = {bound:.2g}){untried}"
         return replace(score, verdict=verdict)
+    if chosen is not None and score.effect.count(" + ") > label(chosen).count(" + "):
+        return replace(score, verdict="significant, but a smaller candidate is too (tested first)")
     return replace(score, verdict="significant, but another candidate is more so")
 
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from estimator.doctor.catalog import MAX_DELAY_S, EffectInstance, EffectName, with_columns
+from estimator.doctor.catalog import MAX_DELAY_S, Candidate, EffectName, with_columns
 from estimator.doctor.criteria import EquationTest, TestResult
 from estimator.doctor.model import FittedModel, ModelStructure, Reference, build_extended
 from estimator.equations import LinearResiduals
@@ -146,29 +146,29 @@ def bounded_step(
 
 
 def fit_added(
-    reference: Reference, current: FittedModel, family: EffectInstance, start: FittedModel
+    reference: Reference, current: FittedModel, candidate: Candidate, start: FittedModel
 ) -> FittedModel:
-    """The current model with `family` added, identified from `start` (its one-step model), or from the
-    current model when that ends worse (a larger model cannot fit worse; a step can start far off)."""
-    structure = current.structure.with_effect(family)
+    """The current model with the candidate's families added, identified from `start` (its one-step model), or
+    from the current model when that ends worse (a larger model fits no worse; a step may start far off)."""
+    structure = current.structure.with_effect(*candidate)
     model = fit(reference, structure, warm=start)
     return model if model.objective <= current.objective else fit(reference, structure, warm=current)
 
 
 def one_step(
-    reference: Reference, current: FittedModel, candidate: EffectInstance, screen: float | None = None
+    reference: Reference, current: FittedModel, candidate: Candidate, screen: float | None = None
 ) -> tuple[FittedModel, TestResult]:
-    """The current model with `candidate` added and its unknowns moved by one linearised step, and the Wald
-    test of those unknowns (their channel parameters' steps included) against zero.
+    """The current model with the candidate's families added and their unknowns moved by one linearised step,
+    and the Wald test of those unknowns (their channel parameters' steps included) against zero.
 
     screen: a Wald p-value above which the candidate cannot be named; its channel step is then clipped into
     the bounds, not solved again within them (the model is only reported, not simulated)."""
-    structure = current.structure.with_effect(candidate)
+    structure = current.structure.with_effect(*candidate)
     parameters = structure.channel_parameters
     vehicle, knots, values = reference.vehicle, reference.knots_m, current.channel_values_for(parameters)
     system, signals, airborne = build_extended(reference, structure, values, current.tyre)
     start = start_from(system, current)
-    own = [k for k, (effect, _) in enumerate(parameters) if effect == candidate]
+    own = [k for k, (effect, _) in enumerate(parameters) if effect in candidate]
     model = FittedModel(
         structure, vehicle, start, system, signals, values, airborne, current.objective, knots
     )

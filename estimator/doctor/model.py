@@ -42,8 +42,8 @@ class ModelStructure:
 
     effects: tuple[EffectInstance, ...] = ()
 
-    def with_effect(self, effect: EffectInstance) -> ModelStructure:
-        return replace(self, effects=(*self.effects, effect))
+    def with_effect(self, *effects: EffectInstance) -> ModelStructure:
+        return replace(self, effects=(*self.effects, *effects))
 
     def has(self, name: EffectName) -> bool:
         return any(e.name is name for e in self.effects)

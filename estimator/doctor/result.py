@@ -120,7 +120,7 @@ class DiagnosisResult:
 
     @property
     def effects_named(self) -> list[str]:
-        return [s.effect for s in self.steps]
+        return [name for s in self.steps for name in s.effect.split(" + ")]  # a load path's: each
 
     @property
     def located_after(self) -> Localisation:

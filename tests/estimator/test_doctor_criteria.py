@@ -20,6 +20,7 @@ from scipy import stats
 
 from estimator.doctor.criteria import (
     ALPHA,
+    EachMember,
     EquationTest,
     GoodnessOfFit,
     Selection,
@@ -136,7 +137,9 @@ def test_selection_names_nothing_missing_at_most_alpha_of_the_time(candidates: i
     draws = 4000
     selection = Selection()
     named = sum(
-        selection.choose({f"family {k}": math.log(p) for k, p in enumerate(rng.uniform(size=candidates))})
+        selection.choose(
+            [{f"family {k}": math.log(p) for k, p in enumerate(rng.uniform(size=candidates))}], candidates
+        )
         is not None
         for _ in range(draws)
     )
@@ -151,16 +154,65 @@ def test_selection_names_the_most_significant_candidate() -> None:
     selection = Selection()
     bound = ALPHA / 3
 
-    def log(p_values: dict[str, float]) -> dict[str, float]:
-        return {k: math.log(p) for k, p in p_values.items()}
+    def log(p_values: dict[str, float]) -> list[dict[str, float]]:
+        return [{k: math.log(p) for k, p in p_values.items()}]
 
-    assert selection.choose(log({"a": 0.5, "b": 1e-8, "c": 1e-5})) == "b"
-    assert selection.choose(log({"a": 0.5, "b": 1.01 * bound, "c": 0.9})) is None
-    assert selection.choose(log({"a": 0.5, "b": 0.99 * bound, "c": 0.9})) == "b"
-    assert selection.choose(log({"b": 1e-9, "a": 1e-9})) == "a"  # a tie: by name, whatever the order
-    assert selection.choose({"a": -900.0, "b": -1200.0, "c": 0.0}) == "b"  # both p-values underflow
-    assert selection.choose({}) is None
-    assert Selection(alpha=0.01).choose(log({"a": 0.02, "b": 0.006})) is None  # α/m = 0.005
+    def choose(tiers: list[dict[str, float]]) -> str | None:
+        return selection.choose(tiers, sum(map(len, tiers)))  # type: ignore[return-value]
+
+    assert choose(log({"a": 0.5, "b": 1e-8, "c": 1e-5})) == "b"
+    assert choose(log({"a": 0.5, "b": 1.01 * bound, "c": 0.9})) is None
+    assert choose(log({"a": 0.5, "b": 0.99 * bound, "c": 0.9})) == "b"
+    assert choose(log({"b": 1e-9, "a": 1e-9})) == "a"  # a tie: by name, whatever the order
+    assert choose([{"a": -900.0, "b": -1200.0, "c": 0.0}]) == "b"  # both p-values underflow
+    assert choose([{}]) is None
+    assert Selection(alpha=0.01).choose(log({"a": 0.02, "b": 0.006}), 2) is None  # α/m = 0.005
+
+
+def test_selection_takes_a_larger_candidate_only_where_no_smaller_one_is_significant() -> None:
+    """Tiers: the load path's families together (second tier) are named only where no family alone is,
+    however small their p-value; every candidate is held to α over all m tested."""
+    selection, bound = Selection(), ALPHA / 3
+    alone, together = {"spring": math.log(0.5 * bound), "tyre": math.log(0.9)}, {"spring + tyre": -50.0}
+    assert selection.choose([alone, together], 3) == "spring"
+    alone["spring"] = math.log(1.01 * bound)
+    assert selection.choose([alone, together], 3) == "spring + tyre"
+    assert selection.choose([alone, {"spring + tyre": math.log(1.01 * bound)}], 3) is None
+    assert selection.choose([alone, {"spring + tyre": math.log(0.99 * bound)}], 3) == "spring + tyre"
+
+
+def test_tiers_keep_the_family_wise_error_at_most_alpha() -> None:
+    """Nothing missing (every p-value uniform): a round of 13 families and one load path names something
+    at most α of the time, as one tier would."""
+    rng, draws, selection = np.random.default_rng(29), 4000, Selection()
+    named = 0
+    for _ in range(draws):
+        p = rng.uniform(size=14)
+        tiers = [{f"family {k}": math.log(v) for k, v in enumerate(p[:13])}, {"path": math.log(p[13])}]
+        named += selection.choose(tiers, 14) is not None
+    low, _ = rejection_interval(named, draws)
+    print(f"two tiers: named something in {named}/{draws} rounds with nothing missing")
+    assert low <= ALPHA and named / draws <= ALPHA + 0.01
+
+
+def test_a_member_the_others_make_redundant_is_not_named_with_them() -> None:
+    """Two families named together, f1 acting and f2 not (one unknown each): f2 is found redundant about
+    1 − α of the time (its Wald test given f1 holds its size), f1 never."""
+    rng, draws = np.random.default_rng(29), 200
+    redundant = {"f1": 0, "f2": 0}
+    for _ in range(draws):
+        system = linear_system(rng, 2000, 0.2)
+        theta, _ = minimise(system, None)
+        for name in redundant:
+            index = {name: [system.parameter_names.index(name)]}
+            redundant[name] += EachMember().redundant(system, theta, index, SAMPLE_TIME_S) is not None
+    low, high = rejection_interval(draws - redundant["f2"], draws)
+    print(f"f2 (not acting) found redundant {redundant['f2']}/{draws}, f1 (acting) {redundant['f1']}/{draws}")
+    assert redundant["f1"] == 0 and low <= ALPHA <= high
+    both = {"f1": [1], "f2": [2]}
+    assert "f2 adds nothing given the others" in str(
+        EachMember(alpha=1e-9).redundant(system, theta, both, 1e-3)
+    )
 
 
 @pytest.mark.parametrize("draws", [DiagnoseOptions().draws, 40])
