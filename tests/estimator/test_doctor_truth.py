@@ -23,13 +23,13 @@ from scipy.optimize import isotonic_regression, nnls
 from estimator.damper import PiecewiseLinearCurve
 from estimator.doctor.expected import (
     TRUTH_POINTS_FACTOR,
-    increasing,
     plausible_truth,
     small_nnls,
     smooth_curve,
 )
 from estimator.doctor.fitting import fit
 from estimator.doctor.model import LOW_SPEED_KNOTS_M_S, FitSettings, Reference, starting_structure
+from estimator.monotone import increasing
 from estimator.sweep import SweepSettings
 from estimator.vehicle import TyreModel
 from simulators.vehicle_sim import SimulationSettings, default_quarter_car, simulate

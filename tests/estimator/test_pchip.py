@@ -1,4 +1,4 @@
-"""estimator.doctor.expected.Pchip against scipy.interpolate.PchipInterpolator, which it replaces: bit for
+"""estimator.monotone.Pchip against scipy.interpolate.PchipInterpolator, which it replaces: bit for
 bit on random curves with fixed seeds."""
 
 from __future__ import annotations
@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from scipy.interpolate import PchipInterpolator
 
-from estimator.doctor.expected import Pchip
+from estimator.monotone import Pchip
 
 
 @pytest.mark.parametrize("seed", range(10))
