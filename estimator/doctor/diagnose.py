@@ -5,17 +5,19 @@ leaves more than its own noise would.
 1. *Start* from what `identify` fits (the paper's model with the `--tyre` option's tyre), its damper curve
    resolved near zero velocity (estimator.doctor.model). Constants the vehicle file does not state are
    identified first (with the stated rates free meanwhile) and then held like stated ones.
-2. *A round*: every family of the catalogue the model lacks (estimator.doctor.catalog) is added in turn and
-   its unknowns moved by one linearised step from the current model (fitting.one_step: the paper's
-   objective, exact solver; channel parameters by a Gauss-Newton step), side by side in forked processes.
+2. *A round*: every family of the catalogue the model lacks (estimator.doctor.catalog) is added in turn, and
+   the load path's two rates together (catalog.LOAD_PATH), and its unknowns moved by one linearised step from
+   the current model (fitting.one_step: the paper's objective, exact solver; channel parameters by a
+   Gauss-Newton step), side by side in forked processes.
 3. *Each candidate is tested* (estimator.doctor.criteria, score_candidate): in the equations (a Wald test of
    its unknowns) and in the free simulation from the measured plate (a likelihood ratio of the gap); its
    p-value is the larger of the two (one with p > α in the equations is not simulated). A candidate whose
-   fitted values are physically impossible (estimator.doctor.parameters.implausible) is not named whatever
-   its p-value.
+   fitted values are physically impossible (estimator.doctor.parameters.implausible), or families together
+   one of which the others make redundant (criteria.EachMember), is not named whatever its p-value.
 4. *Calibrate*: a candidate significant as it stands has both statistics divided by their mean over bootstrap
    draws of the current model (a scaled χ²; calibrate). *Select*: the candidate with the smallest p-value is
-   named when it is at most α/m (Bonferroni over the m candidates of the round); it is then fitted fully
+   named when it is at most α/m (Bonferroni over the m candidates of the round), a family alone before
+   families together (these only where no family alone is significant); it is then fitted fully
    (fitting.fit_added). Repeat from 2 with it added, until a round names nothing.
 5. *Goodness of fit*: the final model against a parametric bootstrap of its plausible truth
    (estimator.doctor.expected); p < α: "unexplained", with where the disagreement is largest
