@@ -105,7 +105,10 @@ SHAPES = {
 
 
 def shape(effect: str, parameters: Parameters) -> str:
-    """The fitted shape of a named family in one phrase (every value, for families without one)."""
+    """The fitted shape of a named family in one phrase (every value, for families without one); families
+    named together ("spring_curve + tyre_stiffness"): each one's phrase from their shared parameters."""
+    if " + " in effect:
+        return "; ".join(shape(member, parameters) for member in effect.split(" + "))
     words = SHAPES.get(family(effect))
     if words is None:
         return plain(parameters)

@@ -25,6 +25,17 @@ def test_the_spring_curve_reads_as_its_rate_and_where_it_departs_from_linear() -
     assert shape("spring_curve", linear).endswith("linear over the deflection measured")
 
 
+def test_the_load_paths_rates_named_together_read_as_each_ones_shape() -> None:
+    tyre = {
+        "tyre_stiffness_N_per_m": 3300.0,
+        "stated_tyre_stiffness_N_per_m": 6200.0,
+        "change_percent": -46.8,
+    }
+    words = shape("spring_curve + tyre_stiffness", SPRING | tyre)
+    assert words == f"{shape('spring_curve', SPRING)}; {shape('tyre_stiffness', tyre)}"
+    assert words.endswith("tyre rate 3300 N/m (stated 6200, -46.8%)")
+
+
 def test_friction_and_sensors_read_as_their_kind_and_constants() -> None:
     friction = {"sliding_friction_N": 80.0, "static_friction_N": 120.0, "stribeck_velocity_m_s": 0.005}
     assert family("low_speed_friction(5 mm/s)") == "low_speed_friction"
