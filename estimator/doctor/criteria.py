@@ -81,8 +81,11 @@ class EachMember:
 
     alpha: float = ALPHA
 
-    def redundant(self, system, solution: np.ndarray, members: dict[str, list[int]], sample_time_s: float):
-        """Why a member is not significant given the others (None: each is); members: name -> unknowns."""
+    def redundant(
+        self, system, solution: np.ndarray, members: dict[str, list[int]], sample_time_s: float
+    ) -> str | None:
+        """Why a member is not significant given the others (None: each is); members: name -> its unknowns'
+        indices in `system` (an estimator.equations.LinearResiduals solved by `solution`)."""
         for name, index in members.items():
             test = EquationTest().test(system, solution, index, sample_time_s)
             if test.p_value > self.alpha:

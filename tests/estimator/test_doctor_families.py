@@ -142,7 +142,7 @@ def test_a_force_family_one_step_is_its_full_fit() -> None:
     same optimum: the objective to rounding; θ to 2e-5 relative, as flat as the objective is along its
     least determined direction, a hinge rate, at the solver's tolerance)."""
     for family in (SPRING, FRICTION):
-        stepped, test = one_step(reference(), starting(), family)
+        stepped, test = one_step(reference(), starting(), (family,))
         full = fit(reference(), START.with_effect(family))
         np.testing.assert_allclose(
             stepped.theta, full.theta, rtol=2e-5, atol=1e-9 * np.max(np.abs(full.theta))
@@ -161,7 +161,7 @@ def test_a_force_family_one_step_is_its_full_fit() -> None:
     ],
 )
 def test_a_channel_family_one_step_is_close_to_its_full_fit(family, kind, truth, tolerance) -> None:
-    stepped, test = one_step(reference(), starting(), family)
+    stepped, test = one_step(reference(), starting(), (family,))
     full = fit(reference(), START.with_effect(family), warm=stepped)
     step_value, full_value = stepped.channel_value(family, kind), full.channel_value(family, kind)
     print(f"{family.label}: one step {step_value:.6g}, full fit {full_value:.6g}, truth {truth:.6g}")
@@ -176,8 +176,8 @@ def test_a_sensor_dynamics_full_fit_is_no_worse_than_without_it(variant: str) ->
     that ends worse) must end at an objective at most the model's without the family (it nests it: zero
     delay and lag) and near the true delay (the wheel laser reads DELAY_S late)."""
     family = EffectInstance(EffectName.SENSOR_DYNAMICS, "x_t", variant)
-    stepped, _ = one_step(reference(True), starting(True), family)
-    full = fit_added(reference(True), starting(True), family, stepped)
+    stepped, _ = one_step(reference(True), starting(True), (family,))
+    full = fit_added(reference(True), starting(True), (family,), stepped)
     late = report(family, full)["equivalent_delay_s"]
     without = starting(True).objective
     print(
