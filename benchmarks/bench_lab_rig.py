@@ -159,6 +159,7 @@ def run_rig(seed: int, folder: str, run_s: float) -> Outcome:
     from daq.formats.recording_csv import read_recording_csv
     from daq.formats.vehicle_file import read_vehicle
     from estimator.doctor import DiagnoseOptions, diagnose
+    from estimator.doctor.catalog import labels_in
     from estimator.identify import IdentifyOptions, identify
     from estimator.model_io import model_from_json
     from estimator.validation import validate
@@ -197,7 +198,7 @@ def run_rig(seed: int, folder: str, run_s: float) -> Outcome:
         rates = {
             effect: float(step.parameters[RATE_EFFECTS[effect][1]])
             for step in result.steps
-            for effect in step.effect.split(" + ")  # the load path's families named together: each
+            for effect in labels_in(step.effect)  # the load path's families named together: each
             if effect in RATE_EFFECTS
         }
         doctor = {

@@ -20,6 +20,11 @@ _HINGE_KEY = re.compile(r"extra_rate_beyond_([0-9.]+)_mm_(extension|compression)
 Parameters = Mapping[str, float | str]
 
 
+JOIN = " + "
+"""Between the labels of families a step named together, as the result's JSON has them
+(estimator.doctor.catalog.JOIN; not imported: this module reads stored results without the estimator)."""
+
+
 def family(effect: str) -> str:
     """The family of an effect label: "sensor_dynamics(x_s, lag)" -> "sensor_dynamics"."""
     return effect.split("(", 1)[0]
@@ -107,8 +112,8 @@ SHAPES = {
 def shape(effect: str, parameters: Parameters) -> str:
     """The fitted shape of a named family in one phrase (every value, for families without one); families
     named together ("spring_curve + tyre_stiffness"): each one's phrase from their shared parameters."""
-    if " + " in effect:
-        return "; ".join(shape(member, parameters) for member in effect.split(" + "))
+    if JOIN in effect:
+        return "; ".join(shape(member, parameters) for member in effect.split(JOIN))
     words = SHAPES.get(family(effect))
     if words is None:
         return plain(parameters)

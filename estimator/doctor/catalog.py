@@ -77,8 +77,17 @@ LOAD_PATH = (EffectName.SPRING_CURVE, EffectName.TYRE_STIFFNESS)
 alone can move the resonances the wrong way (its simulation worse, or a spring curve that is not monotone)."""
 
 
+JOIN = " + "
+"""Between the labels of families named together ("spring_curve + tyre_stiffness")."""
+
+
 def label(candidate: Candidate) -> str:
-    return " + ".join(e.label for e in candidate)
+    return JOIN.join(e.label for e in candidate)
+
+
+def labels_in(step_label: str) -> list[str]:
+    """The family labels of a step's or candidate's label (label's inverse)."""
+    return step_label.split(JOIN)
 
 
 def members(candidate: Candidate, names: list[str]) -> dict[str, list[int]]:

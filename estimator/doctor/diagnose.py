@@ -34,7 +34,15 @@ from functools import cached_property, partial
 
 import numpy as np
 
-from estimator.doctor.catalog import CATALOG, Candidate, EffectName, label, members, round_candidates
+from estimator.doctor.catalog import (
+    CATALOG,
+    Candidate,
+    EffectName,
+    label,
+    labels_in,
+    members,
+    round_candidates,
+)
 from estimator.doctor.criteria import (
     ALPHA,
     EachMember,
@@ -406,7 +414,7 @@ def _verdict(score: CandidateScore, chosen: Candidate | None, bound: float) -> C
         untried = ": not simulated" if score.gap_m is None else ""
         verdict = f"not significant (p = {score.p_value:.2g} > α/m = {bound:.2g}){untried}"
         return replace(score, verdict=verdict)
-    if chosen is not None and score.effect.count(" + ") > label(chosen).count(" + "):
+    if chosen is not None and len(labels_in(score.effect)) > len(chosen):
         return replace(score, verdict="significant, but a smaller candidate is too (tested first)")
     return replace(score, verdict="significant, but another candidate is more so")
 

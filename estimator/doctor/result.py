@@ -7,7 +7,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from estimator.doctor.catalog import FRICTION_UNKNOWNS, EffectName
+from estimator.doctor.catalog import FRICTION_UNKNOWNS, EffectName, labels_in
 from estimator.doctor.residuals import Localisation
 from estimator.vehicle import TyreModel
 
@@ -120,7 +120,7 @@ class DiagnosisResult:
 
     @property
     def effects_named(self) -> list[str]:
-        return [name for s in self.steps for name in s.effect.split(" + ")]  # a load path's: each
+        return [name for s in self.steps for name in labels_in(s.effect)]
 
     @property
     def located_after(self) -> Localisation:

@@ -3,7 +3,8 @@ JSON form of estimator.doctor.parameters.report; a stored result of the earlier 
 
 from __future__ import annotations
 
-from service.doctor_words import departs_from_linear, family, fit_verdict, shape
+from estimator.doctor import catalog
+from service.doctor_words import JOIN, departs_from_linear, family, fit_verdict, shape
 
 SPRING = {
     "rate_at_static_load_N_per_m": 20_000.0,
@@ -34,6 +35,7 @@ def test_the_load_paths_rates_named_together_read_as_each_ones_shape() -> None:
     words = shape("spring_curve + tyre_stiffness", SPRING | tyre)
     assert words == f"{shape('spring_curve', SPRING)}; {shape('tyre_stiffness', tyre)}"
     assert words.endswith("tyre rate 3300 N/m (stated 6200, -46.8%)")
+    assert JOIN == catalog.JOIN  # the joined label as the doctor writes it
 
 
 def test_friction_and_sensors_read_as_their_kind_and_constants() -> None:
