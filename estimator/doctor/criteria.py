@@ -44,13 +44,20 @@ class EquationTest:
     def test(self, system, solution: np.ndarray, index: list[int], sample_time_s: float) -> TestResult:
         """system: an estimator.equations.LinearResiduals (appended columns included) solved by `solution`;
         the test of solution[index], the covariance at `solution`."""
-        if not index:
-            return TestResult(0.0, 0, 1.0)
-        covariance = confidence_intervals(system, solution, sample_time_s).covariance
-        vector = solution[index]
-        statistic = float(vector @ np.linalg.lstsq(covariance[np.ix_(index, index)], vector, rcond=None)[0])
-        p_value = chi_square_survival(statistic, len(index)) if np.isfinite(statistic) else 1.0
-        return TestResult(statistic, len(index), p_value)
+        return self.tests(system, solution, [index], sample_time_s)[0]
+
+    def tests(
+        self, system, solution: np.ndarray, sets: list[list[int]], sample_time_s: float
+    ) -> list[TestResult]:
+        """Each set of unknowns tested, from one covariance at `solution` (none if all sets are empty)."""
+        covariance = confidence_intervals(system, solution, sample_time_s).covariance if any(sets) else None
+        return [_wald(solution[s], covariance[np.ix_(s, s)]) if s else TestResult(0.0, 0, 1.0) for s in sets]
+
+
+def _wald(vector: np.ndarray, covariance: np.ndarray) -> TestResult:
+    statistic = float(vector @ np.linalg.lstsq(covariance, vector, rcond=None)[0])
+    p_value = chi_square_survival(statistic, vector.size) if np.isfinite(statistic) else 1.0
+    return TestResult(statistic, vector.size, p_value)
 
 
 @dataclass(frozen=True)
@@ -86,8 +93,8 @@ class EachMember:
     ) -> str | None:
         """Why a member is not significant given the others (None: each is); members: name -> its unknowns'
         indices in `system` (an estimator.equations.LinearResiduals solved by `solution`)."""
-        for name, index in members.items():
-            test = EquationTest().test(system, solution, index, sample_time_s)
+        tests = EquationTest().tests(system, solution, list(members.values()), sample_time_s)
+        for name, test in zip(members, tests, strict=True):
             if test.p_value > self.alpha:
                 w, q, p = test.statistic, test.unknowns, test.p_value
                 return f"{name} adds nothing given the others (W = {w:.1f} on {q} unknowns, p = {p:.2g})"

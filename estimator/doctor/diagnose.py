@@ -34,15 +34,7 @@ from functools import cached_property, partial
 
 import numpy as np
 
-from estimator.doctor.catalog import (
-    CATALOG,
-    Candidate,
-    EffectName,
-    label,
-    labels_in,
-    members,
-    round_candidates,
-)
+from estimator.doctor.catalog import CATALOG, Candidate, EffectName, label, members, round_candidates
 from estimator.doctor.criteria import (
     ALPHA,
     EachMember,
@@ -177,7 +169,7 @@ class _Doctor:
             # a load path's families together only where none alone is significant (the smaller model first)
             tiers = [{c: v for c, v in log_p.items() if (len(c) == 1) == alone} for alone in (True, False)]
             chosen = Selection(options.alpha).choose(tiers, len(log_p))
-            scores = [_verdict(s, chosen, bound) for s in scores]
+            scores = [_verdict(s, c, chosen, bound) for s, c in zip(scores, candidates, strict=True)]
             rounds.append(scores)
             if chosen is None:
                 break
@@ -405,16 +397,18 @@ def _report(candidate: Candidate, model: FittedModel) -> dict[str, float | str]:
     return {key: value for effect in candidate for key, value in report(effect, model).items()}
 
 
-def _verdict(score: CandidateScore, chosen: Candidate | None, bound: float) -> CandidateScore:
+def _verdict(
+    score: CandidateScore, candidate: Candidate, chosen: Candidate | None, bound: float
+) -> CandidateScore:
     if score.verdict != "tested":
         return score
-    if chosen is not None and score.effect == label(chosen):
+    if candidate == chosen:
         return replace(score, verdict="named")
     if score.p_value > bound:
         untried = ": not simulated" if score.gap_m is None else ""
         verdict = f"not significant (p = {score.p_value:.2g} > α/m = {bound:.2g}){untried}"
         return replace(score, verdict=verdict)
-    if chosen is not None and len(labels_in(score.effect)) > len(chosen):
+    if chosen is not None and len(candidate) > len(chosen):
         return replace(score, verdict="significant, but a smaller candidate is too (tested first)")
     return replace(score, verdict="significant, but another candidate is more so")
 
