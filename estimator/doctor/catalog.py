@@ -4,8 +4,7 @@ equations of motion linearly (a column each), so the exact solver fits them with
 families correct a sensor channel before the equations are built, by Gauss-Newton (estimator.doctor.fitting).
 
 A force family's column is its force filtered by the equations' own low-pass (estimator.equations: per
-selected sample, residual forces in N), so that the equations still hold exactly.
-"""
+selected sample, residual forces in N), so that the equations still hold exactly."""
 
 from __future__ import annotations
 
@@ -55,7 +54,6 @@ HINGE_FRACTIONS = (0.4, 0.7)
 """spring_curve's hinge knots: these fractions of the largest deflection (0.1% / 99.9% quantile) each way."""
 STRIBECK_VELOCITIES_M_S = (0.0025, 0.005, 0.01, 0.02, 0.04)
 """low_speed_friction's variants: the velocity v_s over which the static peak decays (exp(−(v/v_s)²))."""
-MAX_DELAY_S = 0.02  # search limit of a channel's delay, lag and averaging window (s)
 
 FRICTION_UNKNOWNS = ("friction_sliding_N", "friction_static_excess_N")
 SPRING_RATE_UNKNOWN = "spring_rate_change_N_per_m"

@@ -4,14 +4,13 @@ with tyre_liftoff the airborne samples come from the fitted tyre force, decided 
 
 A candidate is screened by one linearised step from the current model (one_step): from a consistent estimate
 one step is as efficient as the fit (Le Cam), so the Wald statistic of its unknowns is a score test. Only the
-family a round names is fitted fully (fit_added).
-"""
+family a round names is fitted fully (fit_added)."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from estimator.doctor.catalog import MAX_DELAY_S, Candidate, EffectName, with_columns
+from estimator.doctor.catalog import Candidate, EffectName, with_columns
 from estimator.doctor.criteria import EquationTest, TestResult
 from estimator.doctor.model import FittedModel, ModelStructure, Reference, build_extended
 from estimator.equations import LinearResiduals
@@ -23,17 +22,21 @@ HALVINGS = 3  # a Gauss-Newton step that raises the objective is halved at most 
 GAUSS_NEWTON_STEP = {"delay": 5e-4, "lag": 5e-4, "average": 1e-3, "gain": 1e-3, "offset": 1e-4}
 """Finite-difference step of each kind of channel parameter (s, s, s, relative, m)."""
 GAUSS_NEWTON_TOLERANCE = {"delay": 2e-6, "lag": 2e-6, "average": 4e-6, "gain": 1e-5, "offset": 1e-7}
-NONNEGATIVE = frozenset({"delay", "lag", "average"})
-"""Channel parameters that cannot be negative (a sensor lags, it does not lead), kept in [0, MAX_DELAY_S]."""
+NONNEGATIVE = frozenset({"delay", "lag", "average"})  # a sensor lags, it does not lead
 
 
-def feasible(kinds: list[str], values: np.ndarray) -> np.ndarray:
-    """Channel parameter values moved into what a sensor can be: delays, lags and averaging windows in
-    [0, MAX_DELAY_S], gain errors above −50%."""
+def channel_limit_s(reference: Reference) -> float:
+    """The longest delay, lag or averaging window searched: half a period of the excitation's top frequency
+    (a longer delay turns the sweep's top past 180°, where it cannot be told from a lead: an alias)."""
+    return 0.5 / reference.filters.excitation_top_Hz
+
+
+def feasible(kinds: list[str], values: np.ndarray, limit_s: float) -> np.ndarray:
+    """Channel values moved into what a sensor can be: delay, lag, window in [0, limit_s], gain over −50%."""
     values = np.array(values, dtype=float)
     for j, kind in enumerate(kinds):
         if kind in NONNEGATIVE:
-            values[j] = float(np.clip(values[j], 0.0, MAX_DELAY_S))
+            values[j] = float(np.clip(values[j], 0.0, limit_s))
         elif kind == "gain":
             values[j] = max(values[j], -0.5)
     return values
@@ -81,7 +84,7 @@ def fit(reference: Reference, structure: ModelStructure, warm: FittedModel | Non
     channel parameter; new ones start at zero). A Gauss-Newton step that raises the objective is halved, at
     most HALVINGS times (a delay and a lag of one channel are nearly collinear; a clipped step overshoots)."""
     parameters = structure.channel_parameters
-    kinds = [kind for _, kind in parameters]
+    kinds, limit_s = [kind for _, kind in parameters], channel_limit_s(reference)
     values = warm.channel_values_for(parameters) if warm else np.zeros(len(parameters))
     liftoff = structure.has(EffectName.TYRE_LIFTOFF)
     vehicle, knots_m, tyre = reference.vehicle, reference.knots_m, (0.0, 0.0, 0.0)
@@ -97,7 +100,7 @@ def fit(reference: Reference, structure: ModelStructure, warm: FittedModel | Non
             if halvings == HALVINGS:
                 return best
             halvings, step = halvings + 1, step / 2.0
-            values = feasible(kinds, best.channel_values + step)
+            values = feasible(kinds, best.channel_values + step, limit_s)
             continue
         best, previous, halvings = model, model, 0
         tyre = model.tyre
@@ -106,7 +109,7 @@ def fit(reference: Reference, structure: ModelStructure, warm: FittedModel | Non
         steps += 1
         if not parameters:
             continue  # once more with the airborne samples of the fitted tyre force
-        moved = bounded_step(system, theta, channel_jacobian(reference, model), kinds, values)
+        moved = bounded_step(system, theta, channel_jacobian(reference, model), kinds, values, limit_s)
         step, values = moved - values, moved
         small = all(abs(d) < GAUSS_NEWTON_TOLERANCE[k] for d, k in zip(step, kinds, strict=True))
         affine = all(k == "offset" for k in kinds) and not liftoff
@@ -119,6 +122,7 @@ def bounded_step(
     jacobian: dict[str, np.ndarray],
     kinds: list[str],
     values: np.ndarray,
+    limit_s: float,
     free_solution: np.ndarray | None = None,
 ) -> np.ndarray:
     """The channel values after one Gauss-Newton step within the bounds of `feasible` (active set): a
@@ -137,7 +141,7 @@ def bounded_step(
         increment = np.zeros(len(names))
         increment[free] = solved[used.n_params :]
         increment[list(fixed)] = list(fixed.values())
-        moved = feasible(kinds, values + increment)
+        moved = feasible(kinds, values + increment, limit_s)
         clipped = [j for j in free if moved[j] != values[j] + increment[j]]
         if not clipped or len(free) == 1:
             return moved
@@ -181,11 +185,12 @@ def one_step(
     index += range(system.n_params, system.n_params + len(own))  # and the steps of its channel parameters
     test = EquationTest().test(augmented, solution, index, reference.recording.sample_time_s)
     screened_out = screen is not None and test.p_value > screen
-    if screened_out or not np.any(feasible(own_kinds, values[own] + steps) != values[own] + steps):
-        values[own] = feasible(own_kinds, values[own] + steps)
+    limit_s = channel_limit_s(reference)
+    if screened_out or not np.any(feasible(own_kinds, values[own] + steps, limit_s) != values[own] + steps):
+        values[own] = feasible(own_kinds, values[own] + steps, limit_s)
     else:
         # the test keeps the unbounded step; the model moves by the step within the bounds
-        values[own] = bounded_step(system, start, jacobian, own_kinds, values[own], solution)
+        values[own] = bounded_step(system, start, jacobian, own_kinds, values[own], limit_s, solution)
         system, signals, airborne = build_extended(reference, structure, values, current.tyre)
         theta, objective = minimise(system, start)
     return FittedModel(structure, vehicle, theta, system, signals, values, airborne, objective, knots), test

@@ -1,7 +1,6 @@
 """Output error of many fitted models driven by the measured plate, as the columns of one population in one
 Runge-Kutta run (each with the general tyre: a Maxwell element beside a dashpot). The gap (m) is the RMS
-over the body and wheel channels of predicted minus measured reading.
-"""
+over the body and wheel channels of predicted minus measured reading."""
 
 from __future__ import annotations
 

@@ -28,7 +28,7 @@ from estimator.doctor.catalog import (
     hinge_unknowns,
     stribeck_velocity_m_s,
 )
-from estimator.doctor.fitting import fit, fit_added, one_step
+from estimator.doctor.fitting import channel_limit_s, fit, fit_added, one_step
 from estimator.doctor.model import FitSettings, FittedModel, Reference, starting_structure
 from estimator.doctor.parameters import implausible, report, spring_curve_points
 from estimator.sweep import SweepSettings
@@ -186,6 +186,28 @@ def test_a_sensor_dynamics_full_fit_is_no_worse_than_without_it(variant: str) ->
     )
     assert full.objective <= without
     assert late == pytest.approx(DELAY_S, rel=0.3)
+
+
+LATE_S = 0.022  # the wheel laser's delay in the next test: beyond the 20 ms the search was once held to
+
+
+def test_a_channel_delay_is_searched_up_to_half_a_period_of_the_excitation_top() -> None:
+    """The search limit is the recording's own, half a period of the sweep's top (25 ms for the default
+    0-20 Hz sweep), so a wheel laser 22 ms late is fitted as a delay (once held at 20 ms, a lag the rest)."""
+    car = with_effects(default_quarter_car(), channel_delay_s={"x_t": LATE_S})
+    recording = simulate(car, SimulationSettings(sweep=SweepSettings(duration_s=8.0), seed=4)).recording
+    on = Reference.of(recording, car.known, FitSettings(points=30))
+    assert channel_limit_s(on) == pytest.approx(0.5 / on.filters.excitation_top_Hz)
+    assert 0.022 < channel_limit_s(on) < 0.03  # the sweep's top is found at 20 Hz or a little under
+    family = EffectInstance(EffectName.SENSOR_DYNAMICS, "x_t", "lag")
+    start = fit(on, START)
+    stepped, test = one_step(on, start, (family,))
+    full = fit_added(on, start, (family,), stepped)
+    values = report(family, full)
+    print(f"{family.label}: {values}, objective {start.objective:.6g} -> {full.objective:.6g}")
+    assert test.p_value < 1e-3
+    assert values["delay_s"] > 0.0205
+    assert values["equivalent_delay_s"] == pytest.approx(LATE_S, rel=0.1)
 
 
 def test_the_spring_curve_reports_its_rate_at_static_load_and_its_hinges() -> None:
