@@ -301,8 +301,13 @@ def print_report(outcomes: list[Outcome]) -> None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--split", choices=("dev", "heldout"), required=True)
-    parser.add_argument("--per-class", type=int, default=40, help="draws per class: indices 0..N-1")
-    parser.add_argument("--first-index", type=int, default=0, help="dev only: the first draw index")
+    parser.add_argument("--per-class", type=int, default=40, help="draws per class, from --first-index")
+    parser.add_argument(
+        "--first-index",
+        type=int,
+        default=0,
+        help="the first draw index (held-out: a later part of the manifest's, left unseen by a design)",
+    )
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--cache", type=Path, required=True, help="folder for recordings and outcomes")
     parser.add_argument("--classes", default=",".join(CLASSES))
@@ -318,11 +323,9 @@ def main() -> None:
         parser.error(f"unknown class {unknown[0]!r}; expected some of {', '.join(CLASSES)}")
     hashes: dict[str, str] = {}
     if args.split == "heldout":
-        if args.first_index:
-            parser.error("--first-index is for the dev split: the held-out draws are the manifest's")
         manifest = load_manifest(args.manifest)
-        if args.per_class > manifest["per_class"]:
-            parser.error(f"the manifest freezes {manifest['per_class']} draws per class")
+        if args.first_index + args.per_class > manifest["per_class"]:
+            parser.error(f"the manifest freezes {manifest['per_class']} draws per class (indices from 0)")
         hashes = {i: d["sha256"] for i, d in manifest["draws"].items()}
     entropy = namespace_entropy(args.split, args.manifest)
     indices = range(args.first_index, args.first_index + args.per_class)
