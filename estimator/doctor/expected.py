@@ -16,8 +16,9 @@ vehicle of this structure with a possible damper", not "this fit, whatever its s
 
 The noise, per channel: a laser's filter colours it (AR(1)), so the density at the top of the band
 understates it where the vehicle responds. The smaller of the output residual's and the measured reading's
-densities bounds it per frequency (misfit and response are each independent of it); above NOISE_BAND_FROM ×
-the excitation's top frequency it is fitted by S(f) = a/(1 − 2ρ·cos ω + ρ²) + b + c/f (a, b, c ≥ 0, ρ on a
+densities bounds it per frequency (misfit and response are each independent of it); above the equations'
+low-pass cutoff (identify's, estimator.signals: the band no fit of the model sees, so its residual is not
+shrunk by the fit's unknowns) it is fitted by S(f) = a/(1 − 2ρ·cos ω + ρ²) + b + c/f (a, b, c ≥ 0, ρ on a
 grid; AR(1), white and 1/f parts), extrapolated to the whole band, and read at the measured resolution.
 """
 
@@ -67,8 +68,6 @@ def plausible_truth(model: FittedModel, reference: Reference) -> FittedModel:
     return replace(truth, curve_override=tuple(smooth_curve(c) for c in truth.curves))
 
 
-NOISE_BAND_FROM = 2.0
-"""The noise is fitted above this multiple of the excitation's top frequency (the vehicle responds below)."""
 LAG1_GRID = np.linspace(0.0, 0.98, 99)  # candidate lag-1 correlations of the AR(1) part
 MIN_BINS = 8
 """Fewest density bins a fit uses; with fewer in the noise band the whole band above 0 Hz is used."""
@@ -195,7 +194,7 @@ def synthetic_recordings(
     """Per seed, the predicted body and wheel readings read with the noise of the output residual (of the
     measured reading where it diverged) at the measured resolution; the plate as measured."""
     recording, noise = reference.recording, {}
-    dt, band_from = recording.sample_time_s, NOISE_BAND_FROM * reference.filters.excitation_top_Hz
+    dt, band_from = recording.sample_time_s, reference.filters.equation_cutoff_Hz
     for name, r in residual.items():
         measured = recording.channels[name]
         r = measured if diverged(r, measured) else r
