@@ -9,8 +9,8 @@ its cable's drag), friction of their own and bearing friction, read at 500 Hz by
 Seeds. Two ranges, kept apart: DEV_SEEDS (0-999) may be looked at while designing the doctor; HELD_OUT_SEEDS
 (200000-200999) are frozen and count for the figures only, never for tuning (`--set held-out` runs the
 first `--rigs` of them after `--offset`; 100000-100999, seen once before the world's last change, are
-retired). 200000-200039 have been scored (2026-11-27, BENCHMARKS.md): a doctor designed after that is
-scored on them and, for draws no design has followed, from 200040 on (`--offset 40`). Dev rigs
+retired). 200000-200099 have been scored (2026-11-27/28, BENCHMARKS.md): a doctor designed after that is
+scored, for rigs no design has followed, from 200100 on (`--offset 100`). Dev rigs
 0-9 set the coil's strength (simulators/lab_rig/draws.py).
 
 For every rig (simulators.lab_rig.draws.draw_rig) runs A (0-20 Hz chirp) and B (random road) are simulated
