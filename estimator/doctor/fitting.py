@@ -15,6 +15,7 @@ from estimator.doctor.criteria import EquationTest, TestResult
 from estimator.doctor.model import FittedModel, ModelStructure, Reference, build_extended
 from estimator.equations import LinearResiduals
 from estimator.newton_refit import MAX_NEWTON_ITERATIONS, newton_refit
+from estimator.signals import MIN_CUTOFF_HZ
 from estimator.solvers.exact import solve_exact
 
 GAUSS_NEWTON_ITERATIONS = 4
@@ -27,8 +28,9 @@ NONNEGATIVE = frozenset({"delay", "lag", "average"})  # a sensor lags, it does n
 
 def channel_limit_s(reference: Reference) -> float:
     """The longest delay, lag or averaging window searched: half a period of the excitation's top frequency
-    (a longer delay turns the sweep's top past 180°, where it cannot be told from a lead: an alias)."""
-    return 0.5 / reference.filters.excitation_top_Hz
+    (a longer delay turns the sweep's top past 180°, where it cannot be told from a lead: an alias); a top
+    under identify's lowest cutoff (a plate that barely moved) counts as that cutoff."""
+    return 0.5 / max(reference.filters.excitation_top_Hz, MIN_CUTOFF_HZ)
 
 
 def feasible(kinds: list[str], values: np.ndarray, limit_s: float) -> np.ndarray:

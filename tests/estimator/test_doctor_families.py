@@ -31,6 +31,7 @@ from estimator.doctor.catalog import (
 from estimator.doctor.fitting import channel_limit_s, fit, fit_added, one_step
 from estimator.doctor.model import FitSettings, FittedModel, Reference, starting_structure
 from estimator.doctor.parameters import implausible, report, spring_curve_points
+from estimator.signals import MIN_CUTOFF_HZ
 from estimator.sweep import SweepSettings
 from estimator.vehicle import TyreModel, VehicleConstant
 from simulators.vehicle_sim import SimulationSettings, default_quarter_car, simulate, with_effects
@@ -199,6 +200,8 @@ def test_a_channel_delay_is_searched_up_to_half_a_period_of_the_excitation_top()
     on = Reference.of(recording, car.known, FitSettings(points=30))
     assert channel_limit_s(on) == pytest.approx(0.5 / on.filters.excitation_top_Hz)
     assert 0.022 < channel_limit_s(on) < 0.03  # the sweep's top is found at 20 Hz or a little under
+    still = replace(on, filters=replace(on.filters, excitation_top_Hz=0.0))  # a plate that barely moved
+    assert channel_limit_s(still) == pytest.approx(0.5 / MIN_CUTOFF_HZ)
     family = EffectInstance(EffectName.SENSOR_DYNAMICS, "x_t", "lag")
     start = fit(on, START)
     stepped, test = one_step(on, start, (family,))
