@@ -57,6 +57,11 @@ def reference(delayed: bool = False) -> Reference:
             "sensor_offset_m": {"x_r": PLATE_OFFSET_M},
         }
     )
+    return on_sweep(**effects)
+
+
+def on_sweep(**effects: object) -> Reference:
+    """The default car with `effects` (simulators.vehicle_sim.with_effects), on an 8 s sweep, 30 points."""
     car = with_effects(default_quarter_car(), **effects)
     settings = SimulationSettings(sweep=SweepSettings(duration_s=8.0), seed=4)
     return Reference.of(simulate(car, settings).recording, car.known, FitSettings(points=30))
@@ -195,9 +200,7 @@ LATE_S = 0.022  # the wheel laser's delay in the next test: beyond the 20 ms the
 def test_a_channel_delay_is_searched_up_to_half_a_period_of_the_excitation_top() -> None:
     """The search limit is the recording's own, half a period of the sweep's top (25 ms for the default
     0-20 Hz sweep), so a wheel laser 22 ms late is fitted as a delay (once held at 20 ms, a lag the rest)."""
-    car = with_effects(default_quarter_car(), channel_delay_s={"x_t": LATE_S})
-    recording = simulate(car, SimulationSettings(sweep=SweepSettings(duration_s=8.0), seed=4)).recording
-    on = Reference.of(recording, car.known, FitSettings(points=30))
+    on = on_sweep(channel_delay_s={"x_t": LATE_S})
     assert channel_limit_s(on) == pytest.approx(0.5 / on.filters.excitation_top_Hz)
     assert 0.022 < channel_limit_s(on) < 0.03  # the sweep's top is found at 20 Hz or a little under
     still = replace(on, filters=replace(on.filters, excitation_top_Hz=0.0))  # a plate that barely moved
