@@ -9,6 +9,7 @@ so it is no part of the installed product. Benchmarks put tests/service on sys.p
 from __future__ import annotations
 
 import re
+import signal
 import subprocess
 import sys
 import tempfile
@@ -131,6 +132,13 @@ class ServeProcess:
         except httpx.TransportError:
             return None
         return status if status["worker"]["ready"] else None
+
+    def terminate(self) -> int:
+        """Stop it as a lane's service manager does (SIGTERM), wait for its graceful shutdown and return
+        its exit code. A killed service leaves its worker's semaphores to multiprocessing's resource
+        tracker, which then warns on the shared stderr in its own format; a terminated one releases them."""
+        self.process.send_signal(signal.SIGTERM)
+        return self.process.wait(60)
 
     def stop(self) -> None:
         """Kill it if it still runs."""

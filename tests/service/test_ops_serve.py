@@ -10,6 +10,7 @@ import asyncio
 import json
 import logging
 import re
+import signal
 import socket
 import sqlite3
 from pathlib import Path
@@ -155,6 +156,8 @@ def test_serve_from_the_environment_logs_json_lines_and_a_job_once(
             job = wait_for_status(client, submitted.headers["location"], "succeeded", "failed", timeout_s=300)
             assert client.get("/healthz").status_code == 200
         wait_until(lambda: "GET /healthz" in service.log.read_text(), 30, "the access log's line")
+        # uvicorn shuts down gracefully, then re-raises the signal it caught
+        assert service.terminate() == -signal.SIGTERM
     finally:
         service.stop()
         taken.close()
