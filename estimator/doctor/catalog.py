@@ -88,10 +88,11 @@ def labels_in(step_label: str) -> list[str]:
     return step_label.split(JOIN)
 
 
-def members(candidate: Candidate, names: list[str]) -> dict[str, list[int]]:
-    """The indices in `names` of each force family's unknowns (names a system has: spring_…, tyre_…)."""
+def members(candidate: Candidate, names: list[str], before: list[str]) -> dict[str, list[int]]:
+    """The indices in `names` of each load-path family's unknowns: spring_…, tyre_… not in `before`."""
     prefix = {EffectName.SPRING_CURVE: "spring_", EffectName.TYRE_STIFFNESS: TYRE_RATE_UNKNOWN}
-    return {e.label: [k for k, n in enumerate(names) if n.startswith(prefix[e.name])] for e in candidate}
+    new = [(k, n) for k, n in enumerate(names) if n not in set(before)]
+    return {e.label: [k for k, n in new if n.startswith(prefix[e.name])] for e in candidate}
 
 
 def round_candidates(singles: list[EffectInstance]) -> list[Candidate]:

@@ -337,8 +337,7 @@ def score_candidate(
         ratio = outcome.gap_m / simulated.gap_m if np.isfinite(simulated.gap_m) else None
     reason = next(filter(None, (implausible(e, model) for e in candidate)), None)
     if len(candidate) > 1 and reason is None and outcome is not None:
-        old = set(current.system.parameter_names)
-        index = members(candidate, [n if n not in old else "" for n in model.system.parameter_names])
+        index = members(candidate, model.system.parameter_names, current.system.parameter_names)
         reason = EachMember().redundant(model.system, model.theta, index, model.signals.sample_time_s)
     return CandidateScore(
         effect=label(candidate),

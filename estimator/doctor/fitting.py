@@ -186,10 +186,10 @@ def one_step(
     index = [k for k, n in enumerate(system.parameter_names) if n not in current.system.parameter_names]
     index += range(system.n_params, system.n_params + len(own))  # and the steps of its channel parameters
     test = EquationTest().test(augmented, solution, index, reference.recording.sample_time_s)
-    screened_out = screen is not None and test.p_value > screen
-    limit_s = channel_limit_s(reference)
-    if screened_out or not np.any(feasible(own_kinds, values[own] + steps, limit_s) != values[own] + steps):
-        values[own] = feasible(own_kinds, values[own] + steps, limit_s)
+    limit_s, moved = channel_limit_s(reference), values[own] + steps
+    clipped = feasible(own_kinds, moved, limit_s)
+    if (screen is not None and test.p_value > screen) or np.array_equal(clipped, moved):
+        values[own] = clipped
     else:
         # the test keeps the unbounded step; the model moves by the step within the bounds
         values[own] = bounded_step(system, start, jacobian, own_kinds, values[own], limit_s, solution)
