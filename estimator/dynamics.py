@@ -39,6 +39,40 @@ def coulomb_sign(velocity_m_s: np.ndarray) -> np.ndarray:
     return np.tanh(velocity_m_s / COULOMB_SMOOTHING_M_S)
 
 
+def hysteresis_rate(velocity_m_s: np.ndarray, hysteresis: np.ndarray, presliding_m: np.ndarray) -> np.ndarray:
+    """ḣ of Dahl's friction state h (F = F_c·h): (v − |v|·h)/z, z the presliding displacement over which a
+    reversed friction force builds up (Dahl 1968; the LuGre model's bristle without its Stribeck and
+    damping terms); 0 where z is 0 (no hysteresis there)."""
+    present = np.asarray(presliding_m) > 0.0
+    scale = np.where(present, presliding_m, 1.0)
+    return np.where(present, (velocity_m_s - np.abs(velocity_m_s) * hysteresis) / scale, 0.0)
+
+
+def hysteresis_interval_mean(deflection_m: np.ndarray, presliding_m: float) -> np.ndarray:
+    """Dahl's h along a measured deflection ζ (linear between samples, h = 0 at the start), per sample the
+    mean over its own interval (half a sample each way). Dahl's law does not depend on the rate:
+    dh/dζ = (1 − sgn(dζ)·h)/z, so over a stretch moving by Δ in one direction s, h relaxes toward s as
+    s + (h − s)·e^(−|Δ|/z), and its mean over the stretch is s + (h − s)·(1 − e^(−a))/a, a = |Δ|/z:
+    exact for the piecewise-linear path, whatever the sample rate."""
+    zeta = np.asarray(deflection_m, dtype=float)
+    half = np.empty(2 * zeta.size - 1)  # the path at samples and midpoints
+    half[::2], half[1::2] = zeta, 0.5 * (zeta[1:] + zeta[:-1])
+    move = np.diff(half)
+    direction, a = np.sign(move), np.abs(move) / presliding_m
+    decay = np.exp(-a)
+    share = np.where(a > 1e-12, -np.expm1(-a) / np.maximum(a, 1e-12), 1.0)  # (1 − e^(−a))/a
+    start = np.empty(move.size)  # h at the start of each half-sample stretch
+    h = 0.0
+    for k, (d, e) in enumerate(zip(direction.tolist(), decay.tolist(), strict=True)):
+        start[k] = h
+        h = d + (h - d) * e
+    means = direction + (start - direction) * share
+    edges = np.concatenate([[0.0], means, [0.0]])  # the first and last samples have one half inside
+    weights = np.concatenate([[0.0], np.ones(means.size), [0.0]])
+    total, count = edges[0::2] + edges[1::2], weights[0::2] + weights[1::2]
+    return total / np.maximum(count, 1.0)
+
+
 RK4_STABLE_STEP = 2.0
 """Largest |λ|·step the Runge-Kutta is run at for the fastest decay a model has (RK4's real-axis limit is
 2.79). Measured on a motorcycle whose identified curve has a 41 kN·s/m segment near zero velocity (λ 3170/s):
@@ -131,10 +165,13 @@ def model_substeps(
     wheel_dashpot_Ns_per_m: float = 0.0,
     stribeck_peak_N: float | np.ndarray = 0.0,
     stribeck_velocity_m_s: float | np.ndarray = 0.0,
+    hysteresis_rate_per_s: float = 0.0,
 ) -> int:
     """Runge-Kutta steps per sample for a model's fastest decay: the steepest segment of its curves (of
     every column of a population), its friction (Coulomb and Stribeck peak), its tyre dashpot, the body
-    shared among `corners`; friction as arrays: one per column (and corner), the steepest counts."""
+    shared among `corners`; friction as arrays: one per column (and corner), the steepest counts.
+    hysteresis_rate_per_s: the fastest decay of a hysteretic friction's Dahl state, |v|/z at the largest
+    suspension velocity expected (hysteresis_rate)."""
     slope = max(steepest_slope_Ns_per_m(c.velocity_m_s, c.force_N) for c in curves)
     rate = decay_rate_per_s(
         slope,
@@ -145,7 +182,7 @@ def model_substeps(
         stribeck_peak_N,
         stribeck_velocity_m_s,
     )
-    return runge_kutta_substeps(rate, sample_time_s)
+    return runge_kutta_substeps(max(rate, hysteresis_rate_per_s), sample_time_s)
 
 
 def sample_substeps(samples: np.ndarray, steps: int) -> np.ndarray:
@@ -186,6 +223,11 @@ class CornerPhysics:
     smoothed sign (coulomb_sign), so that the friction at low speed is (F_c + peak)·s(v), a static peak
     above the sliding level F_c; a zero peak or velocity (per column) is no Stribeck term.
 
+    Hysteretic friction: with presliding_m z > 0 (per column) the friction's sign s is Dahl's state h
+    instead of the smoothed sign of the velocity (hysteresis_rate): after a reversal the force builds up
+    over a deflection of about z, tracing a loop in force against deflection, as seal friction does. h is
+    one more state per corner (QuarterCarPhysics, AxlePhysics), carried where a column has z > 0.
+
     Every number (and tyre_liftoff) may also be an array of the state's trailing shape, one value per
     column, so that a population of different models is integrated at once (the model doctor does).
     """
@@ -205,6 +247,7 @@ class CornerPhysics:
     spring_hinge_rates_N_per_m: np.ndarray | None = None
     stribeck_peak_N: float | np.ndarray = 0.0
     stribeck_velocity_m_s: float | np.ndarray = 0.0
+    presliding_m: float | np.ndarray = 0.0
     _friction: bool = field(init=False, repr=False, compare=False, default=False)
     _cubic: bool = field(init=False, repr=False, compare=False, default=False)
     _dashpot: bool = field(init=False, repr=False, compare=False, default=False)
@@ -214,6 +257,8 @@ class CornerPhysics:
     _stribeck: tuple[np.ndarray, np.ndarray] | None = field(
         init=False, repr=False, compare=False, default=None
     )
+    hysteretic: bool = field(init=False, repr=False, compare=False, default=False)
+    """Some column has hysteretic friction: the corner carries Dahl's state h."""
 
     def __post_init__(self) -> None:
         # which optional terms are present, decided once (the derivatives are evaluated millions of times)
@@ -225,6 +270,7 @@ class CornerPhysics:
             "_liftoff_any": bool(np.any(self.tyre_liftoff)),
             "_hinges": self._hinge_terms(),
             "_stribeck": self._stribeck_terms(),
+            "hysteretic": bool(np.any(np.asarray(self.presliding_m) > 0.0)),
         }
         for name, value in flags.items():
             object.__setattr__(self, name, value)
@@ -273,12 +319,18 @@ class CornerPhysics:
         beyond = np.where(knots >= 0.0, excess > 0.0, excess < 0.0)
         return np.sum(np.where(beyond, rates * excess, 0.0), axis=0)
 
-    def suspension_force_N(self, deflection_m: np.ndarray, velocity_m_s: np.ndarray) -> np.ndarray:
+    def suspension_force_N(
+        self, deflection_m: np.ndarray, velocity_m_s: np.ndarray, hysteresis: np.ndarray | float = 0.0
+    ) -> np.ndarray:
         """Q: force pushing the wheel up and the body down (damper + spring + friction + progression +
-        hinges + Stribeck peak)."""
+        hinges + Stribeck peak); hysteresis: Dahl's state h (used where presliding_m > 0)."""
         force = self.damper.force(velocity_m_s) + self.spring_stiffness_N_per_m * deflection_m
-        # the Stribeck peak steps with the same smoothed sign as the Coulomb friction
-        sign = coulomb_sign(velocity_m_s) if self._friction or self._stribeck is not None else 0.0
+        # the Stribeck peak steps with the same sign as the Coulomb friction
+        sign = 0.0
+        if self._friction or self._stribeck is not None:
+            sign = coulomb_sign(velocity_m_s)
+            if self.hysteretic:
+                sign = np.where(np.asarray(self.presliding_m) > 0.0, hysteresis, sign)
         if self._friction:
             force = force + self.coulomb_friction_N * sign
         if self._cubic:
@@ -290,6 +342,10 @@ class CornerPhysics:
             ratio = velocity_m_s / velocity
             force = force + peak * sign * np.exp(-(ratio * ratio))
         return force
+
+    def hysteresis_rate(self, velocity_m_s: np.ndarray, hysteresis: np.ndarray) -> np.ndarray:
+        """ḣ of the corner's Dahl state (module function hysteresis_rate)."""
+        return hysteresis_rate(velocity_m_s, hysteresis, self.presliding_m)
 
     def tyre_force_N(
         self, deflection_m: np.ndarray, rate_m_s: np.ndarray, maxwell_force_N: np.ndarray
@@ -329,18 +385,22 @@ class CornerPhysics:
 
 @dataclass(frozen=True)
 class QuarterCarPhysics:
-    """Quarter car: state = [x_s, ẋ_s, x_t, ẋ_t, f_v]."""
+    """Quarter car: state = [x_s, ẋ_s, x_t, ẋ_t, f_v], and Dahl's h where the friction is hysteretic."""
 
     corner: CornerPhysics
     sprung_mass_kg: float
     unsprung_mass_kg: float
 
-    state_size = 5
     output_names = ("x_s", "x_t")
 
+    @property
+    def state_size(self) -> int:
+        return 6 if self.corner.hysteretic else 5
+
     def derivatives(self, state: np.ndarray, plate_m: np.ndarray, plate_rate_m_s: np.ndarray) -> np.ndarray:
-        x_s, v_s, x_t, v_t, f_v = state
-        q = self.corner.suspension_force_N(x_s - x_t, v_s - v_t)
+        x_s, v_s, x_t, v_t, f_v = state[:5]
+        h = state[5] if self.corner.hysteretic else 0.0
+        q = self.corner.suspension_force_N(x_s - x_t, v_s - v_t, h)
         tyre = self.corner.tyre_force_N(x_t - plate_m, v_t - plate_rate_m_s, f_v)
         rates = np.empty_like(state)  # filled row by row: cheaper than stacking, this runs every stage
         rates[0] = v_s
@@ -348,6 +408,8 @@ class QuarterCarPhysics:
         rates[2] = v_t
         rates[3] = (q + tyre) / self.unsprung_mass_kg
         rates[4] = self.corner.maxwell_rate(v_t - plate_rate_m_s, f_v, tyre)
+        if self.corner.hysteretic:
+            rates[5] = self.corner.hysteresis_rate(v_s - v_t, h)
         return rates
 
     def outputs(self, state: np.ndarray) -> dict[str, np.ndarray]:
@@ -364,8 +426,9 @@ class QuarterCarPhysics:
 class AxlePhysics:
     """Front axle: body heave x_G and roll θ (small angle, θ ≈ (x_s_l − x_s_r)/b), two wheels.
 
-    state = [x_G, ẋ_G, θ, θ̇, x_t_l, ẋ_t_l, x_t_r, ẋ_t_r, f_v_l, f_v_r]. The plate inputs are stacked
-    (left, right). unsprung_mass_kg is per wheel (the paper's M_u^l = M_u^r).
+    state = [x_G, ẋ_G, θ, θ̇, x_t_l, ẋ_t_l, x_t_r, ẋ_t_r, f_v_l, f_v_r], and Dahl's h_l, h_r where a corner's
+    friction is hysteretic. The plate inputs are stacked (left, right). unsprung_mass_kg is per wheel (the
+    paper's M_u^l = M_u^r).
     """
 
     left: CornerPhysics
@@ -376,22 +439,30 @@ class AxlePhysics:
     track_m: float
     anti_roll_bar_N_per_m: float = 0.0
 
-    state_size = 10
     output_names = ("x_s_l", "x_s_r", "x_t_l", "x_t_r")
+
+    @property
+    def hysteretic(self) -> bool:
+        return self.left.hysteretic or self.right.hysteretic
+
+    @property
+    def state_size(self) -> int:
+        return 12 if self.hysteretic else 10
 
     def _suspension(self, state: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         x_g, v_g, roll, roll_rate, x_tl, v_tl, x_tr, v_tr = state[:8]
+        h_l, h_r = (state[10], state[11]) if self.hysteretic else (0.0, 0.0)
         half = 0.5 * self.track_m
         zeta_l, zeta_r = x_g + half * roll - x_tl, x_g - half * roll - x_tr
         vel_l, vel_r = v_g + half * roll_rate - v_tl, v_g - half * roll_rate - v_tr
         bar = self.anti_roll_bar_N_per_m * (zeta_l - zeta_r)
         return (
-            self.left.suspension_force_N(zeta_l, vel_l) + bar,
-            self.right.suspension_force_N(zeta_r, vel_r) - bar,
+            self.left.suspension_force_N(zeta_l, vel_l, h_l) + bar,
+            self.right.suspension_force_N(zeta_r, vel_r, h_r) - bar,
         )
 
     def derivatives(self, state: np.ndarray, plate_m: np.ndarray, plate_rate_m_s: np.ndarray) -> np.ndarray:
-        _, v_g, _, roll_rate, x_tl, v_tl, x_tr, v_tr, fv_l, fv_r = state
+        _, v_g, _, roll_rate, x_tl, v_tl, x_tr, v_tr, fv_l, fv_r = state[:10]
         q_l, q_r = self._suspension(state)
         tyre_l = self.left.tyre_force_N(x_tl - plate_m[0], v_tl - plate_rate_m_s[0], fv_l)
         tyre_r = self.right.tyre_force_N(x_tr - plate_m[1], v_tr - plate_rate_m_s[1], fv_r)
@@ -407,6 +478,9 @@ class AxlePhysics:
         rates[7] = (q_r + tyre_r) / self.unsprung_mass_kg
         rates[8] = self.left.maxwell_rate(v_tl - plate_rate_m_s[0], fv_l, tyre_l)
         rates[9] = self.right.maxwell_rate(v_tr - plate_rate_m_s[1], fv_r, tyre_r)
+        if self.hysteretic:
+            rates[10] = self.left.hysteresis_rate(v_g + half * roll_rate - v_tl, state[10])
+            rates[11] = self.right.hysteresis_rate(v_g - half * roll_rate - v_tr, state[11])
         return rates
 
     def outputs(self, state: np.ndarray) -> dict[str, np.ndarray]:

@@ -15,14 +15,15 @@ doctor, which may hold effects identify's form has no key for. They are carried 
 empty: none) and simulated by estimator.validation, nothing left out:
 
     "effects": {"coulomb_friction_N": F_c, "cubic_spring_N_per_m3": k3, "tyre_dashpot_Ns_per_m": c,
-                "stribeck_peak_N": F_s, "stribeck_velocity_m_s": v_s,
+                "stribeck_peak_N": F_s, "stribeck_velocity_m_s": v_s, "presliding_m": z,
                 "spring_hinges": [{"knot_m": 0.02, "rate_N_per_m": 1e5}], "tyre_liftoff": true,
                 "channel_delay_s": {"x_t": 0.002}, "sensor_offset_m": {"x_r": 1e-4},
                 "sensor_lag_s": {"x_s": 0.004}, "sensor_average_s": {"x_s": 0.01},
                 "sensor_gain_error": {"x_t": 0.03}}
 
 (the forces act at every corner, as the doctor fits them, with estimator.dynamics.CornerPhysics's meaning:
-the Stribeck peak and its velocity come together; at most HINGES spring hinges. A delayed channel reads
+the Stribeck peak and its velocity come together; a presliding displacement z makes the friction
+hysteretic (Dahl); at most HINGES spring hinges. A delayed channel reads
 the true motion `delay` later, an offset channel reads it plus the offset, a lagging one through a
 first-order lag of that time constant, an averaging one its mean over that window, one with a gain error
 ε reads (1 + ε) times it: estimator.laser_channels.ChannelCorrections). An effect name this module does not
@@ -59,7 +60,13 @@ class ModelFormatError(UserError, ValueError):
 
 STRIBECK_EFFECTS = ("stribeck_peak_N", "stribeck_velocity_m_s")
 """The Stribeck friction's two numbers: given together or not at all."""
-FORCE_EFFECTS = ("coulomb_friction_N", "cubic_spring_N_per_m3", "tyre_dashpot_Ns_per_m", *STRIBECK_EFFECTS)
+FORCE_EFFECTS = (
+    "coulomb_friction_N",
+    "cubic_spring_N_per_m3",
+    "tyre_dashpot_Ns_per_m",
+    *STRIBECK_EFFECTS,
+    "presliding_m",
+)
 """The `effects` keys that are forces at every corner, as estimator.dynamics.CornerPhysics names them."""
 CHANNEL_EFFECTS = (
     "channel_delay_s",
@@ -96,6 +103,7 @@ class ModelEffects:
     tyre_dashpot_Ns_per_m: float = 0.0
     stribeck_peak_N: float = 0.0
     stribeck_velocity_m_s: float = 0.0
+    presliding_m: float = 0.0
     spring_hinges: tuple[SpringHinge, ...] = ()
     tyre_liftoff: bool = False
     channel_delay_s: Mapping[str, float] = field(default_factory=dict)
@@ -135,6 +143,7 @@ class ModelEffects:
             else None,
             stribeck_peak_N=self.stribeck_peak_N if stribeck else 0.0,
             stribeck_velocity_m_s=self.stribeck_velocity_m_s if stribeck else 0.0,
+            presliding_m=self.presliding_m,
             tyre_liftoff=self.tyre_liftoff,
             static_wheel_load_N=static_wheel_load_N,
         )
@@ -282,6 +291,8 @@ def _effects(data: Any, axle: bool) -> ModelEffects:
         )
     if values.get("stribeck_velocity_m_s", 1.0) <= 0:
         raise ModelFormatError("model: 'effects.stribeck_velocity_m_s' must be > 0")
+    if values.get("presliding_m", 0.0) < 0:
+        raise ModelFormatError("model: 'effects.presliding_m' must be >= 0 (0: no hysteresis)")
     if "spring_hinges" in data:
         values["spring_hinges"] = _spring_hinges(data["spring_hinges"])
     if "tyre_liftoff" in data:

@@ -1,6 +1,7 @@
 """The output-error simulation compiled: the fixed-step Runge-Kutta of estimator.dynamics (quarter car or
-axle, piecewise-linear dampers, Maxwell / Kelvin-Voigt / spring tyre with a parallel dashpot, Coulomb and
-Stribeck friction, cubic spring, spring hinges, tyre lift-off) for a population of models, one column each.
+axle, piecewise-linear dampers, Maxwell / Kelvin-Voigt / spring tyre with a parallel dashpot, Coulomb,
+Stribeck and hysteretic friction, cubic spring, spring hinges, tyre lift-off) for a population of models,
+one column each.
 
 Why: the recursion is per sample (the Maxwell state, the damper's segment), so numpy cannot vectorise it
 over time; in a Python loop it was most of `shockbench identify` (about 2.5 s of 3.7 s on 12 s at 1 kHz) and
@@ -58,7 +59,8 @@ STRIBECK_VELOCITY_M_S = 10  # the kernel adds no Stribeck term where this or the
 HINGED = 11  # 1.0 where a hinge has a rate (the kernel skips the hinges where not), 0.0 where not
 HINGE_KNOT_M = 12  # HINGES rows: the knots of CornerPhysics.hinge_table
 HINGE_RATE_N_PER_M = HINGE_KNOT_M + HINGES  # HINGES rows: their rates
-CORNER_ROWS = HINGE_RATE_N_PER_M + HINGES
+PRESLIDING_M = HINGE_RATE_N_PER_M + HINGES  # hysteretic friction's z: the sign is Dahl's h where > 0
+CORNER_ROWS = PRESLIDING_M + 1
 
 # rows of the per-column body table, shape (BODY_ROWS, columns)
 SPRUNG_KG = 0
@@ -71,8 +73,10 @@ BODY_ROWS = 5
 # tyre models as the kernel knows them (one per corner)
 TYRE_CODES = {TyreModel.MAXWELL: 0, TyreModel.KELVIN_VOIGT: 1, TyreModel.SPRING: 2}
 
-STATE_SLOTS = 10
-"""The kernel carries every model's state in 10 slots (the axle's); a quarter car leaves the last 5 at 0."""
+STATE_SLOTS = 12
+"""The kernel carries every model's state in 12 slots: the axle's 10 and its corners' Dahl states h_l, h_r
+(hysteretic friction); a quarter car uses the first 5 and its h in the sixth. Slots beyond the physics'
+state_size start at 0 and are not returned."""
 
 KERNEL_MODULES = (
     "estimator.simulation_kernel",
@@ -178,6 +182,7 @@ def _corner_rows(corner: CornerPhysics, columns: int) -> np.ndarray:
     rows[TYRE_DASHPOT_NS_PER_M] = _per_column(corner.tyre_dashpot_Ns_per_m, columns)
     rows[STRIBECK_PEAK_N] = _per_column(corner.stribeck_peak_N, columns)
     rows[STRIBECK_VELOCITY_M_S] = _per_column(corner.stribeck_velocity_m_s, columns)
+    rows[PRESLIDING_M] = _per_column(corner.presliding_m, columns)
     for first, values in zip((HINGE_KNOT_M, HINGE_RATE_N_PER_M), corner.hinge_table(), strict=True):
         rows[first : first + HINGES] = values if values.ndim == 2 else values[:, None]
     rows[HINGED] = np.any(rows[HINGE_RATE_N_PER_M : HINGE_RATE_N_PER_M + HINGES] != 0.0, axis=0)
@@ -270,4 +275,4 @@ def warm() -> None:
     curve = PiecewiseLinearCurve(np.array([-1.0, 0.0, 1.0]), np.array([-1000.0, 0.0, 1000.0]))
     corner = CornerPhysics(damper=curve, spring_stiffness_N_per_m=20000.0, tyre_stiffness_N_per_m=200000.0)
     physics = QuarterCarPhysics(corner, 300.0, 40.0)
-    integrate_compiled(physics, np.zeros(5), 0.001, np.zeros(3), np.zeros(3))
+    integrate_compiled(physics, np.zeros(physics.state_size), 0.001, np.zeros(3), np.zeros(3))

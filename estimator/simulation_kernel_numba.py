@@ -1,7 +1,7 @@
 """The output-error simulation's kernel for numba: the fixed-step Runge-Kutta of estimator.dynamics (quarter
-car or axle, piecewise-linear dampers, Maxwell / Kelvin-Voigt / spring tyre with a parallel dashpot, Coulomb
-and Stribeck friction, cubic spring, spring hinges, tyre lift-off) for a population of models, one column
-each.
+car or axle, piecewise-linear dampers, Maxwell / Kelvin-Voigt / spring tyre with a parallel dashpot,
+Coulomb, Stribeck and hysteretic friction, cubic spring, spring hinges, tyre lift-off) for a population of
+models, one column each.
 
 Callers use estimator.simulation_kernel (integrate_compiled), which lays the models out in the tables this
 kernel reads and runs it either as built ahead of time into a Python extension (service/kernel_build.py,
@@ -25,6 +25,7 @@ from estimator.simulation_kernel import (
     HINGE_RATE_N_PER_M,
     HINGED,
     MAXWELL_TIME_CONSTANT_S,
+    PRESLIDING_M,
     ROLL_INERTIA_KG_M2,
     SPRING_N_PER_M,
     SPRUNG_KG,
@@ -42,8 +43,11 @@ from estimator.simulation_kernel import (
 
 _MAXWELL, _KELVIN_VOIGT = 0, 1  # estimator.simulation_kernel.TYRE_CODES
 
-if HINGES != 4 or CORNER_ROWS != 20:  # _row and _hinges_N spell the rows out one by one
-    raise ImportError(f"the kernel is written for 4 hinges, 20 corner rows, not {HINGES}, {CORNER_ROWS}")
+if HINGES != 4 or CORNER_ROWS != 21 or STATE_SLOTS != 12:  # spelled out one by one below
+    raise ImportError(
+        f"the kernel is written for 4 hinges, 21 corner rows, 12 state slots, not {HINGES}, {CORNER_ROWS},"
+        f" {STATE_SLOTS}"
+    )
 
 # The per-step functions take and return tuples of floats and 1-D arrays only, and are inlined into the
 # loop: passing numba arrays between functions costs reference counting at every call (25x slower here).
@@ -88,14 +92,18 @@ def _hinges_N(deflection_m: float, corner) -> float:
 
 
 @_inline
-def _suspension_N(deflection_m: float, velocity_m_s: float, corner, grid, force, slope, knots: int) -> float:
+def _suspension_N(
+    deflection_m: float, velocity_m_s: float, hysteresis: float, corner, grid, force, slope, knots: int
+) -> float:
     """CornerPhysics.suspension_force_N for one column, its terms in the same order; `corner` is its row of
-    the corner table."""
+    the corner table, hysteresis its Dahl state h."""
     force_N = _damper_N(velocity_m_s, grid, force, slope, knots) + corner[SPRING_N_PER_M] * deflection_m
     friction = corner[COULOMB_FRICTION_N]
     peak, stribeck_m_s = corner[STRIBECK_PEAK_N], corner[STRIBECK_VELOCITY_M_S]
     stribeck = peak != 0.0 and stribeck_m_s != 0.0
-    sign = np.tanh(velocity_m_s / COULOMB_SMOOTHING_M_S) if friction != 0.0 or stribeck else 0.0
+    sign = 0.0
+    if friction != 0.0 or stribeck:
+        sign = hysteresis if corner[PRESLIDING_M] > 0.0 else np.tanh(velocity_m_s / COULOMB_SMOOTHING_M_S)
     if friction != 0.0:
         force_N = force_N + friction * sign
     cubic = corner[CUBIC_SPRING_N_PER_M3]
@@ -107,6 +115,15 @@ def _suspension_N(deflection_m: float, velocity_m_s: float, corner, grid, force,
         ratio = velocity_m_s / stribeck_m_s
         force_N = force_N + peak * sign * np.exp(-(ratio * ratio))
     return force_N
+
+
+@_scalar
+def _hysteresis_rate(velocity_m_s: float, hysteresis: float, corner) -> float:
+    """estimator.dynamics.hysteresis_rate for one column: Dahl's ḣ, 0 without hysteresis."""
+    presliding_m = corner[PRESLIDING_M]
+    if presliding_m > 0.0:
+        return (velocity_m_s - abs(velocity_m_s) * hysteresis) / presliding_m
+    return 0.0
 
 
 @_scalar
@@ -141,9 +158,9 @@ def _maxwell_rate(rate_m_s: float, maxwell_N: float, corner, code: int, tyre_N: 
 
 @_inline
 def _quarter_car_rates(state, plate_m, plate_rate_m_s, body, corner, code, grid, force, slope, knots):
-    """QuarterCarPhysics.derivatives for one column (state in the first 5 of the 10 slots)."""
-    x_s, v_s, x_t, v_t, f_v = state[0], state[1], state[2], state[3], state[4]
-    q = _suspension_N(x_s - x_t, v_s - v_t, corner, grid, force, slope, knots)
+    """QuarterCarPhysics.derivatives for one column (state in the first 5 of the slots, h in the sixth)."""
+    x_s, v_s, x_t, v_t, f_v, h = state[0], state[1], state[2], state[3], state[4], state[5]
+    q = _suspension_N(x_s - x_t, v_s - v_t, h, corner, grid, force, slope, knots)
     tyre = _tyre_N(x_t - plate_m, v_t - plate_rate_m_s, f_v, corner, code)
     return (
         v_s,
@@ -151,6 +168,8 @@ def _quarter_car_rates(state, plate_m, plate_rate_m_s, body, corner, code, grid,
         v_t,
         (q + tyre) / body[UNSPRUNG_KG],
         _maxwell_rate(v_t - plate_rate_m_s, f_v, corner, code, tyre),
+        _hysteresis_rate(v_s - v_t, h, corner),
+        0.0,
         0.0,
         0.0,
         0.0,
@@ -172,8 +191,9 @@ def _axle_rates(
     bar = body[ANTI_ROLL_BAR_N_PER_M] * (zeta_l - zeta_r)
     grid_l, force_l, slope_l, knots_l = damper_l
     grid_r, force_r, slope_r, knots_r = damper_r
-    q_l = _suspension_N(zeta_l, vel_l, left, grid_l, force_l, slope_l, knots_l) + bar
-    q_r = _suspension_N(zeta_r, vel_r, right, grid_r, force_r, slope_r, knots_r) - bar
+    h_l, h_r = state[10], state[11]
+    q_l = _suspension_N(zeta_l, vel_l, h_l, left, grid_l, force_l, slope_l, knots_l) + bar
+    q_r = _suspension_N(zeta_r, vel_r, h_r, right, grid_r, force_r, slope_r, knots_r) - bar
     tyre_l = _tyre_N(x_tl - plate_l, v_tl - rate_l, fv_l, left, code_l)
     tyre_r = _tyre_N(x_tr - plate_r, v_tr - rate_r, fv_r, right, code_r)
     unsprung = body[UNSPRUNG_KG]
@@ -188,12 +208,14 @@ def _axle_rates(
         (q_r + tyre_r) / unsprung,
         _maxwell_rate(v_tl - rate_l, fv_l, left, code_l, tyre_l),
         _maxwell_rate(v_tr - rate_r, fv_r, right, code_r, tyre_r),
+        _hysteresis_rate(vel_l, h_l, left),
+        _hysteresis_rate(vel_r, h_r, right),
     )
 
 
 @_inline
 def _rates(axle: bool, state, plate_m, plate_rate_m_s, body, left, right, code_l, code_r, damper_l, damper_r):
-    """The derivatives of the 10 state slots; plate_m, plate_rate_m_s: (left, right) (a quarter car: left)."""
+    """The derivatives of the 12 state slots; plate_m, plate_rate_m_s: (left, right) (a quarter car: left)."""
     if axle:
         return _axle_rates(
             state, plate_m[0], plate_m[1], plate_rate_m_s[0], plate_rate_m_s[1],
@@ -212,7 +234,7 @@ def _combine(state, scale: float, rates):
         state[0] + scale * rates[0], state[1] + scale * rates[1], state[2] + scale * rates[2],
         state[3] + scale * rates[3], state[4] + scale * rates[4], state[5] + scale * rates[5],
         state[6] + scale * rates[6], state[7] + scale * rates[7], state[8] + scale * rates[8],
-        state[9] + scale * rates[9],
+        state[9] + scale * rates[9], state[10] + scale * rates[10], state[11] + scale * rates[11],
     )  # fmt: skip
 
 
@@ -225,6 +247,7 @@ def _rk4_update(state, sixth_h: float, k1, k2, k3, k4):
         k1[4] + 2.0 * k2[4] + 2.0 * k3[4] + k4[4], k1[5] + 2.0 * k2[5] + 2.0 * k3[5] + k4[5],
         k1[6] + 2.0 * k2[6] + 2.0 * k3[6] + k4[6], k1[7] + 2.0 * k2[7] + 2.0 * k3[7] + k4[7],
         k1[8] + 2.0 * k2[8] + 2.0 * k3[8] + k4[8], k1[9] + 2.0 * k2[9] + 2.0 * k3[9] + k4[9],
+        k1[10] + 2.0 * k2[10] + 2.0 * k3[10] + k4[10], k1[11] + 2.0 * k2[11] + 2.0 * k3[11] + k4[11],
     )  # fmt: skip
     return _combine(state, sixth_h, total)
 
@@ -239,7 +262,7 @@ def _row(table, corner: int, column: int):
         table[corner, 9, column], table[corner, 10, column], table[corner, 11, column],
         table[corner, 12, column], table[corner, 13, column], table[corner, 14, column],
         table[corner, 15, column], table[corner, 16, column], table[corner, 17, column],
-        table[corner, 18, column], table[corner, 19, column],
+        table[corner, 18, column], table[corner, 19, column], table[corner, 20, column],
     )  # fmt: skip
 
 
@@ -247,6 +270,7 @@ def _row(table, corner: int, column: int):
 def _store(target, state) -> None:
     target[0], target[1], target[2], target[3], target[4] = state[0], state[1], state[2], state[3], state[4]
     target[5], target[6], target[7], target[8], target[9] = state[5], state[6], state[7], state[8], state[9]
+    target[10], target[11] = state[10], state[11]
 
 
 @numba.njit(cache=True, error_model="numpy")
@@ -287,13 +311,13 @@ def integrate(
         start = np.zeros(STATE_SLOTS)
         start[:variables] = initial_state[column]
         state = (
-            start[0], start[1], start[2], start[3], start[4],
-            start[5], start[6], start[7], start[8], start[9],
+            start[0], start[1], start[2], start[3], start[4], start[5],
+            start[6], start[7], start[8], start[9], start[10], start[11],
         )  # fmt: skip
         for i in range(variables):
             states[column, i, 0] = start[i]
         current = np.empty(STATE_SLOTS)
-        zero = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+        zero = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
         for k in range(samples - 1):
             p0 = (plate_m[0, drive, k], plate_m[last, drive, k])
             p1 = (plate_m[0, drive, k + 1], plate_m[last, drive, k + 1])

@@ -68,6 +68,11 @@ def _spring(p: Parameters) -> str:
 
 def _friction(p: Parameters) -> str:
     velocity_mm_s = 1e3 * float(p["stribeck_velocity_m_s"])
+    if presliding_mm := 1e3 * float(p.get("presliding_m", 0.0)):
+        return (
+            f"hysteretic friction of {float(p['sliding_friction_N']):.3g} N sliding, built up over a "
+            f"presliding displacement of {presliding_mm:.3g} mm after each reversal (Dahl)"
+        )
     return (
         f"force step of {float(p['sliding_friction_N']):.3g} N sliding, static peak "
         f"{float(p['static_friction_N']):.3g} N (Stribeck velocity {velocity_mm_s:.3g} mm/s)"

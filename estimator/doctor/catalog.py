@@ -15,7 +15,7 @@ from enum import StrEnum
 import numpy as np
 
 from estimator.digital_filters import first_order_filter
-from estimator.dynamics import coulomb_sign
+from estimator.dynamics import coulomb_sign, hysteresis_interval_mean
 from estimator.equations import LinearResiduals
 from estimator.recording import Recording
 from estimator.signals import lowpass
@@ -38,7 +38,8 @@ class EffectName(StrEnum):
 @dataclass(frozen=True, order=True)
 class EffectInstance:
     """A family as added to a model; channel families name their channel, sensor_dynamics its variant
-    ("lag" or "average"), low_speed_friction its Stribeck velocity ("5 mm/s")."""
+    ("lag" or "average"), low_speed_friction its Stribeck velocity ("5 mm/s") or, hysteretic, its
+    presliding displacement ("presliding 0.1 mm")."""
 
     name: EffectName
     channel: str | None = None
@@ -54,6 +55,11 @@ HINGE_FRACTIONS = (0.4, 0.7)
 """spring_curve's hinge knots: these fractions of the largest deflection (0.1% / 99.9% quantile) each way."""
 STRIBECK_VELOCITIES_M_S = (0.0025, 0.005, 0.01, 0.02, 0.04)
 """low_speed_friction's variants: the velocity v_s over which the static peak decays (exp(−(v/v_s)²))."""
+PRESLIDING_M = (0.0001, 0.0002, 0.0004, 0.0008)
+"""low_speed_friction's hysteretic (Dahl) variants: the presliding displacement z over which a reversed
+friction builds up (estimator.dynamics), in octaves from a sample's travel: below 0.1 mm (0.1 m/s for 1 ms)
+the force reverses within a sample, a step the Stribeck variants already take."""
+PRESLIDING = "presliding "
 
 FRICTION_UNKNOWNS = ("friction_sliding_N", "friction_static_excess_N")
 SPRING_RATE_UNKNOWN = "spring_rate_change_N_per_m"
@@ -194,8 +200,15 @@ def interval_mean(function: Callable[[np.ndarray], np.ndarray], series: np.ndarr
 
 
 def stribeck_velocity_m_s(effect: EffectInstance) -> float:
-    """v_s of a low_speed_friction variant ("5 mm/s")."""
-    return float(str(effect.variant).removesuffix(" mm/s")) / 1000.0
+    """v_s of a low_speed_friction variant ("5 mm/s"; 0 for a hysteretic one)."""
+    variant = str(effect.variant)
+    return float(variant.removesuffix(" mm/s")) / 1000.0 if variant.endswith(" mm/s") else 0.0
+
+
+def presliding_m(effect: EffectInstance) -> float:
+    """z of a hysteretic low_speed_friction variant ("presliding 0.1 mm"; 0 for a Stribeck one)."""
+    variant = str(effect.variant)
+    return float(variant.removeprefix(PRESLIDING)[:-3]) / 1000.0 if variant.startswith(PRESLIDING) else 0.0
 
 
 def hinge_knots_m(recording: Recording, vehicle: VehicleParameters) -> tuple[float, ...]:
@@ -239,7 +252,9 @@ class Effect:
             known = vehicle.anti_roll_bar_stiffness_N_per_m > 0
             return [EffectInstance(self.name)] if vehicle.is_axle and not known else []
         if self.name is EffectName.LOW_SPEED_FRICTION:
-            return [EffectInstance(self.name, None, f"{v * 1e3:g} mm/s") for v in STRIBECK_VELOCITIES_M_S]
+            variants = [f"{v * 1e3:g} mm/s" for v in STRIBECK_VELOCITIES_M_S]
+            variants += [f"{PRESLIDING}{z * 1e3:g} mm" for z in PRESLIDING_M]
+            return [EffectInstance(self.name, None, v) for v in variants]
         if not any(self.name is n for n, _ in CHANNEL_PARAMETERS):  # a force family
             return [EffectInstance(self.name)]
         names = sorted(recording.channels)
@@ -267,6 +282,9 @@ class Effect:
             # off the plate nothing drives the element: it relaxes, and lands with what is left of its force
             series = [signals.maxwell_regressor(c.tyre_rate_m_s * k) * k for c, k in contact]
             return {"maxwell_damping_Ns_per_m": signals.tyre_column(series)}
+        if self.name is EffectName.LOW_SPEED_FRICTION and presliding_m(effect):  # F_c·h, Dahl's h
+            states = [hysteresis_interval_mean(c.deflection_m, presliding_m(effect)) for c in corners]
+            return {FRICTION_UNKNOWNS[0]: signals.suspension_column(states)}
         if self.name is EffectName.LOW_SPEED_FRICTION:
 
             def peak(v: np.ndarray) -> np.ndarray:
@@ -309,7 +327,7 @@ _DESCRIPTIONS = {
     ),
     EffectName.LOW_SPEED_FRICTION: (
         "strut and seal friction: a force step at zero velocity, with a static peak above the sliding "
-        "level (Stribeck)",
+        "level (Stribeck), or hysteretic: building up over a presliding displacement (Dahl)",
         "suspension residual that steps where the suspension velocity changes sign",
     ),
     EffectName.TYRE_STIFFNESS: (

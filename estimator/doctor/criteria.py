@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from estimator.doctor.residuals import chi_square_survival
+from estimator.distributions import chi_square_survival, student_upper_tail
 from estimator.uncertainty import confidence_intervals
 
 ALPHA = 0.05
@@ -123,26 +123,6 @@ class Selection:
             if best is not None and log_p[best] <= bound:
                 return best
         return None
-
-
-def student_upper_tail(t: float, degrees: int) -> float:
-    """P(T > t) for Student's t with a whole number of degrees of freedom (the closed forms of Abramowitz
-    and Stegun 26.7.3-4: a finite sum in cos θ, θ = atan(t/√ν)), without importing scipy.stats."""
-    theta = math.atan2(t, math.sqrt(degrees))
-    c2, s = math.cos(theta) ** 2, math.sin(theta)
-    if degrees % 2 == 1:
-        term, total = math.cos(theta), 0.0
-        for k in range(1, (degrees - 1) // 2 + 1):
-            total += term
-            term *= c2 * (2 * k) / (2 * k + 1)
-        central = (2.0 / math.pi) * (theta + s * total) if degrees > 1 else (2.0 / math.pi) * theta
-    else:
-        term, total = 1.0, 0.0
-        for k in range(degrees // 2):
-            total += term
-            term *= c2 * (2 * k + 1) / (2 * k + 2)
-        central = s * total
-    return 0.5 * (1.0 - central)
 
 
 @dataclass(frozen=True)

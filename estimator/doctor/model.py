@@ -23,6 +23,7 @@ from estimator.doctor.catalog import (
     EquationSignals,
     hinge_knots_m,
     hinge_unknowns,
+    presliding_m,
     stribeck_velocity_m_s,
     with_columns,
 )
@@ -168,6 +169,12 @@ class FittedModel:
         """v_s of the model's low_speed_friction variant (0 without the family)."""
         friction = [e for e in self.structure.effects if e.name is EffectName.LOW_SPEED_FRICTION]
         return stribeck_velocity_m_s(friction[0]) if friction else 0.0
+
+    @property
+    def presliding_m(self) -> float:
+        """z of the model's hysteretic low_speed_friction (0 without it)."""
+        friction = [e for e in self.structure.effects if e.name is EffectName.LOW_SPEED_FRICTION]
+        return presliding_m(friction[0]) if friction else 0.0
 
     @property
     def airborne_fraction(self) -> float:

@@ -49,6 +49,7 @@ def report(effect: EffectInstance, model: FittedModel) -> dict[str, float | str]
             "sliding_friction_N": sliding,
             "static_friction_N": sliding + excess,
             "stribeck_velocity_m_s": model.stribeck_velocity_m_s,
+            "presliding_m": model.presliding_m,
         }
     if name is EffectName.TYRE_STIFFNESS:
         stated = float(model.vehicle.tyre_stiffness_N_per_m or 0.0)

@@ -6,12 +6,12 @@ fitted samples). A time maps to a band of the sweep by the plate's instantaneous
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from estimator.digital_filters import welch_density
+from estimator.distributions import chi_square_survival
 from estimator.doctor.model import FittedModel
 from estimator.doctor.simulation import diverged
 
@@ -116,37 +116,6 @@ def ljung_box(residual: np.ndarray, sample_time_s: float, bandwidth_Hz: float) -
     lags = np.arange(1, WHITENESS_LAGS + 1)
     rho = np.array([np.dot(x[:-k], x[k:]) / denominator for k in lags])
     return chi_square_survival(float(n * (n + 2) * np.sum(rho**2 / (n - lags))), WHITENESS_LAGS)
-
-
-def chi_square_survival(statistic: float, degrees: int) -> float:
-    """P(χ² > statistic) with `degrees` degrees of freedom (log_chi_square_survival)."""
-    return min(1.0, math.exp(log_chi_square_survival(statistic, degrees)))
-
-
-def log_chi_square_survival(statistic: float, degrees: int) -> float:
-    """ln P(χ² > s), d = `degrees` (scipy.special.chdtrc's tail without its 0.1 s import), in logarithms
-    so that p-values that underflow to 0 still compare. Even d: e^(−s/2)·Σ_{k<d/2} (s/2)^k / k!; odd d:
-    erfc(√(s/2)) + e^(−s/2)·Σ_{k=1}^{(d−1)/2} (s/2)^(k−1/2) / Γ(k + 1/2), erfc(x) ≈ e^(−x²)/(x√π) above 25."""
-    if degrees <= 0:
-        raise ValueError(f"chi_square_survival takes a positive number of degrees, not {degrees}")
-    if statistic <= 0:
-        return 0.0
-    if not math.isfinite(statistic):
-        return -math.inf
-    half = statistic / 2.0
-    if half == 0.0:  # a statistic so small that half of it underflows: P = 1
-        return 0.0
-    log_half = math.log(half)
-    if degrees % 2 == 0:
-        terms = [k * log_half - half - math.lgamma(k + 1) for k in range(degrees // 2)]
-    else:
-        root = math.sqrt(half)
-        tail = math.log(math.erfc(root)) if root < 25.0 else -half - math.log(root * math.sqrt(math.pi))
-        terms = [tail] + [
-            (k - 0.5) * log_half - half - math.lgamma(k + 0.5) for k in range(1, (degrees + 1) // 2)
-        ]
-    top = max(terms)
-    return min(0.0, top + math.log(sum(math.exp(t - top) for t in terms)))
 
 
 def effective_samples(residual: np.ndarray) -> float:

@@ -173,6 +173,7 @@ def model_json(model: FittedModel) -> dict[str, object]:
         "tyre_dashpot_Ns_per_m": dashpot,
         "stribeck_peak_N": peak,
         "stribeck_velocity_m_s": model.stribeck_velocity_m_s if peak else 0.0,
+        "presliding_m": model.presliding_m,
         "spring_hinges": [{"knot_m": float(k), "rate_N_per_m": float(r)} for k, r in hinges if r],
         "tyre_liftoff": structure.has(EffectName.TYRE_LIFTOFF),
     }

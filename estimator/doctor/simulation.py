@@ -80,6 +80,7 @@ def _corner(models: list[FittedModel], side: int, sample_time_s: float) -> Corne
         coulomb_friction_N=each(FRICTION_UNKNOWNS[0]),
         stribeck_peak_N=each(FRICTION_UNKNOWNS[1]),
         stribeck_velocity_m_s=np.array([m.stribeck_velocity_m_s for m in models]),
+        presliding_m=np.array([m.presliding_m for m in models]),
         spring_hinge_knots_m=np.stack([np.asarray(m.knots_m) for m in models], axis=1),
         spring_hinge_rates_N_per_m=np.stack([m.hinge_rates_N_per_m for m in models], axis=1),
         tyre_liftoff=np.array([m.structure.has(EffectName.TYRE_LIFTOFF) for m in models]),
@@ -90,7 +91,9 @@ def _corner(models: list[FittedModel], side: int, sample_time_s: float) -> Corne
 
 def substeps(model: FittedModel, sample_time_s: float) -> int:
     """Runge-Kutta steps per sample for the model's fastest decay: its steepest damper segment, its friction
-    (near zero velocity a steep dashpot on the wheel) and its tyre dashpot."""
+    (near zero velocity a steep dashpot on the wheel), its tyre dashpot and a Dahl state's |v|/z."""
+    z, corners = model.presliding_m, model.signals.corners
+    speed_m_s = max(float(np.max(np.abs(c.velocity_m_s))) for c in corners) if z else 0.0
     return model_substeps(
         model.curves,
         model.sprung_mass_kg,
@@ -101,6 +104,7 @@ def substeps(model: FittedModel, sample_time_s: float) -> int:
         wheel_dashpot_Ns_per_m=model.value("tyre_dashpot_Ns_per_m"),
         stribeck_peak_N=model.value(FRICTION_UNKNOWNS[1]),
         stribeck_velocity_m_s=model.stribeck_velocity_m_s,
+        hysteresis_rate_per_s=speed_m_s / z if z else 0.0,
     )
 
 
@@ -163,6 +167,7 @@ def _simulate(
             vehicle.anti_roll_bar_stiffness_N_per_m
             + np.array([m.value("anti_roll_bar_N_per_m") for m in models]),
         )
+    state0 = np.vstack([state0, np.zeros((physics.state_size - state0.shape[0], len(models)))])  # Dahl's h
     with np.errstate(over="ignore", invalid="ignore"):  # an unstable model is reported as a diverged gap
         if steps > MAX_SUBSTEPS:  # stiffer than any damper: reported as diverged, not simulated
             states = np.full((plate.shape[-1], *state0.shape), np.nan)

@@ -240,6 +240,9 @@ class ModelEffectsOut(ResultPart):
     coulomb_friction_N: float | None = Field(None, description="sliding friction at every corner (N)")
     stribeck_peak_N: float | None = Field(None, description="static peak above the sliding level (N)")
     stribeck_velocity_m_s: float | None = Field(None, description="over which the peak decays (m/s)")
+    presliding_m: float | None = Field(
+        None, description="hysteretic (Dahl) friction: the displacement over which it builds up (m)"
+    )
     cubic_spring_N_per_m3: float | None = Field(None, description="progressive spring k3 (N/m³)")
     spring_hinges: list[SpringHingeOut] | None = Field(None, description="the spring curve's extra rates")
     tyre_dashpot_Ns_per_m: float | None = Field(None, description="tyre dashpot beside the Maxwell element")

@@ -69,8 +69,8 @@ def test_where_neither_model_simulates_the_equations_decide() -> None:
     p-value, calibrated or not, is its Wald test's."""
     import math
 
+    from estimator.distributions import log_chi_square_survival
     from estimator.doctor.diagnose import _calibrated
-    from estimator.doctor.residuals import log_chi_square_survival
 
     score = _score(40.0, math.nan, 2, "spring_curve")
     assert _log_p(score) == log_chi_square_survival(40.0, 2)

@@ -247,7 +247,7 @@ def test_the_goodness_of_fit_finds_a_gap_beyond_its_draws() -> None:
 
 def test_a_statistic_whose_half_underflows_has_p_one() -> None:
     """The smallest positive float (a draw's statistic can be that): ln P = 0, not a math domain error."""
-    from estimator.doctor.residuals import log_chi_square_survival
+    from estimator.distributions import log_chi_square_survival
 
     assert log_chi_square_survival(5e-324, 2) == 0.0
     assert log_chi_square_survival(5e-324, 3) == 0.0

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from estimator.damper import CurveBatch, PiecewiseLinearCurve
-from estimator.doctor.catalog import EffectInstance, EffectName
+from estimator.doctor.catalog import FRICTION_UNKNOWNS, EffectInstance, EffectName
 from estimator.doctor.fitting import fit
 from estimator.doctor.model import FitSettings, Reference, starting_structure
 from estimator.doctor.result import model_json
@@ -100,6 +100,7 @@ def test_the_model_form_carries_the_effects_and_validate_simulates_them(fitted) 
         ({"channel_delay_s": {"x_q": 0.001}}, "names channel 'x_q'"),
         ({"channel_delay_s": {"x_t": -0.001}}, "must be >= 0"),
         ({"tyre_liftoff": 1}, "'effects.tyre_liftoff' must be true or false"),
+        ({"coulomb_friction_N": 50.0, "presliding_m": -1e-4}, "'effects.presliding_m' must be >= 0"),
         ([], "'effects' must be an object"),
     ],
 )
@@ -242,3 +243,29 @@ def test_validate_simulates_a_spring_curve_and_sensor_shapes_as_the_doctor_does(
     validated = validate(model_from_json(form), recording)
     print(f"doctor {doctor_gap * 1e6:.2f} µm, validate {validated.gap_m * 1e6:.2f} µm")
     assert validated.gap_m == pytest.approx(doctor_gap, rel=1e-2)
+
+
+def test_validate_simulates_hysteretic_friction_as_the_doctor_does(fitted) -> None:
+    """low_speed_friction's hysteretic variant (Dahl's state, estimator.dynamics) goes through the model's
+    JSON form as `presliding_m` beside the sliding force, and validate simulates it as the doctor does: on
+    recording A its gap is the doctor's own output error of the fitted model (to 1e-3, as above)."""
+    _, a, _ = fitted
+    hysteretic = EffectInstance(EffectName.LOW_SPEED_FRICTION, None, "presliding 0.2 mm")
+    lag = EffectInstance(EffectName.SENSOR_DYNAMICS, "x_t", "lag")  # the fixture's wheel laser is late
+    structure = starting_structure(TyreModel.MAXWELL).with_effect(hysteretic).with_effect(lag)
+    model = fit(Reference.of(a, fitted[0].vehicle, FitSettings(points=30)), structure)
+    assert model.presliding_m == 0.0002 and model.stribeck_velocity_m_s == 0.0
+    # this car's friction steps with the velocity, which the curve's low-speed knots take; the Dahl force
+    # is set to its size so that the simulations compared carry it
+    theta = model.theta.copy()
+    theta[model.system.parameter_names.index(FRICTION_UNKNOWNS[0])] = FRICTION_N
+    model = replace(model, theta=theta)
+    form = json.loads(json.dumps({"model": model_json(model)}))["model"]
+    assert form["effects"]["presliding_m"] == 0.0002
+    assert form["effects"]["coulomb_friction_N"] == FRICTION_N
+    assert "stribeck_peak_N" not in form["effects"]
+    doctor_gap = float(simulate_models([model], a).gap_m()[0])
+    validated = validate(model_from_json(form), a)
+    print(f"doctor {doctor_gap * 1e6:.2f} µm, validate {validated.gap_m * 1e6:.2f} µm")
+    assert "presliding_m" in validated.effects
+    assert validated.gap_m == pytest.approx(doctor_gap, rel=1e-3)

@@ -1,5 +1,5 @@
 """estimator.doctor's scipy stand-ins for a diagnosis without scipy imports: spline_shift.shift_signal
-against scipy.ndimage.shift(order=3, mode="nearest") and residuals.chi_square_survival against
+against scipy.ndimage.shift(order=3, mode="nearest") and distributions.chi_square_survival against
 scipy.special.chdtrc, on random draws with fixed seeds."""
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ import pytest
 from scipy import ndimage
 from scipy.special import chdtrc
 
-from estimator.doctor.residuals import chi_square_survival
+from estimator.distributions import chi_square_survival
 from estimator.spline_shift import shift_signal
 
 
