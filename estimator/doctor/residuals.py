@@ -13,7 +13,7 @@ import numpy as np
 from estimator.digital_filters import welch_density
 from estimator.distributions import chi_square_survival
 from estimator.doctor.model import FittedModel
-from estimator.doctor.simulation import diverged
+from estimator.doctor.simulation import RUNAWAY_GAP_RATIO, diverged
 
 BAND_WIDTH_HZ = 2.0
 WINDOW_S = 0.5  # short-time spectrum window for the sweep frequency
@@ -162,7 +162,10 @@ class Localisation:
         if not np.isfinite(self.gap_m):
             return "the model diverges when driven by the measured plate"
         channel = self.worst_channel()
-        lo, hi = self.output_bands.worst(channel)
+        if channel not in self.output_bands.values:  # its simulation ran away (simulation.diverged)
+            band = f"where the model runs away from its motion (over {RUNAWAY_GAP_RATIO:g}× its RMS)"
+        else:
+            band = "in the {:g}-{:g} Hz part of the sweep".format(*self.output_bands.worst(channel))
         equation = max(self.equation_rms_N, key=lambda e: self.equation_rms_N[e])
         elo, ehi = self.equation_bands.worst(equation)
         vlo, vhi = self.by_variable[0].worst(equation)
@@ -170,7 +173,7 @@ class Localisation:
         return (
             f"gap {self.gap_m * 1e6:.1f} µm; largest on {channel} "
             f"({self.channel_rms_m[channel] * 1e6:.1f} µm RMS), at {start:.1f}-{stop:.1f} s, "
-            f"in the {lo:g}-{hi:g} Hz part of the sweep; largest equation residual: {equation} "
+            f"{band}; largest equation residual: {equation} "
             f"({self.equation_rms_N[equation]:.1f} N RMS, {elo:g}-{ehi:g} Hz, most at suspension velocities "
             f"{vlo:+.3f}..{vhi:+.3f} m/s); output error "
             + ("white on " + ", ".join(self.white) if self.white else "not white on any channel")

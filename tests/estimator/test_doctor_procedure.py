@@ -20,7 +20,14 @@ from cases import random_axle
 from estimator.doctor import DiagnoseOptions, DiagnosisResult, diagnose
 from estimator.doctor.catalog import CATALOG, EffectName, interval_mean
 from estimator.doctor.model import LOW_SPEED_KNOTS_M_S, low_speed_grids
-from estimator.doctor.residuals import WHITENESS_LEVEL, effective_samples, ljung_box, sweep_frequency_Hz
+from estimator.doctor.residuals import (
+    WHITENESS_LEVEL,
+    Localisation,
+    Profile,
+    effective_samples,
+    ljung_box,
+    sweep_frequency_Hz,
+)
 from estimator.recording import Recording
 from estimator.sweep import SweepSettings
 from estimator.vehicle import VehicleParameters
@@ -145,3 +152,31 @@ def test_locate_tools_whiteness_effective_samples_and_sweep_frequency() -> None:
     found = sweep_frequency_Hz(chirp, 0.001)
     inside = (t > 2.0) & (t < 18.0)
     assert np.max(np.abs(found[inside] - t[inside])) < 0.5
+
+
+def test_where_a_channel_ran_away_is_said_not_a_key_error() -> None:
+    """A channel whose simulation ran away (its output error over 3x its motion, simulation.diverged) is
+    left out of the band profile; when it is also the largest, the sentence says so. It raised KeyError
+    on held-out lab rig 200117 (the body laser's prediction 3.7 mm RMS off)."""
+    edges = np.array([0.0, 2.0, 4.0])
+
+    def profile(values: dict[str, list[float]]) -> Profile:
+        return Profile("sweep frequency", "Hz", edges, {k: np.array(v) for k, v in values.items()})
+
+    located = Localisation(
+        gap_m=2.6e-3,
+        channel_rms_m={"x_s": 3.7e-3, "x_t": 1e-4, "x_r": 1e-5},
+        equation_rms_N={"body": 0.4, "wheel": 0.1},
+        output_bands=profile({"x_t": [1e-4, 2e-5], "x_r": [1e-5, 1e-5]}),
+        equation_bands=profile({"body": [0.1, 0.4], "wheel": [0.1, 0.1]}),
+        by_variable=[profile({"body": [0.2, 0.1], "wheel": [0.1, 0.1]})],
+        whiteness={"x_t": 0.0, "x_r": 0.0},
+        spectra={},
+        worst_time_s=(2.0, 2.5),
+    )
+    sentence = located.describe()
+    assert "largest on x_s (3700.0 µm RMS)" in sentence
+    assert "where the model runs away from its motion (over 3× its RMS)" in sentence
+    assert "in the 2-4 Hz part of the sweep" not in sentence
+    kept = replace(located, channel_rms_m={"x_s": 1e-6, "x_t": 1e-4, "x_r": 1e-5})
+    assert "largest on x_t (100.0 µm RMS), at 2.0-2.5 s, in the 0-2 Hz part of the sweep" in kept.describe()
