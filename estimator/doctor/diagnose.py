@@ -210,7 +210,8 @@ class _Doctor:
             else f"p = {p:.2g}: nothing left that the noise does not explain"
         )
         effects = ", ".join(s.effect for s in steps)
-        named = f"named {effects}: the gap fell from {before:.1f} µm to {gap:.1f} µm"
+        moved = "fell" if gap <= before else "rose"  # each was significant; together they may not help
+        named = f"named {effects}: the gap {moved} from {before:.1f} µm to {gap:.1f} µm"
         plate = recording.channels["x_r_l" if final.vehicle.is_axle else "x_r"]
         return DiagnosisResult(
             starting_effects=start.structure.labels,
