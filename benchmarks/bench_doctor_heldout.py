@@ -236,8 +236,8 @@ def half_detection_size(sizes: np.ndarray, found: np.ndarray, rng: np.random.Gen
     for _ in range(300):
         pick = rng.integers(sizes.size, size=sizes.size)
         again = _logistic_fit(log_size[pick], found[pick])
-        if again is not None and again[1] > 0:
-            estimates.append(math.exp(-again[0] / again[1]))
+        if again is not None and again[1] > 0:  # a resample with a flat slope puts the size beyond reach
+            estimates.append(math.exp(min(-again[0] / again[1], 700.0)))
     if middle > high:
         return f"not reached (extrapolated {middle:.3g} > largest drawn {high:.3g})"
     if len(estimates) < 100:

@@ -26,11 +26,13 @@ from estimator.doctor.catalog import (
     hinge,
     hinge_knots_m,
     hinge_unknowns,
+    presliding_m,
     stribeck_velocity_m_s,
 )
 from estimator.doctor.fitting import channel_limit_s, fit, fit_added, one_step
 from estimator.doctor.model import FitSettings, FittedModel, Reference, starting_structure
 from estimator.doctor.parameters import implausible, report, spring_curve_points
+from estimator.dynamics import hysteresis_interval_mean
 from estimator.signals import MIN_CUTOFF_HZ
 from estimator.sweep import SweepSettings
 from estimator.vehicle import TyreModel, VehicleConstant
@@ -141,6 +143,29 @@ def test_the_friction_is_a_step_with_a_stribeck_peak() -> None:
     assert np.all(
         np.sign(sliding[fast]) == np.sign(sliding[fast][0]) * np.sign(velocity[fast] * velocity[fast][0])
     )
+
+
+def test_the_hysteretic_friction_is_dahls_state_along_the_measured_deflection() -> None:
+    """low_speed_friction's presliding variants: one unknown, the sliding force, whose column is Dahl's h
+    along the low-passed deflection through the equations; the variants are told apart from the Stribeck
+    ones by their labels."""
+    model = starting()
+    family = CATALOG[EffectName.LOW_SPEED_FRICTION]
+    variants = [e.variant for e in family.instances(model.vehicle, model.signals.recording)]
+    assert variants == ["2.5 mm/s", "5 mm/s", "10 mm/s", "20 mm/s", "40 mm/s"] + [
+        f"presliding {z} mm" for z in ("0.1", "0.2", "0.4", "0.8")
+    ]
+    hysteretic = EffectInstance(EffectName.LOW_SPEED_FRICTION, None, "presliding 0.2 mm")
+    assert presliding_m(hysteretic) == 0.0002 and stribeck_velocity_m_s(hysteretic) == 0.0
+    assert presliding_m(FRICTION) == 0.0
+    columns = family.columns(hysteretic, model.signals, [], model.knots_m, frozenset())
+    assert list(columns) == [FRICTION_UNKNOWNS[0]]
+    corner = model.signals.corners[0]
+    expected = model.signals.suspension_column([hysteresis_interval_mean(corner.deflection_m, 0.0002)])
+    np.testing.assert_array_equal(columns[FRICTION_UNKNOWNS[0]], expected)
+    # unlike the velocity's step, which it follows only away from reversals
+    stepped = family.columns(FRICTION, model.signals, [], model.knots_m, frozenset())[FRICTION_UNKNOWNS[0]]
+    assert np.max(np.abs(expected - stepped)) > 0.1
 
 
 def test_a_force_family_one_step_is_its_full_fit() -> None:

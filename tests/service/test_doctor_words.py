@@ -44,6 +44,11 @@ def test_friction_and_sensors_read_as_their_kind_and_constants() -> None:
     assert shape("low_speed_friction(5 mm/s)", friction) == (
         "force step of 80 N sliding, static peak 120 N (Stribeck velocity 5 mm/s)"
     )
+    hysteretic = {**friction, "static_friction_N": 80.0, "stribeck_velocity_m_s": 0.0, "presliding_m": 2e-4}
+    assert shape("low_speed_friction(presliding 0.2 mm)", hysteretic) == (
+        "hysteretic friction of 80 N sliding, built up over a presliding displacement of 0.2 mm after each "
+        "reversal (Dahl)"
+    )
     lag = {
         "channel": "x_s",
         "filter": "first-order lag",
