@@ -101,9 +101,9 @@ def _suspension_N(
     friction = corner[COULOMB_FRICTION_N]
     peak, stribeck_m_s = corner[STRIBECK_PEAK_N], corner[STRIBECK_VELOCITY_M_S]
     stribeck = peak != 0.0 and stribeck_m_s != 0.0
-    sign = 0.0
-    if friction != 0.0 or stribeck:
-        sign = hysteresis if corner[PRESLIDING_M] > 0.0 else np.tanh(velocity_m_s / COULOMB_SMOOTHING_M_S)
+    sign = np.tanh(velocity_m_s / COULOMB_SMOOTHING_M_S) if friction != 0.0 or stribeck else 0.0
+    if corner[PRESLIDING_M] > 0.0:  # hysteretic: the friction's sign is Dahl's state
+        sign = hysteresis
     if friction != 0.0:
         force_N = force_N + friction * sign
     cubic = corner[CUBIC_SPRING_N_PER_M3]
