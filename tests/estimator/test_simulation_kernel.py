@@ -448,6 +448,18 @@ def _substepped(physics, initial_state, plate_m, rate_m_s, steps: int) -> tuple[
     return reference, integrate_compiled(physics, initial_state, SAMPLE_TIME_S / steps, plate, rate)
 
 
+def _hysteretic_run(physics, base, drive, extra_states: int) -> np.ndarray:
+    """The reference trajectories of `physics` (`base` made hysteretic: extra_states more, Dahl's h) at 4
+    steps a sample from the drive's state with h = 0, checked finite and followed by the compiled kernel."""
+    assert physics.state_size == base.state_size + extra_states
+    plate, rate, state0 = drive
+    state0 = np.vstack([state0, np.zeros((extra_states, state0.shape[1]))])
+    reference, compiled = _substepped(physics, state0, plate, rate, 4)
+    assert np.all(np.isfinite(reference))
+    assert_same_trajectories(reference, compiled)
+    return reference
+
+
 def test_quarter_car_population_with_hysteretic_friction() -> None:
     """Six columns, Dahl friction in some and the smoothed sign in the others (the models of
     test_quarter_car_population_with_every_effect's seed 11, whose random curves are dissipative enough
@@ -457,18 +469,15 @@ def test_quarter_car_population_with_hysteretic_friction() -> None:
     columns = 6
     base = _quarter_car(11, columns, TyreModel.MAXWELL, effects=True)
     physics = replace(base, corner=_with_hysteresis(base.corner, 511, columns))
-    assert physics.state_size == 6 and base.state_size == 5
-    plate, rate, state0 = _quarter_car_drive(111, columns)
-    state0 = np.vstack([state0, np.zeros((1, columns))])
-    reference, compiled = _substepped(physics, state0, plate, rate, 4)
-    assert np.all(np.isfinite(reference))
-    assert_same_trajectories(reference, compiled)
+    assert base.state_size == 5
+    plate, rate, state0 = drive = _quarter_car_drive(111, columns)
+    reference = _hysteretic_run(physics, base, drive, 1)
     dahl = np.asarray(physics.corner.presliding_m) > 0.0
     h = reference[:, 5]
     assert np.all(np.max(np.abs(h[:, dahl]), axis=0) > 0.99) and np.all(np.abs(h) <= 1.0 + 1e-9)
     assert np.all(h[:, ~dahl] == 0.0)  # no hysteresis there: h stays at its start
     smooth = replace(physics, corner=replace(physics.corner, presliding_m=0.0))
-    other, _ = _substepped(smooth, state0[:5], plate, rate, 4)
+    other, _ = _substepped(smooth, state0, plate, rate, 4)
     moved = np.max(np.abs(other[:, 0] - reference[:, 0]), axis=0)
     print(f"body motion changed by hysteresis: {moved * 1e6} µm")
     assert np.all(moved[dahl] > 1e-6) and np.all(moved[~dahl] < 1e-12)
@@ -480,12 +489,8 @@ def test_axle_population_with_hysteretic_friction_on_one_side() -> None:
     columns = 4
     base = _axle(23, columns)
     physics = replace(base, left=_with_hysteresis(base.left, 524, columns))
-    assert physics.state_size == 12 and base.state_size == 10
-    plate, rate, state0 = _axle_drive(123, columns)
-    state0 = np.vstack([state0, np.zeros((2, columns))])
-    reference, compiled = _substepped(physics, state0, plate, rate, 4)
-    assert np.all(np.isfinite(reference))
-    assert_same_trajectories(reference, compiled)
+    assert base.state_size == 10
+    reference = _hysteretic_run(physics, base, _axle_drive(123, columns), 2)
     dahl = np.asarray(physics.left.presliding_m) > 0.0
     assert np.all(np.max(np.abs(reference[:, 10][:, dahl]), axis=0) > 0.99)
     assert np.all(reference[:, 11] == 0.0)
