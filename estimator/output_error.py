@@ -155,7 +155,7 @@ def _substeps(
     dashpot = float(np.max(np.abs(model.tyre_damping_Ns_per_m))) if kelvin_voigt else 0.0
     corners = [physics.corner] if isinstance(physics, QuarterCarPhysics) else [physics.left, physics.right]
     dashpot = max(dashpot, *(float(np.max(np.abs(c.tyre_dashpot_Ns_per_m))) for c in corners))
-    # every corner's and column's friction law: the steepest counts (dynamics.friction_slope_Ns_per_m)
+    # every corner's and column's friction law: the steepest counts (friction.friction_slope_Ns_per_m)
     laws = [
         np.broadcast_arrays(c.coulomb_friction_N, c.stribeck_peak_N, c.stribeck_velocity_m_s) for c in corners
     ]

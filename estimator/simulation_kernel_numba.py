@@ -15,7 +15,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from estimator.dynamics import COULOMB_SMOOTHING_M_S, HINGES
+from estimator.dynamics import HINGES
+from estimator.friction import COULOMB_SMOOTHING_M_S
 from estimator.simulation_kernel import (
     ANTI_ROLL_BAR_N_PER_M,
     CORNER_ROWS,

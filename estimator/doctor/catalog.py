@@ -15,8 +15,8 @@ from enum import StrEnum
 import numpy as np
 
 from estimator.digital_filters import first_order_filter
-from estimator.dynamics import coulomb_sign, hysteresis_interval_mean
 from estimator.equations import LinearResiduals
+from estimator.friction import coulomb_sign, hysteresis_interval_mean
 from estimator.recording import Recording
 from estimator.signals import lowpass
 from estimator.vehicle import VehicleConstant, VehicleParameters
@@ -57,7 +57,7 @@ STRIBECK_VELOCITIES_M_S = (0.0025, 0.005, 0.01, 0.02, 0.04)
 """low_speed_friction's variants: the velocity v_s over which the static peak decays (exp(−(v/v_s)²))."""
 PRESLIDING_M = (0.0001, 0.0002, 0.0004, 0.0008)
 """low_speed_friction's hysteretic (Dahl) variants: the presliding displacement z over which a reversed
-friction builds up (estimator.dynamics), in octaves from a sample's travel: below 0.1 mm (0.1 m/s for 1 ms)
+friction builds up (estimator.friction), in octaves from a sample's travel: below 0.1 mm (0.1 m/s for 1 ms)
 the force reverses within a sample, a step the Stribeck variants already take."""
 PRESLIDING = "presliding "
 

@@ -32,7 +32,7 @@ from estimator.doctor.catalog import (
 from estimator.doctor.fitting import channel_limit_s, fit, fit_added, one_step
 from estimator.doctor.model import FitSettings, FittedModel, Reference, starting_structure
 from estimator.doctor.parameters import implausible, report, spring_curve_points
-from estimator.dynamics import hysteresis_interval_mean
+from estimator.friction import hysteresis_interval_mean
 from estimator.signals import MIN_CUTOFF_HZ
 from estimator.sweep import SweepSettings
 from estimator.vehicle import TyreModel, VehicleConstant

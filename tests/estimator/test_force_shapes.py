@@ -20,15 +20,13 @@ import pytest
 
 from estimator.damper import PiecewiseLinearCurve
 from estimator.dynamics import (
-    COULOMB_SMOOTHING_M_S,
     HINGES,
     CornerPhysics,
     QuarterCarPhysics,
-    coulomb_sign,
-    friction_slope_Ns_per_m,
     model_substeps,
     sample_substeps,
 )
+from estimator.friction import COULOMB_SMOOTHING_M_S, coulomb_sign, friction_slope_Ns_per_m
 from estimator.model_io import ModelFormatError, SpringHinge, model_from_json
 from estimator.simulation_kernel import integrate_compiled
 

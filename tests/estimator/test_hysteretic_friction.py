@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from estimator.dynamics import hysteresis_interval_mean, hysteresis_rate
+from estimator.friction import hysteresis_interval_mean, hysteresis_rate
 
 
 def _fine_dahl(deflection_m: np.ndarray, presliding_m: float, per_sample: int) -> np.ndarray:
