@@ -1,6 +1,6 @@
 """Tail probabilities of the χ² and Student's t distributions, in closed forms: the model doctor's tests
 need them per candidate and per round, and scipy.stats costs a process about 0.1 s to import (its p-values
-agree: tests/estimator/test_doctor_criteria.py)."""
+agree: tests/estimator/test_distributions.py)."""
 
 from __future__ import annotations
 

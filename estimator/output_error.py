@@ -141,7 +141,7 @@ def _substeps(
     curves: tuple[object, ...],
     sample_time_s: float,
     physics: QuarterCarPhysics | AxlePhysics,
-    speed_m_s: float,
+    kinematics: Mapping[str, Kinematics],
 ) -> int:
     """Runge-Kutta steps per sample for the model's fastest decay (estimator.dynamics.RK4_STABLE_STEP): its
     steepest damper segment (over every column of a population), a Kelvin-Voigt tyre's damping, and the
@@ -149,7 +149,7 @@ def _substeps(
     step and a tyre dashpot, as the doctor counts them (estimator.doctor.simulation.substeps). Without the
     friction, validate simulated a doctor's model with 461 N of friction on a car at 2 ms at one step per
     sample, and its gap was 338 µm against the doctor's 89 µm for the same model (independent pair 111).
-    A hysteretic friction's Dahl state decays at |v|/z: speed_m_s is the measured suspension's fastest."""
+    A hysteretic friction's Dahl state decays at |v|/z, v the measured suspension's fastest (kinematics)."""
     kelvin_voigt = model.tyre_model is TyreModel.KELVIN_VOIGT
     # a population (the output-error refinement) carries one tyre damping per column
     dashpot = float(np.max(np.abs(model.tyre_damping_Ns_per_m))) if kelvin_voigt else 0.0
@@ -163,6 +163,11 @@ def _substeps(
         np.concatenate([np.ravel(law[k]) for law in laws]) for k in range(3)
     )
     presliding = [float(z) for c in corners for z in np.ravel(c.presliding_m) if z > 0]
+    hysteresis_rate_per_s = 0.0
+    if presliding:
+        sides = ("_l", "_r") if model.vehicle.is_axle else ("",)
+        speed = [kinematics[f"x_s{s}"].velocity_m_s - kinematics[f"x_t{s}"].velocity_m_s for s in sides]
+        hysteresis_rate_per_s = float(np.max(np.abs(speed))) / min(presliding)
     return model_substeps(
         curves,  # type: ignore[arg-type]
         model.sprung_mass_kg,
@@ -173,7 +178,7 @@ def _substeps(
         wheel_dashpot_Ns_per_m=dashpot,
         stribeck_peak_N=stribeck,
         stribeck_velocity_m_s=stribeck_velocity,
-        hysteresis_rate_per_s=speed_m_s / min(presliding) if presliding else 0.0,
+        hysteresis_rate_per_s=hysteresis_rate_per_s,
     )
 
 
@@ -195,9 +200,7 @@ def simulate_identified(
     physics = model.physics(tuple(c.dissipative() for c in curves or model.curves))
     if batch is not None:
         state0 = np.repeat(state0[:, None], batch, axis=1)
-    sides = ("_l", "_r") if model.vehicle.is_axle else ("",)
-    suspension = [kinematics[f"x_s{s}"].velocity_m_s - kinematics[f"x_t{s}"].velocity_m_s for s in sides]
-    steps = _substeps(model, curves or model.curves, dt, physics, float(np.max(np.abs(suspension))))
+    steps = _substeps(model, curves or model.curves, dt, physics, kinematics)
     state0 = np.concatenate([state0, np.zeros((physics.state_size - len(state0), *state0.shape[1:]))])
     with np.errstate(over="ignore", invalid="ignore"):  # an unstable model is reported as a diverged gap
         states = integrate_compiled(

@@ -97,7 +97,8 @@ def labels_in(step_label: str) -> list[str]:
 def members(candidate: Candidate, names: list[str], before: list[str]) -> dict[str, list[int]]:
     """The indices in `names` of each load-path family's unknowns: spring_…, tyre_… not in `before`."""
     prefix = {EffectName.SPRING_CURVE: "spring_", EffectName.TYRE_STIFFNESS: TYRE_RATE_UNKNOWN}
-    new = [(k, n) for k, n in enumerate(names) if n not in set(before)]
+    old = set(before)
+    new = [(k, n) for k, n in enumerate(names) if n not in old]
     return {e.label: [k for k, n in new if n.startswith(prefix[e.name])] for e in candidate}
 
 
@@ -282,8 +283,8 @@ class Effect:
             # off the plate nothing drives the element: it relaxes, and lands with what is left of its force
             series = [signals.maxwell_regressor(c.tyre_rate_m_s * k) * k for c, k in contact]
             return {"maxwell_damping_Ns_per_m": signals.tyre_column(series)}
-        if self.name is EffectName.LOW_SPEED_FRICTION and presliding_m(effect):  # F_c·h, Dahl's h
-            states = [hysteresis_interval_mean(c.deflection_m, presliding_m(effect)) for c in corners]
+        if self.name is EffectName.LOW_SPEED_FRICTION and (z := presliding_m(effect)):  # F_c·h, Dahl's h
+            states = [hysteresis_interval_mean(c.deflection_m, z) for c in corners]
             return {FRICTION_UNKNOWNS[0]: signals.suspension_column(states)}
         if self.name is EffectName.LOW_SPEED_FRICTION:
 

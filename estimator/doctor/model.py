@@ -165,16 +165,19 @@ class FittedModel:
         return np.array([self.value(n) for n in hinge_unknowns(self.knots_m)])
 
     @property
+    def _friction(self) -> EffectInstance | None:
+        """The model's low_speed_friction variant, if it has the family."""
+        return next((e for e in self.structure.effects if e.name is EffectName.LOW_SPEED_FRICTION), None)
+
+    @property
     def stribeck_velocity_m_s(self) -> float:
         """v_s of the model's low_speed_friction variant (0 without the family)."""
-        friction = [e for e in self.structure.effects if e.name is EffectName.LOW_SPEED_FRICTION]
-        return stribeck_velocity_m_s(friction[0]) if friction else 0.0
+        return stribeck_velocity_m_s(self._friction) if self._friction else 0.0
 
     @property
     def presliding_m(self) -> float:
         """z of the model's hysteretic low_speed_friction (0 without it)."""
-        friction = [e for e in self.structure.effects if e.name is EffectName.LOW_SPEED_FRICTION]
-        return presliding_m(friction[0]) if friction else 0.0
+        return presliding_m(self._friction) if self._friction else 0.0
 
     @property
     def airborne_fraction(self) -> float:
