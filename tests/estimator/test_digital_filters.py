@@ -13,6 +13,7 @@ from scipy import signal
 from scipy.linalg import lapack
 
 import estimator.digital_filters as digital_filters
+from estimator.damper import hat_basis
 from estimator.digital_filters import (
     analytic_signal,
     butterworth_lowpass_sos,
@@ -158,3 +159,23 @@ def test_doctor_sized_filtering_same_with_both_paths(monkeypatch, extension) -> 
     assert relative_difference(results["compiled"][0], signal.sosfiltfilt(sos, basis, axis=0)) < (
         RELATIVE_TOLERANCE
     )
+
+
+def test_a_column_quiet_for_long_stretches_filters_to_zeros_not_subnormals() -> None:
+    """A tent function of one damper knot (estimator.damper.hat_basis) is zero between the sweep's passes
+    over its knot; the filter's tail there decays through the subnormal range, where arithmetic is many
+    times slower, unless flushed. Both paths give exact zeros there instead, no subnormal anywhere, and
+    scipy's values to 1e-12 relative."""
+    time_s = np.arange(15001) * 0.002
+    velocity = 0.3 * np.sin(2 * np.pi * (0.3 + 0.08 * time_s) * time_s) * np.exp(-time_s / 10)
+    grid = np.linspace(-0.4, 0.4, 30)
+    basis = np.asfortranarray(hat_basis(velocity, grid))
+    sos = butterworth_lowpass_sos(4, 25.0, 500.0)
+    reference = signal.sosfiltfilt(sos, basis, axis=0)
+    tiny = np.finfo(float).tiny
+    subnormal = (reference != 0) & (np.abs(reference) < tiny)
+    assert np.count_nonzero(subnormal) > 1000  # the case is real
+    ours = sosfiltfilt(sos, basis, axis=0)
+    assert np.count_nonzero((ours != 0) & (np.abs(ours) < tiny)) == 0
+    assert np.mean(ours[subnormal] == 0.0) > 0.99  # flushed early in each quiet stretch
+    assert relative_difference(ours, reference) < RELATIVE_TOLERANCE
