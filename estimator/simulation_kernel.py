@@ -20,7 +20,8 @@ Which compiled code runs (the kernel's source is estimator/simulation_kernel_num
 - the extension built ahead of time, `estimator/_simulation_kernel_aot_<digest>` (numba's pycc, built by
   service/kernel_build.py: `shockbench demo` or `python -m service.kernel_build`), when it exists for the
   present source (the digest is of the sources of KERNEL_MODULES: this file, the kernel's and that of
-  estimator.digital_filters' compiled filters, which the extension also holds). Loading it takes
+  estimator.digital_filters' compiled filters, which the extension also holds, and of the values of the
+  constants they import, IMPORTED_CONSTANTS). Loading it takes
   milliseconds: it needs neither numba nor its cache. A process that only runs one identify would
   otherwise spend 1-3 s importing numba and loading the cached kernel (numba's typing registries), about
   100 times the simulation itself;
@@ -84,14 +85,23 @@ KERNEL_MODULES = (
     "estimator.filter_kernel_numba",
 )
 """The modules the extension is built from (its digest covers their source)."""
+IMPORTED_CONSTANTS = {
+    "estimator.dynamics": ("HINGES",),
+    "estimator.friction": ("COULOMB_SMOOTHING_M_S",),
+    "estimator.digital_filters": ("FLUSH_BELOW_PEAK",),
+}
+"""The names the kernel modules import from other modules of ours, by module: the build freezes their
+values into the extension, so the digest covers their values too (tests/estimator/test_kernel_digest.py
+checks the table lists every such import)."""
 EXTENSION_PREFIX = "_simulation_kernel_aot_"
 
 
 def source_digest() -> str:
     """The kernel's version: a digest of the source of this module (the table layout) and of the kernels'
     (KERNEL_MODULES), as the import system reads them (the kernel modules are not imported: that would
-    import numba). CRC-32 is enough to tell versions apart (this is a cache key, not a seal) and zlib is
-    built in, where hashlib's OpenSSL would cost every process about 2.5 ms of its start."""
+    import numba), and of the values of the constants they import (IMPORTED_CONSTANTS). CRC-32 is enough
+    to tell versions apart (this is a cache key, not a seal) and zlib is built in, where hashlib's OpenSSL
+    would cost every process about 2.5 ms of its start."""
     digest = 0
     for name in KERNEL_MODULES:
         spec = importlib.util.find_spec(name)
@@ -99,6 +109,9 @@ def source_digest() -> str:
         if source is None:
             raise ImportError(f"no source for {name}")
         digest = zlib.crc32(source.encode(), digest)
+    for module, names in IMPORTED_CONSTANTS.items():
+        values = importlib.import_module(module).__dict__
+        digest = zlib.crc32(repr([(name, values[name]) for name in names]).encode(), digest)
     return f"{digest:08x}"
 
 
