@@ -141,8 +141,8 @@ def main() -> None:
         runs = ", ".join(f"{v:.2f}" for v in values)
         cpu_s = statistics.median(cpu[name])
         print(
-            f"{name}: median {median:.2f} s ({runs}){ratios}; CPU {cpu_s:.2f} s (the doctor's fits run in "
-            f"threads); peak RSS {max(peaks[name]):.0f} MiB"
+            f"{name}: median {median:.2f} s ({runs}){ratios}; CPU {cpu_s:.2f} s (the process and its "
+            f"children: the doctor forks its fits); peak RSS {max(peaks[name]):.0f} MiB"
         )
     for name, verdict in verdicts.items():
         print(f"{name}: {verdict[:120]}")
