@@ -120,6 +120,13 @@ def extension_name() -> str:
     return EXTENSION_PREFIX + source_digest()
 
 
+def extension_built() -> bool:
+    """Is there an extension built ahead of time for the present source (found, not loaded: no numba import
+    either way)? For a service's readiness details: without one, every process loads numba (1-3 s) and
+    the first on a machine compiles (10-30 s)."""
+    return importlib.util.find_spec(f"estimator.{extension_name()}") is not None
+
+
 @cache
 def _extension() -> ModuleType | None:
     """The extension built ahead of time for the present source, or None where there is none (not built

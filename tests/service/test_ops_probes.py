@@ -1,5 +1,6 @@
 """The probes (issue 31, item 3): GET /healthz and /readyz answer without a key, read no body and look up no
-key, and /readyz names the check that failed: the database, the worker, the bench's devices."""
+key, and /readyz names the check that failed: the database, the worker, the bench's devices; it also says
+whether the compiled kernel is built (never a failure)."""
 
 from __future__ import annotations
 
@@ -14,10 +15,11 @@ import httpx
 import pytest
 from live_server import LiveServer
 
+from estimator import simulation_kernel
 from service.access import KeyRing, Role
 from service.api import ServiceSettings, create_app
 from service.api.key_gate import EXEMPT_PATHS, OPEN, KeyGate
-from service.api.routes.health import database_check
+from service.api.routes.health import database_check, kernel_check
 from service.store.database import Database
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -39,7 +41,7 @@ def test_the_probes_answer_anyone(server: LiveServer, headers: dict[str, str]) -
     assert ready.status_code == 200, ready.text
     body = ready.json()
     assert body["status"] == "ready" and body["failed"] == []
-    assert set(body["checks"]) == {"database", "worker", "devices"}
+    assert set(body["checks"]) == {"database", "worker", "devices", "kernel"}
     assert all(check["ok"] for check in body["checks"].values())
     assert "simulated bench" in body["checks"]["devices"]["detail"]
 
@@ -121,3 +123,15 @@ def test_a_drive_unreachable_at_start_up_makes_the_service_not_ready(tmp_path: P
     assert body["status"] == "not ready" and body["failed"] == ["devices"]
     assert "could not command the drive 'plate-drive'" in body["checks"]["devices"]["detail"]
     assert body["checks"]["database"]["ok"] and body["checks"]["worker"]["ok"]
+
+
+def test_readiness_says_whether_the_compiled_kernel_is_built(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A stale or missing extension is no failure (numba runs the kernel) but the detail says so, with the
+    command that builds it; neither case imports numba or loads the extension."""
+    monkeypatch.setattr(simulation_kernel, "extension_name", lambda: "_simulation_kernel_aot_" + "0" * 8)
+    missing = kernel_check()
+    assert missing.ok and "not built for this version" in missing.detail
+    assert "python -m service.kernel_build" in missing.detail
+    # found: a module of that name exists in the estimator package
+    monkeypatch.setattr(simulation_kernel, "extension_name", lambda: "simulation_kernel")
+    assert kernel_check() == dataclasses.replace(missing, detail="compiled ahead of time (simulation_kernel)")

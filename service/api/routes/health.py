@@ -2,9 +2,10 @@
 paths by name, service.api.key_gate.EXEMPT_PATHS) and out of the OpenAPI schema:
 
 - `GET /healthz`: liveness, the process answers. 200 {"status": "ok"}, from memory, nothing else looked at.
-- `GET /readyz`: readiness, the service can do its work. Three checks, each {"ok": bool, "detail": str}:
-  `database` (a `SELECT 1` within READY_DATABASE_TIMEOUT_S), `worker` (the worker process alive) and
-  `devices` (the bench's devices as the service knows them, see `devices_check`). 200 when all pass, else
+- `GET /readyz`: readiness, the service can do its work. Four checks, each {"ok": bool, "detail": str}:
+  `database` (a `SELECT 1` within READY_DATABASE_TIMEOUT_S), `worker` (the worker process alive),
+  `devices` (the bench's devices as the service knows them, see `devices_check`) and `kernel` (whether
+  the compiled simulation kernel is built for this version, see `kernel_check`). 200 when all pass, else
   503 naming the failed ones in "failed". A lane whose central database is away is still ready: it works
   on its local store (GET /api/v1/status and /metrics show the sync).
 
@@ -84,6 +85,22 @@ def devices_check(services: Services) -> Check:
     )
 
 
+def kernel_check() -> Check:
+    """Always ok (numba runs the simulation without the extension built ahead of time), but the detail
+    says which: without the extension each analysis process loads numba (1-3 s) and the first on a machine
+    compiles the kernel (10-30 s), which an operator sees as a slow lane, not as a failure."""
+    from estimator import simulation_kernel
+
+    name = simulation_kernel.extension_name()
+    if simulation_kernel.extension_built():
+        return Check(True, f"compiled ahead of time ({name})")
+    return Check(
+        True,
+        f"not built for this version ({name}): numba compiles or loads it in each process; build it with "
+        "`python -m service.kernel_build`",
+    )
+
+
 @router.get(HEALTH_PATH, include_in_schema=False)
 async def healthz() -> dict[str, str]:
     """The process answers."""
@@ -100,6 +117,7 @@ async def readyz(request: Request) -> JSONResponse:
         "database": await database_check(services),
         "worker": worker_check(services),
         "devices": devices_check(services),
+        "kernel": kernel_check(),
     }
     failed = [name for name, check in checks.items() if not check.ok]
     body = {
