@@ -120,11 +120,12 @@ def extension_name() -> str:
     return EXTENSION_PREFIX + source_digest()
 
 
-def extension_built() -> bool:
-    """Is there an extension built ahead of time for the present source (found, not loaded: no numba import
-    either way)? For a service's readiness details: without one, every process loads numba (1-3 s) and
-    the first on a machine compiles (10-30 s)."""
-    return importlib.util.find_spec(f"estimator.{extension_name()}") is not None
+def built_extension() -> str | None:
+    """The name of the extension built ahead of time for the present source, None when there is none
+    (found, not loaded: no numba import either way). For a service's readiness details: without one,
+    every process loads numba (1-3 s) and the first on a machine compiles (10-30 s)."""
+    name = extension_name()
+    return name if importlib.util.find_spec(f"estimator.{name}") is not None else None
 
 
 @cache

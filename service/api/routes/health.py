@@ -9,7 +9,8 @@ paths by name, service.api.key_gate.EXEMPT_PATHS) and out of the OpenAPI schema:
   503 naming the failed ones in "failed". A lane whose central database is away is still ready: it works
   on its local store (GET /api/v1/status and /metrics show the sync).
 
-Neither takes a body, and no key is looked up: a probe costs microseconds (readiness: one pooled query).
+Neither takes a body, and no key is looked up: a probe costs microseconds (readiness: one pooled query,
+and the kernel's digest over three source files).
 """
 
 from __future__ import annotations
@@ -89,14 +90,14 @@ def kernel_check() -> Check:
     """Always ok (numba runs the simulation without the extension built ahead of time), but the detail
     says which: without the extension each analysis process loads numba (1-3 s) and the first on a machine
     compiles the kernel (10-30 s), which an operator sees as a slow lane, not as a failure."""
-    from estimator import simulation_kernel
+    from estimator.simulation_kernel import built_extension
 
-    name = simulation_kernel.extension_name()
-    if simulation_kernel.extension_built():
+    name = built_extension()
+    if name is not None:
         return Check(True, f"compiled ahead of time ({name})")
     return Check(
         True,
-        f"not built for this version ({name}): numba compiles or loads it in each process; build it with "
+        "not built for this version: numba compiles or loads it in each process; build it with "
         "`python -m service.kernel_build`",
     )
 
