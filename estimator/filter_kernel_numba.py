@@ -151,12 +151,15 @@ def zero_phase(sos, zi, edge: int, x, out) -> None:
     coefficients = [(sos[k, 0], sos[k, 1], sos[k, 2], sos[k, 3], sos[k, 4]) for k in range(sos.shape[0])]
     for column in range(columns):
         first, last = x[0, column], x[samples - 1, column]
+        peak = 0.0  # of the padded column, found as it is copied in
         for i in range(edge):
             buffer[i] = 2.0 * first - x[edge - i, column]
             buffer[edge + samples + i] = 2.0 * last - x[samples - 2 - i, column]
+            peak = max(peak, abs(buffer[i]), abs(buffer[edge + samples + i]))
         for i in range(samples):
             buffer[edge + i] = x[i, column]
-        floor = np.max(np.abs(buffer)) * FLUSH_BELOW_PEAK
+            peak = max(peak, abs(buffer[edge + i]))
+        floor = peak * FLUSH_BELOW_PEAK
         _cascade(buffer, 0, 1, length, coefficients, zi, buffer[0], floor)
         _cascade(buffer, length - 1, -1, length, coefficients, zi, buffer[length - 1], floor)
         for i in range(samples):
