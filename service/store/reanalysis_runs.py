@@ -103,30 +103,32 @@ class RunStore:
         return self.record_many(run_id, [Written(recording_sha256, analysis, result, reason, seconds)]) == 1
 
     def record_many(self, run_id: int, written: Sequence[Written]) -> int:
-        """Store results of the run in one transaction (a batch's); how many were new (the others were
-        stored already and are left as they are)."""
+        """Store results of the run in one transaction and one INSERT (a batch's); how many were new (the
+        others were stored already and are left as they are). One multi-row statement, not one a result:
+        the client stores every batch on the cores the workers compute on."""
         if not written:
             return 0
         now = utcnow()
-        new = 0
+        rows = [
+            {
+                "run_id": run_id,
+                "recording_sha256": w.recording_sha256,
+                "analysis": w.analysis,
+                "result": w.result,
+                "reason": w.reason,
+                "seconds": w.seconds,
+                "created_at": now,
+            }
+            for w in written
+        ]
         with self.db.transaction() as session:
-            for w in written:
-                statement = (
-                    _insert(session)
-                    .values(
-                        run_id=run_id,
-                        recording_sha256=w.recording_sha256,
-                        analysis=w.analysis,
-                        result=w.result,
-                        reason=w.reason,
-                        seconds=w.seconds,
-                        created_at=now,
-                    )
-                    .on_conflict_do_nothing(index_elements=["run_id", "recording_sha256", "analysis"])
-                    .returning(ReanalysisResultRow.id)
-                )
-                new += session.execute(statement).first() is not None  # no row back: it was there
-        return new
+            statement = (
+                _insert(session)
+                .values(rows)
+                .on_conflict_do_nothing(index_elements=["run_id", "recording_sha256", "analysis"])
+                .returning(ReanalysisResultRow.id)
+            )
+            return len(session.execute(statement).all())  # a row comes back for each new result only
 
     def finish(self, run_id: int) -> RunRecord:
         """The run ended now, its counts taken from its stored results (a recording succeeded when every

@@ -17,7 +17,7 @@ from service.reanalyse.sources import Item
 from service.reanalyse.task import Analysis, AnalysisOptions, Outcome, Task
 from service.store.database import Database
 from service.store.jobs import JobFiles, JobStore
-from service.store.reanalysis_runs import RunStore
+from service.store.reanalysis_runs import RunStore, Written
 from service.store.recordings import RecordingStore
 
 PASSING = {"phase_shift_min_deg": 60.0, "eusama_percent": 70.0}
@@ -44,6 +44,25 @@ def test_a_result_is_written_once_however_often_it_is_written(database: Database
     assert (finished.recordings, finished.succeeded, finished.failed) == (2, 1, 1)
     assert finished.software_version == "1.2.3" and finished.finished_at is not None
     assert runs.count(run) == 2 and runs.results(run)["a" * 64] == result()  # the first write stands
+
+
+def test_a_batch_stores_its_new_results_and_leaves_those_stored_before(database: Database) -> None:
+    """record_many writes a batch in one statement: a result stored before (a retried batch's) stays as
+    it was, the others are new, and a result written twice within the batch counts once."""
+    runs = RunStore(database)
+    run = runs.begin("1.2.3", {"analyses": ["identify"]}, recordings=3)
+    assert runs.record(run, "a" * 64, "identify", result(), None, 0.5)
+    batch = [
+        Written("a" * 64, "identify", result(2.0), None, 0.7),
+        Written("b" * 64, "identify", result(3.0), None, 0.6),
+        Written("c" * 64, "identify", None, "broken.csv:3: NaN", 0.1),
+        Written("b" * 64, "identify", result(4.0), None, 0.6),
+    ]
+    assert runs.record_many(run, batch) == 2
+    assert runs.record_many(run, batch) == 0
+    stored = runs.results(run)
+    assert stored["a" * 64] == result() and stored["b" * 64] == result(3.0) and stored["c" * 64] is None
+    assert runs.count(run) == 3
 
 
 def test_compare_finds_the_largest_changes_and_the_verdict_flips() -> None:
