@@ -478,3 +478,11 @@ def integrate_rk4(
         )
         states[k + 1] = state
     return states
+
+
+def start_state(physics: QuarterCarPhysics | AxlePhysics, measured: np.ndarray) -> np.ndarray:
+    """The initial state of a simulation: `measured` (the motion and Maxwell forces at the start, rows
+    first, columns for a batch; estimator.output_error.measured_drive) with Dahl's h = 0 appended where the
+    physics carries it (a hysteretic friction starts unbuilt)."""
+    missing = physics.state_size - measured.shape[0]
+    return np.concatenate([measured, np.zeros((missing, *measured.shape[1:]))])

@@ -24,6 +24,7 @@ from estimator.dynamics import (
     QuarterCarPhysics,
     model_substeps,
     sample_substeps,
+    start_state,
 )
 from estimator.recording import Recording
 from estimator.signals import Kinematics, initial_state
@@ -201,7 +202,7 @@ def simulate_identified(
     if batch is not None:
         state0 = np.repeat(state0[:, None], batch, axis=1)
     steps = _substeps(model, curves or model.curves, dt, physics, kinematics)
-    state0 = np.concatenate([state0, np.zeros((physics.state_size - len(state0), *state0.shape[1:]))])
+    state0 = start_state(physics, state0)
     with np.errstate(over="ignore", invalid="ignore"):  # an unstable model is reported as a diverged gap
         states = integrate_compiled(
             physics, state0, dt / steps, sample_substeps(plate, steps), sample_substeps(rate, steps)
