@@ -141,6 +141,12 @@ def run_alone(url: str, workers: int) -> None:
         client_cpu = time.process_time() - cpu  # this process: the client and the local scheduler
     finally:
         database.dispose()
+        # the workers are forked from the forkserver (service.reanalyse.forkserver), whose CPU and theirs
+        # reach this process's reaped children only once it is stopped and waited for; it would otherwise
+        # end after this process and count as other processes' CPU (multiprocessing's own stop, private)
+        from multiprocessing import forkserver
+
+        forkserver._forkserver._stop()
     print(f"    client and scheduler CPU {client_cpu / len(seconds) * 1e3:.1f} ms a recording", flush=True)
     stop = start + wall - last[0]
     fields = asdict(ClusterRun(wall, up[0] - start, statistics.mean(seconds), len(seconds), stop, None))

@@ -25,6 +25,8 @@ from typing import TYPE_CHECKING, Any
 
 from estimator.errors import UserError, one_line
 from service.extras import extra_needed
+from service.reanalyse.forkserver import METHOD as FORK_METHOD
+from service.reanalyse.forkserver import start_forkserver
 from service.reanalyse.results import Done, save, stored, summary_row, write_summary
 from service.reanalyse.sources import Item, input_digest
 from service.reanalyse.task import (
@@ -154,7 +156,9 @@ def _bokeh_installed() -> bool:
 def dask_client(settings: RunSettings) -> Iterator[Client]:
     """A client of the scheduler at settings.scheduler, or of a LocalCluster of settings.workers processes
     with one thread each (the estimator is single-threaded numpy: processes, not threads, run in parallel);
-    its workers set up by WorkerSetup."""
+    its workers set up by WorkerSetup; a LocalCluster's forked from a warm server started first
+    (forkserver.py), where the platform has one."""
+    forked = settings.scheduler is None and start_forkserver()  # before Dask's import: side by side
     with extra_needed("cluster", DASK_NEEDED_FOR):
         import dask
         from dask.distributed import Client, LocalCluster
@@ -170,8 +174,9 @@ def dask_client(settings: RunSettings) -> Iterator[Client]:
             client.register_plugin(WorkerSetup())
             yield client
         return
+    start = {"distributed.worker.multiprocessing-method": FORK_METHOD} if forked else {}
     with (
-        dask.config.set({**ONE_BLAS_THREAD, **QUIET_CLUSTER}),
+        dask.config.set({**ONE_BLAS_THREAD, **QUIET_CLUSTER, **start}),
         LocalCluster(
             n_workers=settings.workers,
             threads_per_worker=1,

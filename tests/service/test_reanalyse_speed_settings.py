@@ -1,11 +1,13 @@
 """What keeps `reanalyse` near the in-process speed (issue 33, item 4): batches that shrink towards the
 end, the workers set up with glibc's allocator keeping freed memory, the local cluster's with Dask's
-dashboard-only chores cut down, and a closing worker's objects frozen before its process ends."""
+dashboard-only chores cut down and forked from a warm single-threaded server, and a closing worker's objects
+frozen before its process ends."""
 
 from __future__ import annotations
 
 import ctypes
 import math
+import os
 import subprocess
 import sys
 from collections.abc import Iterator
@@ -32,6 +34,7 @@ from distributed import Client
 from distributed.core import Status
 
 from service.reanalyse import worker_setup
+from service.reanalyse.forkserver import PRELOAD, start_forkserver
 
 
 @given(st.integers(0, 400), st.integers(1, 8), st.integers(1, 6))
@@ -106,6 +109,39 @@ def test_a_fresh_process_maps_a_40_mib_array_of_its_own() -> None:
 def test_the_workers_keep_freed_memory(client: Client) -> None:
     (mapped,) = client.run(mapped_for_a_40_mib_array).values()
     assert mapped == 0
+
+
+def _parent_and_blas() -> tuple[int, str, list[int], bool]:
+    """In a worker: its parent's pid and command line, its BLAS pools' thread counts, and whether the
+    estimator was loaded (by the server it was forked from) before any task."""
+    import os
+
+    from threadpoolctl import threadpool_info
+
+    parent = os.getppid()
+    command = Path(f"/proc/{parent}/cmdline").read_bytes().replace(b"\0", b" ").decode()
+    blas = sorted({i["num_threads"] for i in threadpool_info() if i.get("user_api") == "blas"})
+    return parent, command, blas, "estimator.identify" in sys.modules
+
+
+@linux_only
+def test_the_local_cluster_forks_its_workers_from_a_warm_single_threaded_server(client: Client) -> None:
+    """The workers are children of multiprocessing's forkserver, which preloaded Dask and the estimator
+    with one BLAS thread and runs no thread of its own (a fork copies no lock another thread holds)."""
+    ((parent, command, blas, loaded),) = client.run(_parent_and_blas).values()
+    assert "multiprocessing.forkserver" in command and all(m in command for m in PRELOAD)
+    assert blas == [1] and loaded
+    status = Path(f"/proc/{parent}/status").read_text()
+    assert "\nThreads:\t1\n" in status
+
+
+def test_starting_the_forkserver_leaves_this_process_environment_as_it_was(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    monkeypatch.setenv("OPENBLAS_NUM_THREADS", "7")
+    monkeypatch.delenv("OMP_NUM_THREADS", raising=False)
+    assert start_forkserver()  # started, or running already for the module's cluster
+    assert os.environ["OPENBLAS_NUM_THREADS"] == "7" and "OMP_NUM_THREADS" not in os.environ
 
 
 def _dask_settings() -> dict[str, object]:
