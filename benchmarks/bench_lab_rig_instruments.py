@@ -1,5 +1,6 @@
-"""Experiment (issue 29, item 5): would instrumental variables take the unrecorded force's bias out of a
-mass-only identification on the lab rig world? Not a feature: a measured lead for the next design.
+"""Experiment (issue 29, item 5): what takes the unrecorded force's bias out of a mass-only identification
+on the lab rig world, identify's output-error refinement (`identify --refine`) or instrumental variables?
+Not a feature: measured leads for the next design.
 
     PYTHONPATH=. OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/bench_lab_rig_instruments.py --rigs 24
 
@@ -13,10 +14,14 @@ plate's chirp is independent of the coil's command). One pass: θ from (Zᵀ A) 
 and c identify's system (estimator.equations.LinearResiduals, every equation and selected sample a row),
 the tyre's ϑ kept at identify's, no constraint on the curve.
 
-For each DEV rig (simulators/lab_rig: seeds 0-999 may be looked at; the held-out seeds are never run here)
+For each rig of the set (simulators/lab_rig; `--set dev`: seeds 0-999, which may be looked at; `--set
+held-out --offset N`: bench_lab_rig.py's frozen seeds from 200000 + N, for scoring a design made on DEV rigs)
 runs A and B are simulated as bench_lab_rig.py does (`--cache` shares its files), and printed: mass-only
-identify's held-out gap (its model from run A validated on run B, % of B's response RMS) and the
-instrumental-variable model's, in-sample and held-out, with the rates against the truth. A model that cannot
+identify's held-out gap (its model from run A validated on run B, % of B's response RMS), that of identify
+with `refine_output_error` (DE over the curve points and the tyre damping on run A's free-simulation gap,
+estimator.output_error.refine_on_output_error: an output-error fit is not biased by a disturbance the plate
+does not cause) and the instrumental-variable model's, in-sample and held-out, with the rates against the
+truth. A model that cannot
 be simulated (a rate not positive) is reported as such.
 """
 
@@ -33,7 +38,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from bench_lab_rig import DEV_SEEDS, rig_files
+from bench_lab_rig import DEV_SEEDS, HELD_OUT_SEEDS, rig_files
 
 from daq.formats.recording_csv import read_recording_csv
 from daq.formats.vehicle_file import read_vehicle
@@ -110,16 +115,19 @@ def main() -> None:
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
-    parser.add_argument("--rigs", type=int, default=12, help="the first N DEV rigs")
+    parser.add_argument("--set", choices=("dev", "held-out"), default="dev")
+    parser.add_argument("--rigs", type=int, default=12, help="this many rigs of the set")
+    parser.add_argument("--offset", type=int, default=0, help="skip this many rigs of the set first")
     parser.add_argument("--run-s", type=float, default=16.0)
     parser.add_argument("--cache", default=None, help="folder of the rigs' runs (bench_lab_rig.py's --cache)")
     args = parser.parse_args()
     folder = args.cache or tempfile.mkdtemp(prefix="lab-rig-iv-")
     Path(folder).mkdir(parents=True, exist_ok=True)
-    held: dict[str, list[float]] = {"identify": [], "instrumented": []}
-    print("| rig | identify held-out | instrumented held-out (in-sample) | rates: identify, IV, true |")
-    print("|---|---:|---:|---|")
-    for seed in list(DEV_SEEDS)[: args.rigs]:
+    held: dict[str, list[float]] = {"identify": [], "identify --refine": [], "instrumented": []}
+    print("| rig | identify | --refine (in-sample) | instrumented (in-sample) | rates: identify, IV, true |")
+    print("|---|---:|---:|---:|---|")
+    seeds = DEV_SEEDS if args.set == "dev" else HELD_OUT_SEEDS
+    for seed in list(seeds)[args.offset : args.offset + args.rigs]:
         draw, files, _ = rig_files(seed, folder, args.run_s)
         run_a, run_b = read_recording_csv(files["A"].csv), read_recording_csv(files["B"].csv)
         vehicle = read_vehicle(files["A"].mass_only_toml)
@@ -127,6 +135,10 @@ def main() -> None:
         unknown = constants_to_identify(vehicle, IdentifyOptions())
         base = validate(result.model, run_b).gap_ratio
         held["identify"].append(base)
+        refined = identify(run_a, vehicle, IdentifyOptions(refine_output_error=True)).model
+        refined_out = validate(refined, run_b).gap_ratio
+        held["identify --refine"].append(refined_out)
+        oe = f"{percent(refined_out)} ({percent(validate(refined, run_a).gap_ratio)})"
         v = result.model.vehicle
         rates = f"{v.spring_stiffness_N_per_m:.0f}/{v.tyre_stiffness_N_per_m:.0f}"
         try:
@@ -140,7 +152,7 @@ def main() -> None:
             out, iv = float("inf"), f"no model: {exc}"
         held["instrumented"].append(out)
         truth = f"{draw.rig.spring_N_per_m:.0f}/{draw.rig.tyre_N_per_m:.0f}"
-        print(f"| {seed} | {percent(base)} | {iv} | {rates}, {truth} |", flush=True)
+        print(f"| {seed} | {percent(base)} | {oe} | {iv} | {rates}, {truth} |", flush=True)
     for name, gaps in held.items():
         finite = [g for g in gaps if np.isfinite(g)]
         within = sum(g <= 0.40 for g in gaps)
