@@ -273,6 +273,17 @@ def model_from_json(result: Mapping[str, Any], track_m: float | None = None) -> 
     return ModelWithEffects(vehicle, tyre_model, curves, sprung, tyre_damping, roll_inertia, effects)
 
 
+def with_curves_of(data: Mapping[str, Any], model: IdentifiedModel) -> dict[str, Any]:
+    """A model's JSON (identify's form, as model_from_json reads it) with `model`'s damper curves and tyre
+    damping in place of its own, the rest as it was (a model refined on a recording: estimator.validation
+    .refined_on)."""
+    curves = [
+        {**entry, "velocity_m_s": curve.velocity_m_s.tolist(), "force_N": curve.force_N.tolist()}
+        for entry, curve in zip(data["curves"], model.curves, strict=True)
+    ]
+    return {**data, "curves": curves, "tyre_damping_Ns_per_m": float(model.tyre_damping_Ns_per_m)}
+
+
 def _effects(data: Any, axle: bool) -> ModelEffects:
     """The `effects` object (module docstring); none when absent."""
     if data is None:

@@ -1,5 +1,4 @@
-"""The doctor's statistical tests, one object each (tests/estimator/test_doctor_criteria.py), for the
-procedure of estimator.doctor.diagnose.
+"""The statistical tests of diagnose.py, one object each (tests/estimator/test_doctor_criteria.py).
 
 - EquationTest: is a family's contribution to the equations of motion zero? A Wald test with the sandwich
   covariance of the paper's objective (a block long-run variance of the score, estimator.uncertainty), so a

@@ -21,7 +21,8 @@ leaves more than its own noise would.
    (fitting.fit_added). Repeat from 2 with it added, until a round names nothing.
 5. *Goodness of fit*: the final model against a parametric bootstrap of its plausible truth
    (estimator.doctor.expected); p < α: "unexplained", with where the disagreement is largest
-   (estimator.doctor.residuals.Localisation).
+   (estimator.doctor.residuals.Localisation); the model handed out then has its curve refined on the
+   free-simulation gap (estimator.validation.refined_on: what the model lacks biases the equations' fit).
 """
 
 from __future__ import annotations
@@ -50,11 +51,13 @@ from estimator.doctor.fitting import fit, fit_added, one_step
 from estimator.doctor.model import FitSettings, FittedModel, Reference, starting_structure
 from estimator.doctor.parameters import implausible, report
 from estimator.doctor.residuals import effective_samples, locate, sweep_frequency_Hz
-from estimator.doctor.result import CandidateScore, DiagnosisResult, DiagnosisStep
+from estimator.doctor.result import CandidateScore, DiagnosisResult, DiagnosisStep, model_json
 from estimator.doctor.simulation import simulate_models
 from estimator.forked_map import forked_map
 from estimator.identify import identify_unstated
+from estimator.model_io import model_from_json
 from estimator.recording import Recording
+from estimator.validation import refined_on
 from estimator.vehicle import TyreModel, VehicleConstant, VehicleParameters
 
 TESTED_RATES = frozenset({VehicleConstant.SPRING, VehicleConstant.TYRE})  # by spring_curve, tyre_stiffness
@@ -439,4 +442,7 @@ def diagnose(
         vehicle = identify_unstated(recording, vehicle, TESTED_RATES, options.points)
     points = options.points or DEFAULT_POINTS[vehicle.model.value]
     reference = Reference.of(recording, vehicle, FitSettings(points, options.nsample), identified)
-    return _Doctor(reference, options, progress, cancel).diagnose()
+    result = _Doctor(reference, options, progress, cancel).diagnose()
+    if result.unexplained and result.final_model is not None:  # step 5's model for prediction
+        result.refit = refined_on(model_from_json(model_json(result.final_model)), recording, cancel)
+    return result

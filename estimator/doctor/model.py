@@ -1,7 +1,6 @@
 """A model with effect families added, and its equations: the paper's on the recording corrected for its
 channel families, with the uncorrected recording's damper grid and filters (every candidate shares its
-unknowns) and the force families' columns appended; cached per Reference (a diagnosis fits many models).
-"""
+unknowns) and the force families' columns appended; cached per Reference (a diagnosis fits many models)."""
 
 from __future__ import annotations
 

@@ -1,8 +1,7 @@
 """Locate a disagreement: which channel, part of the sweep, range of suspension velocity, deflection and tyre
 deflection, and whether what is left is white. Two residuals: the output error (m, per channel: the model
 simulated from the measured plate, estimator.doctor.simulation) and the equation error (N, per equation at the
-fitted samples). A time maps to a band of the sweep by the plate's instantaneous frequency.
-"""
+fitted samples). A time maps to a band of the sweep by the plate's instantaneous frequency."""
 
 from __future__ import annotations
 

@@ -9,10 +9,12 @@ import numpy as np
 
 from estimator.doctor.catalog import FRICTION_UNKNOWNS, EffectName, labels_in
 from estimator.doctor.residuals import Localisation
+from estimator.model_io import with_curves_of
 from estimator.vehicle import TyreModel
 
 if TYPE_CHECKING:
     from estimator.doctor.model import FittedModel
+    from estimator.output_error import IdentifiedModel
 
 
 def _finite_or_none(value: float | None) -> float | None:
@@ -117,6 +119,7 @@ class DiagnosisResult:
     time_s: np.ndarray = field(repr=False)
     sweep_frequency_Hz: np.ndarray = field(repr=False)
     final_model: FittedModel | None = field(default=None, repr=False)
+    refit: tuple[IdentifiedModel, float] | None = field(default=None, repr=False)  # unexplained: refined_on's
 
     @property
     def effects_named(self) -> list[str]:
@@ -131,8 +134,9 @@ class DiagnosisResult:
         return self.steps[-1].predicted_after if self.steps else self.predicted_before
 
     def to_json(self) -> dict[str, object]:
-        """The stable JSON shape; `model` is the final model as identify --json has it (model_json), which
-        `shockbench validate --model` takes."""
+        """The stable JSON shape; `model` is the final model as identify --json has it (model_json), refined
+        when unexplained (refit), which `shockbench validate --model` takes: its gap here is model_gap_m."""
+        model = model_json(self.final_model) if self.final_model is not None else None
         return {
             "gap_before_m": _finite_or_none(self.gap_before_m),
             "steps": [s.to_json() for s in self.steps],
@@ -149,7 +153,9 @@ class DiagnosisResult:
             "located": localisation_json(self.located_after) if self.unexplained else None,
             "noise_floor_m": self.noise_floor_m,
             "candidates": [[c.to_json() for c in round_] for round_ in self.rounds],
-            "model": model_json(self.final_model) if self.final_model is not None else None,
+            "model": with_curves_of(model, self.refit[0]) if model and self.refit else model,
+            "model_gap_m": _finite_or_none(self.refit[1] if self.refit else self.gap_after_m),
+            "model_refined": self.refit is not None,
         }
 
 

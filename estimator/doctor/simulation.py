@@ -8,17 +8,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from estimator import dynamics
 from estimator.damper import CurveBatch
 from estimator.doctor.catalog import FRICTION_UNKNOWNS, EffectName
 from estimator.doctor.model import FittedModel
-from estimator.dynamics import (
-    AxlePhysics,
-    CornerPhysics,
-    QuarterCarPhysics,
-    model_substeps,
-    sample_substeps,
-    start_state,
-)
+from estimator.dynamics import AxlePhysics, CornerPhysics, QuarterCarPhysics, model_substeps, sample_substeps
 from estimator.output_error import DIVERGED_GAP_M, measured_drive
 from estimator.recording import Recording
 from estimator.simulation_kernel import integrate_compiled
@@ -174,7 +168,7 @@ def _simulate(
             vehicle.anti_roll_bar_stiffness_N_per_m
             + np.array([m.value("anti_roll_bar_N_per_m") for m in models]),
         )
-    state0 = start_state(physics, state0)
+    state0 = dynamics.start_state(physics, state0)
     with np.errstate(over="ignore", invalid="ignore"):  # an unstable model is reported as a diverged gap
         if steps > MAX_SUBSTEPS:  # stiffer than any damper: reported as diverged, not simulated
             states = np.full((plate.shape[-1], *state0.shape), np.nan)

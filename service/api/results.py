@@ -314,6 +314,14 @@ class DiagnoseResult(ResultPart):
     model: DiagnosisModelOut | None = Field(
         None, description="the final model (identify's form plus its effects), for validate --model"
     )
+    model_gap_m: MaybeNumber = Field(
+        None, description="the gap of `model` on this recording (m): validate --model gives it"
+    )
+    model_refined: bool = Field(
+        False,
+        description="unexplained: `model`'s damper curve and tyre damping refined on the free-simulation gap "
+        "(what the model lacks biases the equations' fit); gap_after_m is the final model's before it",
+    )
 
 
 # ---- validate ----------------------------------------------------------------------------------------------

@@ -48,6 +48,11 @@ def summary(result: DiagnosisResult) -> str:
         f"goodness of fit: {fit_verdict(result.p_value, result.alpha, result.unexplained, result.where)}",
         f"conclusion: {result.conclusion}",
     ]
+    if result.refit is not None:
+        lines.append(
+            f"model (--json): the final one with its curve refined on the free-simulation gap, as something "
+            f"it lacks biases the equations' fit: gap {_micro(result.refit[1])}"
+        )
     return "\n".join(lines)
 
 
