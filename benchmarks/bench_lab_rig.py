@@ -20,8 +20,9 @@ and written as recording CSV with the vehicle file stating the wrong rates (A.to
 (a) the doctor (estimator.doctor.diagnose, as `shockbench diagnose` with its default Maxwell tyre) runs on
     run A from the stated rates: what it names (the rates it corrects to, against the truth), its verdict,
     its gap before and after as % of the response RMS of run A, and where it locates what remains;
-(b) the doctor's final model (its `model` JSON, as `shockbench validate --model` reads it) is validated on
-    run B (estimator.validation.validate): the held-out gap as % of run B's response RMS;
+(b) the doctor's final model (its `model` JSON, as `shockbench validate --model` reads it: refined on the
+    free-simulation gap when the verdict is "unexplained", docs/method.md) is validated on run B
+    (estimator.validation.validate): the held-out gap as % of run B's response RMS;
 (c) `identify` on run A from the mass-only file (every rate and ϑ free; estimator.identify, the call of
     `shockbench identify`), its model validated on run B: held-out gap %.
 
