@@ -109,9 +109,11 @@ def refined_on(
     model's effects kept) and that model's validate gap (m); None when refining does not lower the gap.
     Why: a fit of the equations is biased by a force the model lacks (it is in their residual and moves the
     motions they are built from), a fit of the simulated motion to the measured one is not when the plate
-    does not cause that force."""
+    does not cause that force. InterruptedError when `cancel` is set meanwhile."""
     before = validate(model, recording).gap_m
     _corrections, driven, kin, noise_m = _driven(model, recording)
     refined, _ = refine_on_output_error(model, driven, kin, noise_m, cancel=cancel)
+    if cancel is not None and cancel.is_set():  # the DE stopped early: not a refined model
+        raise InterruptedError("refinement cancelled")
     after = validate(refined, recording).gap_m
     return (refined, after) if after < before else None

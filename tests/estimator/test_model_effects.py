@@ -11,6 +11,7 @@ and on A itself validate's gap agrees with the doctor's own output error of the 
 from __future__ import annotations
 
 import json
+import threading
 import warnings
 from dataclasses import fields, replace
 
@@ -34,7 +35,7 @@ from estimator.doctor.simulation import (
 from estimator.model_io import ModelFormatError, model_from_json
 from estimator.output_error import IdentifiedModel
 from estimator.sweep import SweepSettings
-from estimator.validation import validate
+from estimator.validation import refined_on, validate
 from estimator.vehicle import TyreModel
 from simulators.vehicle_sim import SimulationSettings, default_quarter_car, simulate, with_effects
 
@@ -269,3 +270,13 @@ def test_validate_simulates_hysteretic_friction_as_the_doctor_does(fitted) -> No
     print(f"doctor {doctor_gap * 1e6:.2f} µm, validate {validated.gap_m * 1e6:.2f} µm")
     assert "presliding_m" in validated.effects
     assert validated.gap_m == pytest.approx(doctor_gap, rel=1e-3)
+
+
+def test_refining_a_model_on_a_recording_stops_when_cancelled(fitted) -> None:
+    """estimator.validation.refined_on (the doctor's model for prediction) honours a diagnosis's cancel:
+    a DE stopped early is not handed out as a refined model."""
+    model, a, _ = fitted
+    cancel = threading.Event()
+    cancel.set()
+    with pytest.raises(InterruptedError):
+        refined_on(model_from_json(model_json(model)), a, cancel)
