@@ -68,37 +68,50 @@ def check_model_fits(model: IdentifiedModel, recording: Recording) -> None:
         raise InvalidValueError(f"the model is for {kind} but the recording has {has} channels")
 
 
-def _driven(
-    model: IdentifiedModel, recording: Recording
-) -> tuple[ChannelCorrections, Recording, dict[str, Kinematics], float]:
-    """The model's channel corrections, the recording as they say the true motion was, its channels
-    low-passed (the kinematics the simulation starts from) and the sensor noise floor (m)."""
+@dataclass(frozen=True)
+class _Driven:
+    """What a simulation of the model on a recording starts from: the model's channel corrections and
+    effect names, the recording as the corrections say the true motion was, its channels low-passed (the
+    kinematics the simulation starts from) and the sensor noise floor (m). The same for every model with
+    the same effects (refined_on compares two)."""
+
+    corrections: ChannelCorrections
+    effect_names: tuple[str, ...]
+    recording: Recording
+    kinematics: dict[str, Kinematics]
+    noise_m: float
+
+
+def _driven(model: IdentifiedModel, recording: Recording) -> _Driven:
     effects = model.effects if isinstance(model, ModelWithEffects) else None
     corrections = effects.channel_corrections() if effects is not None else ChannelCorrections()
     dt = recording.sample_time_s
     driven = corrections.apply(recording)  # the true motion as the model's channel effects say
     filters = choose_filters(recording.channels, dt)
     kin = {name: kinematics(x, filters.kinematics_cutoff_Hz, dt) for name, x in driven.channels.items()}
-    return corrections, driven, kin, filters.noise_floor_m
+    names = tuple(effects.names) if effects is not None else ()
+    return _Driven(corrections, names, driven, kin, filters.noise_floor_m)
 
 
 def validate(model: IdentifiedModel, recording: Recording) -> ValidationResult:
     """Simulate `model` from the recording's plate (its own sample time and length) and compare."""
     check_model_fits(model, recording)
-    corrections, driven, kin, noise_m = _driven(model, recording)
-    simulated = simulate_identified(model, driven, kin, noise_m)
+    return _compared(model, recording, _driven(model, recording))
+
+
+def _compared(model: IdentifiedModel, recording: Recording, start: _Driven) -> ValidationResult:
+    """validate's comparison, from what the simulation starts from (_driven)."""
+    simulated = simulate_identified(model, start.recording, start.kinematics, start.noise_m)
     dt = recording.sample_time_s
     residuals = []
     with np.errstate(over="ignore", invalid="ignore"):  # a diverging model is reported as such
         for name, motion in simulated.simulated.items():
-            residuals.append(corrections.distort(name, motion, dt) - recording.channels[name])
+            residuals.append(start.corrections.distort(name, motion, dt) - recording.channels[name])
         gap = float(np.sqrt(np.mean(np.stack(residuals) ** 2)))
     if not (math.isfinite(gap) and gap < DIVERGED_GAP_M):
         gap = math.inf
     measured = np.stack([recording.channels[n] - np.mean(recording.channels[n]) for n in simulated.simulated])
-    effects = model.effects if isinstance(model, ModelWithEffects) else None
-    names = tuple(effects.names) if effects is not None else ()
-    return ValidationResult(gap, float(np.sqrt(np.mean(measured**2))), names)
+    return ValidationResult(gap, float(np.sqrt(np.mean(measured**2))), start.effect_names)
 
 
 def refined_on(
@@ -110,10 +123,12 @@ def refined_on(
     Why: a fit of the equations is biased by a force the model lacks (it is in their residual and moves the
     motions they are built from), a fit of the simulated motion to the measured one is not when the plate
     does not cause that force. InterruptedError when `cancel` is set meanwhile."""
-    before = validate(model, recording).gap_m
-    _corrections, driven, kin, noise_m = _driven(model, recording)
+    check_model_fits(model, recording)
+    start = _driven(model, recording)  # the refined model keeps the effects: the same start
+    before = _compared(model, recording, start).gap_m
+    driven, kin, noise_m = start.recording, start.kinematics, start.noise_m
     refined, _ = refine_on_output_error(model, driven, kin, noise_m, cancel=cancel)
     if cancel is not None and cancel.is_set():  # the DE stopped early: not a refined model
         raise InterruptedError("refinement cancelled")
-    after = validate(refined, recording).gap_m
+    after = _compared(refined, recording, start).gap_m
     return (refined, after) if after < before else None
