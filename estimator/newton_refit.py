@@ -43,7 +43,10 @@ class NewtonRefit:
 
 
 class _Problem:
-    """GF and its derivatives over z = (θ scaled by its columns' norms[, log τ])."""
+    """GF and its derivatives over z = (θ scaled by its columns' norms[, log τ]).
+
+    The scaled matrix is held transposed, one row per unknown (p, e·n): the Hessian's products then run
+    along the samples, where numpy's inner loops are long (along the few unknowns they are not)."""
 
     def __init__(self, system: LinearResiduals, free_tau: bool) -> None:
         self.system = system
@@ -52,7 +55,8 @@ class _Problem:
         flat = system.matrix.reshape(e * n, p)  # equation-major rows, as the system stores them
         self.scale = np.linalg.norm(flat, axis=0)
         self.scale[self.scale == 0] = 1.0
-        self.flat = flat / self.scale
+        self.rows = np.ascontiguousarray(flat.T)
+        self.rows /= self.scale[:, None]
         self.offset = system.offset.reshape(e * n)
         self.free_tau = free_tau and system.tyre_theta is not None and bool(system.tyre_rates_m_s)
         self.dt = system.filters.sample_time_s
@@ -68,16 +72,17 @@ class _Problem:
             column[equation] = maxwell_regressor(rate, theta)[self.system.sample_index]
         return column.reshape(-1)
 
-    def matrix(self, log_tau: float | None) -> np.ndarray:
+    def matrix_rows(self, log_tau: float | None) -> np.ndarray:
+        """The scaled matrix, transposed (p, e·n), its tyre row at τ = exp(log_tau) when τ is free."""
         if log_tau is None or not self.free_tau:
-            return self.flat
-        flat = self.flat.copy()
-        flat[:, self.column] = self.tyre(log_tau) / self.scale[self.column]
-        return flat
+            return self.rows
+        rows = self.rows.copy()
+        rows[self.column] = self.tyre(log_tau) / self.scale[self.column]
+        return rows
 
     def objective(self, z: np.ndarray) -> float:
         theta, log_tau = self.split(z)
-        r = (self.matrix(log_tau) @ theta + self.offset).reshape(self.equations, -1)
+        r = (theta @ self.matrix_rows(log_tau) + self.offset).reshape(self.equations, -1)
         return float(np.sqrt(np.square(r).sum(axis=0)).sum())
 
     def split(self, z: np.ndarray) -> tuple[np.ndarray, float | None]:
@@ -86,35 +91,35 @@ class _Problem:
     def newton_step(self, z: np.ndarray) -> np.ndarray:
         """The Newton step at z."""
         theta, log_tau = self.split(z)
-        a = self.matrix(log_tau)
+        rows = self.matrix_rows(log_tau)
         e = self.equations
-        r = (a @ theta + self.offset).reshape(e, -1)
+        r = (theta @ rows + self.offset).reshape(e, -1)
         norms = np.sqrt(np.square(r).sum(axis=0))
         norms = np.maximum(norms, 1e-9 * max(float(median(norms)), 1e-300))
         unit = r / norms
-        columns = a.reshape(e, -1, a.shape[1])
+        columns = rows.reshape(rows.shape[0], e, -1)  # (p, e, n)
         second: list[tuple[int, int, float]] = []
         if self.free_tau:
             up, mid, down = (self.tyre(log_tau + s) for s in (LOG_TAU_STEP, 0.0, -LOG_TAU_STEP))
             slope = ((up - down) / (2 * LOG_TAU_STEP)).reshape(e, -1)
             curvature = ((up - 2 * mid + down) / LOG_TAU_STEP**2).reshape(e, -1)
             damping = theta[self.column] / self.scale[self.column]
-            columns = np.concatenate([columns, (damping * slope)[:, :, None]], axis=2)
-            tau_index = columns.shape[2] - 1
+            columns = np.concatenate([columns, (damping * slope)[None]], axis=0)
+            tau_index = columns.shape[0] - 1
             # second derivatives of r: ∂²r/∂log τ² = C_d·g'', ∂²r/∂log τ ∂z_C = g'/scale_C
             second = [
                 (tau_index, tau_index, float(np.sum(unit * damping * curvature))),
                 (tau_index, self.column, float(np.sum(unit * slope)) / self.scale[self.column]),
             ]
-        gradient = np.einsum("enp,en->p", columns, unit)
-        root = np.sqrt(norms)[:, None]
+        gradient = columns.reshape(columns.shape[0], -1) @ unit.reshape(-1)
+        root = np.sqrt(norms)
         if e == 2:  # I − u uᵀ = v vᵀ with v ⟂ u: one row per sample instead of two
-            across = (columns[1] * unit[0][:, None] - columns[0] * unit[1][:, None]) / root
-            hessian = across.T @ across
+            across = columns[:, 1] * (unit[0] / root) - columns[:, 0] * (unit[1] / root)
+            hessian = across @ across.T
         else:
-            along = np.einsum("enp,en->np", columns, unit) / root  # u_iᵀ A_i / sqrt(||r_i||)
-            flat = (columns / root[None]).reshape(-1, columns.shape[2])
-            hessian = flat.T @ flat - along.T @ along
+            along = np.einsum("pen,en->pn", columns, unit) / root  # u_iᵀ A_i / sqrt(||r_i||)
+            flat = (columns / root).reshape(columns.shape[0], -1)
+            hessian = flat @ flat.T - along @ along.T
         for i, j, value in second:
             hessian[i, j] += value
             if i != j:
