@@ -55,7 +55,8 @@ from estimator.doctor.result import CandidateScore, DiagnosisResult, DiagnosisSt
 from estimator.doctor.simulation import simulate_models
 from estimator.forked_map import forked_map
 from estimator.identify import identify_unstated
-from estimator.model_io import model_from_json
+from estimator.model_io import ModelFormatError, model_from_json
+from estimator.output_error import IdentifiedModel
 from estimator.recording import Recording
 from estimator.validation import refined_on
 from estimator.vehicle import TyreModel, VehicleConstant, VehicleParameters
@@ -443,6 +444,19 @@ def diagnose(
     points = options.points or DEFAULT_POINTS[vehicle.model.value]
     reference = Reference.of(recording, vehicle, FitSettings(points, options.nsample), identified)
     result = _Doctor(reference, options, progress, cancel).diagnose()
-    if result.unexplained and result.final_model is not None:  # step 5's model for prediction
-        result.refit = refined_on(model_from_json(model_json(result.final_model)), recording, cancel)
+    result.refit = refined(result, recording, cancel)
     return result
+
+
+def refined(
+    result: DiagnosisResult, recording: Recording, cancel: threading.Event | None = None
+) -> tuple[IdentifiedModel, float] | None:
+    """Step 5's model for prediction: an unexplained final model refined on the free-simulation gap (None
+    when explained, or when the final model has a rate fitted below zero, which no model file holds)."""
+    if not result.unexplained or result.final_model is None:
+        return None
+    try:
+        start = model_from_json(model_json(result.final_model))
+    except ModelFormatError:
+        return None
+    return refined_on(start, recording, cancel)

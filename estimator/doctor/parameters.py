@@ -3,8 +3,11 @@ physically possible (implausible: signs and limits of physics, not thresholds)."
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
+from estimator.distributions import chi_square_survival
 from estimator.doctor.catalog import (
     FRICTION_UNKNOWNS,
     SPRING_RATE_UNKNOWN,
@@ -12,9 +15,11 @@ from estimator.doctor.catalog import (
     EffectInstance,
     EffectName,
     hinge,
+    hinge_unknowns,
 )
-from estimator.doctor.criteria import ALPHA, EquationTest
+from estimator.doctor.criteria import ALPHA
 from estimator.doctor.model import FittedModel
+from estimator.uncertainty import confidence_intervals
 
 
 def spring_curve_points(model: FittedModel) -> tuple[np.ndarray, np.ndarray]:
@@ -90,15 +95,6 @@ def report(effect: EffectInstance, model: FittedModel) -> dict[str, float | str]
     return {"channel": channel, "offset_m": model.channel_value(effect, "offset")}
 
 
-def _below_zero(model: FittedModel, name: str) -> bool:
-    """Is the unknown `name` of θ below zero beyond chance: a one-sided Wald test at level ALPHA (the
-    equations' sandwich covariance). An estimate at a bound (a Coulomb friction's Stribeck excess, 0) falls
-    below it half the time; only one that falls significantly contradicts the family's law."""
-    index = model.system.parameter_names.index(name)
-    tested = EquationTest().test(model.system, model.theta, [index], model.signals.sample_time_s)
-    return tested.p_value < 2.0 * ALPHA  # the two-sided p of |z|, halved for one side
-
-
 def implausible(effect: EffectInstance, model: FittedModel) -> str | None:
     """Why the fitted family cannot be what it says (None if it can)."""
     name = effect.name
@@ -107,7 +103,7 @@ def implausible(effect: EffectInstance, model: FittedModel) -> str | None:
         if sliding < 0.0 or sliding + excess < 0.0:
             static = sliding + excess
             return f"the friction would feed energy in (sliding {sliding:.0f} N, static {static:.0f} N)"
-        if excess < 0.0 and _below_zero(model, FRICTION_UNKNOWNS[1]):
+        if excess < 0.0 and _below_zero(model, {FRICTION_UNKNOWNS[1]: 1.0}):
             # Stribeck's law falls from the breakaway level to the sliding one; a law that rises is viscous
             return (
                 f"the force would rise with velocity (static {sliding + excess:.0f} N below sliding "
@@ -119,10 +115,32 @@ def implausible(effect: EffectInstance, model: FittedModel) -> str | None:
         return "the bar's stiffness is negative"
     elif name is EffectName.TYRE_STIFFNESS and model.tyre_stiffness_N_per_m <= 0.0:
         return "the tyre rate is not positive"
-    elif name is EffectName.SPRING_CURVE:
-        _, force = spring_curve_points(model)
-        if np.any(np.diff(force) <= 0.0):
-            return "the spring curve is not monotone: the spring would push the wrong way somewhere"
+    elif name is EffectName.SPRING_CURVE and any(_below_zero(model, *s) for s in _falling_segments(model)):
+        return "the spring curve falls beyond chance somewhere: the spring would push the wrong way there"
     elif name is EffectName.TYRE_LIFTOFF and model.airborne_fraction <= 0.0:
         return "the tyre never leaves the plate in the fitted model"
     return None
+
+
+def _falling_segments(model: FittedModel) -> list[tuple[dict[str, float], float]]:
+    """The spring curve's segments whose fitted rate is not positive, each as (weights, stated rate): its rate
+    is the stated one plus the rate change and the hinges passed on its side (catalog.hinge)."""
+    stated, names = float(model.vehicle.spring_stiffness_N_per_m or 0.0), hinge_unknowns(model.knots_m)
+    by_distance = sorted(zip(model.knots_m, names, strict=True), key=lambda knot: abs(knot[0]))
+    change = {SPRING_RATE_UNKNOWN: 1.0}
+    segments = [change]
+    for side in (-1.0, 1.0):
+        passed = [name for knot, name in by_distance if knot * side > 0]
+        segments += [change | dict.fromkeys(passed[: j + 1], 1.0) for j in range(len(passed))]
+    return [(w, stated) for w in segments if stated + sum(model.value(n) for n in w) <= 0.0]
+
+
+def _below_zero(model: FittedModel, weights: dict[str, float], constant: float = 0.0) -> bool:
+    """Is constant + Σ weight·θ[name] below zero beyond chance: a one-sided Wald test at level ALPHA (the
+    equations' sandwich covariance). An estimate at a bound (a Coulomb friction's Stribeck excess, a spring
+    curve's flat end: 0) falls below it half the time; only one that falls significantly contradicts the
+    family's law."""
+    row = np.array([weights.get(n, 0.0) for n in model.system.parameter_names])
+    covariance = confidence_intervals(model.system, model.theta, model.signals.sample_time_s).covariance
+    value, spread = constant + float(row @ model.theta), math.sqrt(max(float(row @ covariance @ row), 0.0))
+    return value < 0.0 and (spread == 0.0 or chi_square_survival((value / spread) ** 2, 1) < 2.0 * ALPHA)
