@@ -66,7 +66,7 @@ class SimulationTest:
 
     def test(self, samples: float, gap_without_m: float, gap_with_m: float, unknowns: int) -> TestResult:
         """samples: the effective number of independent samples of the residual without the family
-        (estimator.doctor.residuals.effective_samples, summed over its channels)."""
+        (estimator.autocorrelation.effective_samples, summed over its channels)."""
         q = max(unknowns, 1)
         if not np.isfinite(gap_with_m) and not np.isfinite(gap_without_m):
             # neither model simulates: no evidence against the family (p = 1 would veto every one)

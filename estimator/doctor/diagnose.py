@@ -35,6 +35,7 @@ from functools import cached_property, partial
 
 import numpy as np
 
+from estimator.autocorrelation import effective_samples
 from estimator.distributions import log_chi_square_survival
 from estimator.doctor.catalog import CATALOG, Candidate, EffectName, label, members, round_candidates
 from estimator.doctor.criteria import (
@@ -50,7 +51,7 @@ from estimator.doctor.expected import plausible_truth, synthetic_recordings
 from estimator.doctor.fitting import fit, fit_added, one_step
 from estimator.doctor.model import FitSettings, FittedModel, Reference, starting_structure
 from estimator.doctor.parameters import implausible, report
-from estimator.doctor.residuals import effective_samples, locate, sweep_frequency_Hz
+from estimator.doctor.residuals import locate, sweep_frequency_Hz
 from estimator.doctor.result import CandidateScore, DiagnosisResult, DiagnosisStep, model_json
 from estimator.doctor.simulation import simulate_models
 from estimator.forked_map import forked_map

@@ -33,6 +33,7 @@ from estimator.digital_filters import first_order_filter, welch_density
 from estimator.doctor.fitting import fit
 from estimator.doctor.model import FittedModel, Reference
 from estimator.doctor.simulation import diverged
+from estimator.linear_algebra import small_nnls
 from estimator.monotone import Pchip, increasing
 from estimator.recording import Recording
 
@@ -122,30 +123,6 @@ def reading_quantum_m(x: np.ndarray) -> float:
     if step <= 0.0 or np.max(np.abs(x / step - np.round(x / step))) > 1e-3:
         return 0.0
     return step
-
-
-def small_nnls(designs: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Per design of a stack (count, rows, a few columns): x ≥ 0 minimising ||design·x − target||, and that
-    norm: least squares on every set of free columns (the rest at zero; normal equations of unit columns
-    for the whole stack, by pseudo-inverse: ρ = 0 makes the AR(1) column the white one), the fewest and
-    earliest columns winning a tie. Not scipy's nnls: its import costs more than the fit, and it would loop
-    over the stack; the test checks the two agree."""
-    count, _, columns = designs.shape
-    scale = np.linalg.norm(designs, axis=1)
-    scale[scale == 0.0] = 1.0
-    scaled = designs / scale[:, None, :]
-    gram, moment = np.einsum("nrk,nrl->nkl", scaled, scaled), np.einsum("nrk,r->nk", scaled, target)
-    best_misfit, best = np.full(count, float(np.linalg.norm(target))), np.zeros((count, columns))
-    tie = 1e-12 * best_misfit[0]
-    subsets = [[k for k in range(columns) if mask >> k & 1] for mask in range(1, 2**columns)]
-    for free in sorted(subsets, key=lambda subset: (len(subset), subset)):
-        inverse = np.linalg.pinv(gram[:, free][:, :, free], rcond=1e-13, hermitian=True)
-        x = np.zeros((count, columns))
-        x[:, free] = np.einsum("nkl,nl->nk", inverse, moment[:, free])
-        misfit = np.linalg.norm(np.einsum("nrk,nk->nr", scaled, x) - target, axis=1)
-        better = np.all(x >= 0.0, axis=1) & (misfit < best_misfit - tie)
-        best_misfit, best = np.where(better, misfit, best_misfit), np.where(better[:, None], x, best)
-    return best / scale, best_misfit
 
 
 def measure_channel_noise(

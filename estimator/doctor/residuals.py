@@ -9,8 +9,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from estimator.autocorrelation import ljung_box
 from estimator.digital_filters import welch_density
-from estimator.distributions import chi_square_survival
 from estimator.doctor.model import FittedModel
 from estimator.doctor.simulation import RUNAWAY_GAP_RATIO, diverged
 
@@ -20,7 +20,6 @@ REST_FRACTION = 0.1
 """Where the plate's amplitude is below this fraction of its largest, the plate rests (no sweep frequency)."""
 BINS = 8
 TIME_WINDOW_S = 0.5
-WHITENESS_LAGS = 20
 WHITENESS_LEVEL = 0.01
 
 
@@ -102,34 +101,6 @@ def binned_rms(variable: np.ndarray, series: dict[str, np.ndarray], name: str, u
     edges = np.unique(np.quantile(variable, np.linspace(0.0, 1.0, BINS + 1)))
     which = np.clip(np.searchsorted(edges, variable, side="right") - 1, 0, edges.size - 2)
     return _profile(name, unit, edges, which, series, 1)
-
-
-def ljung_box(residual: np.ndarray, sample_time_s: float, bandwidth_Hz: float) -> float:
-    """p of the Ljung-Box Q over WHITENESS_LAGS lags of the residual decimated to twice its bandwidth."""
-    step = max(1, int(1.0 / (2.0 * bandwidth_Hz * sample_time_s)))
-    x = residual[::step] - np.mean(residual[::step])
-    n = x.size
-    denominator = float(np.dot(x, x))
-    if n <= WHITENESS_LAGS + 1 or denominator == 0.0:
-        return 1.0
-    lags = np.arange(1, WHITENESS_LAGS + 1)
-    rho = np.array([np.dot(x[:-k], x[k:]) / denominator for k in lags])
-    return chi_square_survival(float(n * (n + 2) * np.sum(rho**2 / (n - lags))), WHITENESS_LAGS)
-
-
-def effective_samples(residual: np.ndarray) -> float:
-    """n / (1 + 2·Σρ_k): how many independent samples a correlated residual is worth (the sum runs to the
-    first negative autocorrelation)."""
-    x = residual - np.mean(residual)
-    n = x.size
-    spectrum = np.fft.rfft(x, 2 * n)
-    acf = np.fft.irfft(np.abs(spectrum) ** 2)[:n]
-    if acf[0] <= 0:
-        return float(n)
-    rho = acf / acf[0]
-    negative = np.nonzero(rho[1:] < 0)[0]
-    stop = negative[0] + 1 if negative.size else n
-    return float(n / max(1.0, 1.0 + 2.0 * np.sum(rho[1:stop])))
 
 
 @dataclass

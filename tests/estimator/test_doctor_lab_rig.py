@@ -15,6 +15,7 @@ then named one after the other, and the outcome asked of both rigs is the same.
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from functools import cache
 from tempfile import TemporaryDirectory
 
@@ -23,8 +24,10 @@ import pytest
 from daq.formats.recording_csv import read_recording_csv
 from daq.formats.vehicle_file import read_vehicle
 from estimator.doctor import DiagnoseOptions, DiagnosisResult, diagnose
+from estimator.doctor.catalog import TYRE_RATE_UNKNOWN
+from estimator.doctor.diagnose import refined
 from estimator.doctor.result import model_json
-from estimator.model_io import model_from_json
+from estimator.model_io import ModelFormatError, model_from_json
 from estimator.recording import Recording
 from estimator.validation import validate
 from estimator.vehicle import VehicleParameters
@@ -99,3 +102,20 @@ def test_an_unexplained_model_is_handed_out_refined_on_the_free_simulation(seed:
         f"{before:.0%} -> {held_out:.0%} of the response"
     )
     assert held_out <= before
+
+
+def test_a_final_model_with_a_rate_below_zero_is_handed_out_unrefined() -> None:
+    """A final model whose tyre rate was fitted below zero (as on DEV draw outside/4 before d106a50) has
+    no model file to round-trip through: the diagnosis ends with it unrefined, not with ModelFormatError."""
+    a, _, _ = runs(INTERACTING_RIG)
+    result = diagnosed(INTERACTING_RIG)
+    final = result.final_model
+    names = final.system.parameter_names
+    theta = final.theta.copy()
+    theta[names.index(TYRE_RATE_UNKNOWN)] = -2.0 * final.vehicle.tyre_stiffness_N_per_m
+    broken = replace(result, final_model=replace(final, theta=theta))
+    assert broken.final_model.tyre_stiffness_N_per_m < 0 and broken.unexplained
+    with pytest.raises(ModelFormatError, match="tyre_stiffness_N_per_m must be > 0"):
+        model_from_json(model_json(broken.final_model))
+    assert refined(broken, a) is None
+    assert refined(result, a) is not None  # the same diagnosis with its fitted rate is refined

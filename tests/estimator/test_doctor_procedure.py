@@ -17,17 +17,11 @@ import numpy as np
 import pytest
 from cases import random_axle
 
+from estimator.autocorrelation import effective_samples, ljung_box
 from estimator.doctor import DiagnoseOptions, DiagnosisResult, diagnose
 from estimator.doctor.catalog import CATALOG, EffectName, interval_mean
 from estimator.doctor.model import LOW_SPEED_KNOTS_M_S, low_speed_grids
-from estimator.doctor.residuals import (
-    WHITENESS_LEVEL,
-    Localisation,
-    Profile,
-    effective_samples,
-    ljung_box,
-    sweep_frequency_Hz,
-)
+from estimator.doctor.residuals import WHITENESS_LEVEL, Localisation, Profile, sweep_frequency_Hz
 from estimator.recording import Recording
 from estimator.sweep import SweepSettings
 from estimator.vehicle import VehicleParameters

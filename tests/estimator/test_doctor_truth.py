@@ -24,11 +24,11 @@ from estimator.damper import PiecewiseLinearCurve
 from estimator.doctor.expected import (
     TRUTH_POINTS_FACTOR,
     plausible_truth,
-    small_nnls,
     smooth_curve,
 )
 from estimator.doctor.fitting import fit
 from estimator.doctor.model import LOW_SPEED_KNOTS_M_S, FitSettings, Reference, starting_structure
+from estimator.linear_algebra import small_nnls
 from estimator.monotone import increasing
 from estimator.sweep import SweepSettings
 from estimator.vehicle import TyreModel
