@@ -19,6 +19,7 @@ import numpy as np
 
 from estimator.damper import CurveBatch, PiecewiseLinearCurve
 from estimator.dynamics import (
+    MAX_SUBSTEPS,
     AxlePhysics,
     CornerPhysics,
     QuarterCarPhysics,
@@ -204,9 +205,12 @@ def simulate_identified(
     steps = _substeps(model, curves or model.curves, dt, physics, kinematics)
     state0 = start_state(physics, state0)
     with np.errstate(over="ignore", invalid="ignore"):  # an unstable model is reported as a diverged gap
-        states = integrate_compiled(
-            physics, state0, dt / steps, sample_substeps(plate, steps), sample_substeps(rate, steps)
-        )[::steps]
+        if steps > MAX_SUBSTEPS:  # stiffer than any damper: diverged, not simulated (as the doctor has it)
+            states = np.full((plate.shape[-1], *state0.shape), np.nan)
+        else:
+            states = integrate_compiled(
+                physics, state0, dt / steps, sample_substeps(plate, steps), sample_substeps(rate, steps)
+            )[::steps]
     outputs = physics.outputs(np.moveaxis(states, 0, 1))
     measured = {name: recording.channels[name] for name in outputs}
     with np.errstate(over="ignore", invalid="ignore"):

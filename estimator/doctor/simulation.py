@@ -12,15 +12,19 @@ from estimator import dynamics
 from estimator.damper import CurveBatch
 from estimator.doctor.catalog import FRICTION_UNKNOWNS, EffectName
 from estimator.doctor.model import FittedModel
-from estimator.dynamics import AxlePhysics, CornerPhysics, QuarterCarPhysics, model_substeps, sample_substeps
+from estimator.dynamics import (
+    MAX_SUBSTEPS,
+    AxlePhysics,
+    CornerPhysics,
+    QuarterCarPhysics,
+    model_substeps,
+    sample_substeps,
+)
 from estimator.output_error import DIVERGED_GAP_M, measured_drive
 from estimator.recording import Recording
 from estimator.simulation_kernel import integrate_compiled
 from estimator.vehicle import TyreModel
 
-MAX_SUBSTEPS = 256
-"""Runge-Kutta steps per sample beyond which a model counts as diverged, unsimulated: |λ|·dt above 500, a
-damper segment of 10⁶ N·s/m on a motorcycle's wheel at 1 ms (real dampers stay below 10⁵)."""
 RUNAWAY_GAP_RATIO = 3.0
 """A model whose gap is at least this many times the RMS of the measured motion it predicts (about its
 mean) has run away, and counts as diverged: predicting no motion at all would be a third as far off."""

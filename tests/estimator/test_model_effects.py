@@ -24,7 +24,6 @@ from estimator.doctor.fitting import fit
 from estimator.doctor.model import FitSettings, Reference, starting_structure
 from estimator.doctor.result import model_json
 from estimator.doctor.simulation import (
-    MAX_SUBSTEPS,
     RUNAWAY_GAP_RATIO,
     BatchOutputError,
     _corner,
@@ -32,6 +31,7 @@ from estimator.doctor.simulation import (
     simulate_models,
     substeps,
 )
+from estimator.dynamics import MAX_SUBSTEPS
 from estimator.model_io import ModelFormatError, model_from_json
 from estimator.output_error import IdentifiedModel
 from estimator.sweep import SweepSettings
@@ -158,6 +158,21 @@ def test_a_curve_stiffer_than_any_damper_is_reported_diverged_not_simulated(fitt
     gaps = simulate_models([model, steep], a).gap_m()
     assert gaps[0] == pytest.approx(float(simulate_models([model], a).gap_m()[0]), rel=1e-12)
     assert np.isinf(gaps[1])
+
+
+def test_validate_and_the_refinement_report_such_a_curve_diverged_not_simulated(fitted) -> None:
+    """The output-error path (validate, and refined_on: the doctor's model handed out refined) has the same
+    limit: a degenerate final model (a held-out foreign draw's: a 0.6 kg body under a 3·10⁸ N·s/m segment)
+    asked it for 278 775 steps a sample, 27 GiB of plate drive, and the diagnosis died."""
+    model, a, _ = fitted
+    curve = model.curves[0]
+    force = curve.force_N.copy()
+    force[-1] = force[-2] + 1e8
+    steep = model_from_json(
+        model_json(replace(model, curve_override=(PiecewiseLinearCurve(curve.velocity_m_s, force),)))
+    )
+    assert np.isinf(validate(steep, a).gap_m)
+    assert refined_on(steep, a) is None  # every member of the population diverges too: nothing lowers it
 
 
 def test_a_curve_that_slopes_back_at_its_end_is_extended_flat(fitted) -> None:
