@@ -208,15 +208,12 @@ class _Doctor:
         unexplained = gof.unexplained(p)
         located = locate(final, simulated.residual, simulated.gap_m)
         finite = [g for g in gaps if np.isfinite(g)]
-        gap, before = simulated.gap_m * 1e6, initial.gap_m * 1e6
         verdict = (
             f"p = {p:.2g} < α = {options.alpha:g}: unexplained; " + located.describe()
             if unexplained
             else f"p = {p:.2g}: nothing left that the noise does not explain"
         )
         effects = ", ".join(s.effect for s in steps)
-        moved = "fell" if gap <= before else "rose"  # each was significant; together they may not help
-        named = f"named {effects}: the gap {moved} from {before:.1f} µm to {gap:.1f} µm"
         plate = recording.channels["x_r_l" if final.vehicle.is_axle else "x_r"]
         return DiagnosisResult(
             starting_effects=start.structure.labels,
@@ -226,7 +223,7 @@ class _Doctor:
             steps=steps,
             rounds=rounds,
             unexplained=bool(unexplained),
-            conclusion=(named if steps else f"nothing named: the gap is {gap:.1f} µm") + f"; {verdict}",
+            conclusion=gap_words(effects, initial.gap_m, simulated.gap_m) + f"; {verdict}",
             expected_gap_m=float(np.mean(finite)) if finite else float("inf"),
             residual_ratio=final.objective / float(np.mean(objectives)) if objectives else float("nan"),
             p_value=p,
@@ -293,6 +290,22 @@ class _Doctor:
         (simulated,) = _simulate([base], recording)
         scores = {c: trial(on, base, simulated, c) for c in candidates}
         return {c: (s.equation_statistic, s.simulation_statistic) for c, s in scores.items()}
+
+
+def gap_words(effects: str, before_m: float, after_m: float) -> str:
+    """The conclusion's first half: what was named and how the gap moved (each effect was significant when
+    named; together they may not help); a model without a finite gap diverges."""
+    if not math.isfinite(after_m) and (not effects or not math.isfinite(before_m)):
+        return (
+            f"named {effects}: the model diverges before and after"
+            if effects
+            else "nothing named: the model diverges"
+        )
+    after = f"{after_m * 1e6:.1f} µm" if math.isfinite(after_m) else "diverged"
+    if not effects:
+        return f"nothing named: the gap is {after}"
+    before = f"{before_m * 1e6:.1f} µm" if math.isfinite(before_m) else "diverged"
+    return f"named {effects}: the gap {'fell' if after_m <= before_m else 'rose'} from {before} to {after}"
 
 
 def trial(

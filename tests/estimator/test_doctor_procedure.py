@@ -20,6 +20,7 @@ from cases import random_axle
 from estimator.autocorrelation import effective_samples, ljung_box
 from estimator.doctor import DiagnoseOptions, DiagnosisResult, diagnose
 from estimator.doctor.catalog import CATALOG, EffectName, interval_mean
+from estimator.doctor.diagnose import gap_words
 from estimator.doctor.model import LOW_SPEED_KNOTS_M_S, low_speed_grids
 from estimator.doctor.residuals import WHITENESS_LEVEL, Localisation, Profile, sweep_frequency_Hz
 from estimator.recording import Recording
@@ -174,3 +175,19 @@ def test_where_a_channel_ran_away_is_said_not_a_key_error() -> None:
     assert "in the 2-4 Hz part of the sweep" not in sentence
     kept = replace(located, channel_rms_m={"x_s": 1e-6, "x_t": 1e-4, "x_r": 1e-5})
     assert "largest on x_t (100.0 µm RMS), at 2.0-2.5 s, in the 0-2 Hz part of the sweep" in kept.describe()
+
+
+def test_the_conclusion_says_diverged_where_a_gap_is_not_finite() -> None:
+    """The conclusion's gap words: µm where a gap is finite, "diverged" where a model has none (a held-out
+    foreign draw's read "the gap fell from inf µm to inf µm")."""
+    inf = float("inf")
+    assert gap_words("", 3.5e-5, 3.5e-5) == "nothing named: the gap is 35.0 µm"
+    assert (
+        gap_words("spring_curve", 6.7e-4, 5.6e-5)
+        == "named spring_curve: the gap fell from 670.0 µm to 56.0 µm"
+    )
+    assert gap_words("a, b", 5e-5, 6e-5) == "named a, b: the gap rose from 50.0 µm to 60.0 µm"
+    assert gap_words("a", inf, 2.7e-4) == "named a: the gap fell from diverged to 270.0 µm"
+    assert gap_words("a", 2.7e-4, inf) == "named a: the gap rose from 270.0 µm to diverged"
+    assert gap_words("a, b", inf, inf) == "named a, b: the model diverges before and after"
+    assert gap_words("", inf, inf) == "nothing named: the model diverges"
