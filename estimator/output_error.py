@@ -184,6 +184,27 @@ def _substeps(
     )
 
 
+def sampled_states(
+    physics: QuarterCarPhysics | AxlePhysics,
+    state0: np.ndarray,
+    sample_time_s: float,
+    plate: np.ndarray,
+    rate: np.ndarray,
+    steps: int,
+) -> np.ndarray:
+    """The states at the samples of a Runge-Kutta run at `steps` steps a sample, from the measured state0
+    (dynamics.start_state pads it) driven by the plate's position and rate; all NaN, not simulated, for a
+    model stiffer than any damper (more than MAX_SUBSTEPS steps: diverged). Shared with the model doctor's
+    batch simulation (estimator.doctor.simulation)."""
+    state0 = start_state(physics, state0)
+    if steps > MAX_SUBSTEPS:
+        return np.full((plate.shape[-1], *state0.shape), np.nan)
+    substep_s = sample_time_s / steps
+    return integrate_compiled(
+        physics, state0, substep_s, sample_substeps(plate, steps), sample_substeps(rate, steps)
+    )[::steps]
+
+
 def simulate_identified(
     model: IdentifiedModel,
     recording: Recording,
@@ -203,14 +224,8 @@ def simulate_identified(
     if batch is not None:
         state0 = np.repeat(state0[:, None], batch, axis=1)
     steps = _substeps(model, curves or model.curves, dt, physics, kinematics)
-    state0 = start_state(physics, state0)
     with np.errstate(over="ignore", invalid="ignore"):  # an unstable model is reported as a diverged gap
-        if steps > MAX_SUBSTEPS:  # stiffer than any damper: diverged, not simulated (as the doctor has it)
-            states = np.full((plate.shape[-1], *state0.shape), np.nan)
-        else:
-            states = integrate_compiled(
-                physics, state0, dt / steps, sample_substeps(plate, steps), sample_substeps(rate, steps)
-            )[::steps]
+        states = sampled_states(physics, state0, dt, plate, rate, steps)
     outputs = physics.outputs(np.moveaxis(states, 0, 1))
     measured = {name: recording.channels[name] for name in outputs}
     with np.errstate(over="ignore", invalid="ignore"):

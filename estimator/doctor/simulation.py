@@ -8,21 +8,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from estimator import dynamics
 from estimator.damper import CurveBatch
 from estimator.doctor.catalog import FRICTION_UNKNOWNS, EffectName
 from estimator.doctor.model import FittedModel
-from estimator.dynamics import (
-    MAX_SUBSTEPS,
-    AxlePhysics,
-    CornerPhysics,
-    QuarterCarPhysics,
-    model_substeps,
-    sample_substeps,
-)
-from estimator.output_error import DIVERGED_GAP_M, measured_drive
+from estimator.dynamics import AxlePhysics, CornerPhysics, QuarterCarPhysics, model_substeps
+from estimator.output_error import DIVERGED_GAP_M, measured_drive, sampled_states
 from estimator.recording import Recording
-from estimator.simulation_kernel import integrate_compiled
 from estimator.vehicle import TyreModel
 
 RUNAWAY_GAP_RATIO = 3.0
@@ -172,14 +163,8 @@ def _simulate(
             vehicle.anti_roll_bar_stiffness_N_per_m
             + np.array([m.value("anti_roll_bar_N_per_m") for m in models]),
         )
-    state0 = dynamics.start_state(physics, state0)
     with np.errstate(over="ignore", invalid="ignore"):  # an unstable model is reported as a diverged gap
-        if steps > MAX_SUBSTEPS:  # stiffer than any damper: reported as diverged, not simulated
-            states = np.full((plate.shape[-1], *state0.shape), np.nan)
-        else:
-            states = integrate_compiled(
-                physics, state0, dt / steps, sample_substeps(plate, steps), sample_substeps(rate, steps)
-            )[::steps]
+        states = sampled_states(physics, state0, dt, plate, rate, steps)  # NaN: stiffer than any damper
         outputs = physics.outputs(np.moveaxis(states, 0, 1))
     sources = [ref if ref is not None else recording for ref in references]
     predicted: dict[str, np.ndarray] = {}
