@@ -103,7 +103,7 @@ def implausible(effect: EffectInstance, model: FittedModel) -> str | None:
         if sliding < 0.0 or sliding + excess < 0.0:
             static = sliding + excess
             return f"the friction would feed energy in (sliding {sliding:.0f} N, static {static:.0f} N)"
-        if excess < 0.0 and _below_zero(model, {FRICTION_UNKNOWNS[1]: 1.0}):
+        if excess < 0.0 and _below_zero(model, [({FRICTION_UNKNOWNS[1]: 1.0}, 0.0)]):
             # Stribeck's law falls from the breakaway level to the sliding one; a law that rises is viscous
             return (
                 f"the force would rise with velocity (static {sliding + excess:.0f} N below sliding "
@@ -115,7 +115,7 @@ def implausible(effect: EffectInstance, model: FittedModel) -> str | None:
         return "the bar's stiffness is negative"
     elif name is EffectName.TYRE_STIFFNESS and model.tyre_stiffness_N_per_m <= 0.0:
         return "the tyre rate is not positive"
-    elif name is EffectName.SPRING_CURVE and any(_below_zero(model, *s) for s in _falling_segments(model)):
+    elif name is EffectName.SPRING_CURVE and _below_zero(model, _falling_segments(model)):
         return "the spring curve falls beyond chance somewhere: the spring would push the wrong way there"
     elif name is EffectName.TYRE_LIFTOFF and model.airborne_fraction <= 0.0:
         return "the tyre never leaves the plate in the fitted model"
@@ -135,12 +135,18 @@ def _falling_segments(model: FittedModel) -> list[tuple[dict[str, float], float]
     return [(w, stated) for w in segments if stated + sum(model.value(n) for n in w) <= 0.0]
 
 
-def _below_zero(model: FittedModel, weights: dict[str, float], constant: float = 0.0) -> bool:
-    """Is constant + Σ weight·θ[name] below zero beyond chance: a one-sided Wald test at level ALPHA (the
-    equations' sandwich covariance). An estimate at a bound (a Coulomb friction's Stribeck excess, a spring
-    curve's flat end: 0) falls below it half the time; only one that falls significantly contradicts the
-    family's law."""
-    row = np.array([weights.get(n, 0.0) for n in model.system.parameter_names])
+def _below_zero(model: FittedModel, combinations: list[tuple[dict[str, float], float]]) -> bool:
+    """Is any (weights, constant) + Σ weight·θ[name] below zero beyond chance: a one-sided Wald test at level
+    ALPHA each (the equations' sandwich covariance, computed once). An estimate at a bound (a Coulomb
+    friction's Stribeck excess, a spring curve's flat end: 0) falls below it half the time; only one that
+    falls significantly contradicts the family's law."""
+    if not combinations:
+        return False
     covariance = confidence_intervals(model.system, model.theta, model.signals.sample_time_s).covariance
-    value, spread = constant + float(row @ model.theta), math.sqrt(max(float(row @ covariance @ row), 0.0))
-    return value < 0.0 and (spread == 0.0 or chi_square_survival((value / spread) ** 2, 1) < 2.0 * ALPHA)
+    for weights, constant in combinations:
+        row = np.array([weights.get(n, 0.0) for n in model.system.parameter_names])
+        value = constant + float(row @ model.theta)
+        spread = math.sqrt(max(float(row @ covariance @ row), 0.0))
+        if value < 0.0 and (spread == 0.0 or chi_square_survival((value / spread) ** 2, 1) < 2.0 * ALPHA):
+            return True
+    return False
