@@ -18,7 +18,8 @@ leaves more than its own noise would.
    draws of the current model (a scaled χ²; calibrate). *Select*: the candidate with the smallest p-value is
    named when it is at most α/m (Bonferroni over the m candidates of the round), a family alone before
    families together (these only where no family alone is significant); it is then fitted fully
-   (fitting.fit_added). Repeat from 2 with it added, until a round names nothing.
+   (fitting.fit_added). Repeat from 2 with it added, until a round names nothing; the model kept is the
+   one on this path whose free simulation has the smallest gap (steps after it are left out, and said).
 5. *Goodness of fit*: the final model against a parametric bootstrap of its plausible truth
    (estimator.doctor.expected); p < α: "unexplained", with where the disagreement is largest
    (estimator.doctor.residuals.Localisation); the model handed out then has its curve refined on the
@@ -142,7 +143,7 @@ class _Doctor:
         self.report(0, "identifying the starting model")
         start = current = fit(reference, starting_structure(options.tyre))  # step 1
         (initial,) = _simulate([current], recording)
-        simulated = initial
+        simulated, path = initial, [(current, initial)]  # the model and its simulation after each step
         steps: list[DiagnosisStep] = []
         rounds: list[list[CandidateScore]] = []
         for step in range(options.max_steps + 1):
@@ -197,6 +198,13 @@ class _Doctor:
                 )
             )
             current, simulated = model, outcome
+            path.append((model, outcome))
+        # each step is named on its one-step model's evidence; where full fits together end above a model
+        # on the path, the doctor stands by the one that simulates the recording best (the first of equals)
+        best, left_out = int(np.argmin([s.gap_m for _, s in path])), ""
+        if best < len(steps):
+            left_out = f"; left out {', '.join(s.effect for s in steps[best:])}: the gap rose with them"
+            steps, (current, simulated) = steps[:best], path[best]
         self.report(len(steps), "testing the final model against its own noise")
         # step 5: the final structure re-identified on synthetic recordings of its plausible truth (started
         # from the final model: each is its response plus noise)
@@ -223,7 +231,7 @@ class _Doctor:
             steps=steps,
             rounds=rounds,
             unexplained=bool(unexplained),
-            conclusion=gap_words(effects, initial.gap_m, simulated.gap_m) + f"; {verdict}",
+            conclusion=gap_words(effects, initial.gap_m, simulated.gap_m) + f"{left_out}; {verdict}",
             expected_gap_m=float(np.mean(finite)) if finite else float("inf"),
             residual_ratio=final.objective / float(np.mean(objectives)) if objectives else float("nan"),
             p_value=p,
