@@ -25,14 +25,10 @@ from estimator.doctor.catalog import CATALOG, EffectName
 from estimator.doctor.parameters import spring_curve_points
 from estimator.doctor.residuals import Localisation
 from estimator.doctor.result import DiagnosisResult
-from service.doctor_words import fit_verdict, shape
+from service.doctor_words import fit_verdict, micrometres, shape
 
 REPORT_NAME = "report.md"
 ZOOM_S = 0.6
-
-
-def _micro(value: float | None) -> str:
-    return "diverged" if value is None or not np.isfinite(value) else f"{value * 1e6:.1f} µm"
 
 
 def _save(fig: plt.Figure, path: Path) -> str:
@@ -202,11 +198,11 @@ def markdown(result: DiagnosisResult, title: str, images: dict[str, str]) -> str
     lines += [
         f"Starting model: {', '.join(result.starting_effects) or 'the vehicle file with a spring tyre'}; "
         f"final model: {', '.join(result.final_effects) or 'the same'}. "
-        f"Gap before {_micro(result.gap_before_m)}, "
-        f"after {_micro(result.gap_after_m)}; sensor noise {_micro(result.noise_floor_m)}. "
+        f"Gap before {micrometres(result.gap_before_m)}, "
+        f"after {micrometres(result.gap_after_m)}; sensor noise {micrometres(result.noise_floor_m)}. "
         f"Unexplained: {'yes' if result.unexplained else 'no'}.",
         "",
-        f"Goodness of fit of the final model against {_micro(result.expected_gap_m)}, the mean gap of "
+        f"Goodness of fit of the final model against {micrometres(result.expected_gap_m)}, the mean gap of "
         f"itself re-identified on synthetic recordings with this recording's noise: "
         f"{fit_verdict(result.p_value, result.alpha, result.unexplained, result.where)}.",
         "",
@@ -220,8 +216,8 @@ def markdown(result: DiagnosisResult, title: str, images: dict[str, str]) -> str
             str(n),
             s.effect,
             shape(s.effect, s.parameters),
-            _micro(s.gap_before_m),
-            _micro(s.gap_after_m),
+            micrometres(s.gap_before_m),
+            micrometres(s.gap_after_m),
             _p(s.p_value),
             s.evidence,
         ]
@@ -252,7 +248,7 @@ def markdown(result: DiagnosisResult, title: str, images: dict[str, str]) -> str
                 c.effect,
                 str(c.unknowns),
                 f"{c.equation_statistic:.1f} (p {_p(c.equation_p)})",
-                "-" if c.gap_m is None else _micro(c.gap_m),
+                "-" if c.gap_m is None else micrometres(c.gap_m),
                 "-" if c.gap_m is None else f"{c.simulation_statistic:.1f} (p {_p(c.simulation_p)})",
                 _p(c.p_value),
                 c.verdict,

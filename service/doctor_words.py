@@ -9,6 +9,7 @@ result of the earlier doctor, whose parameters have other keys, falls back to th
 
 from __future__ import annotations
 
+import math
 import re
 from collections.abc import Mapping
 
@@ -23,6 +24,11 @@ Parameters = Mapping[str, float | str]
 JOIN = " + "
 """Between the labels of families a step named together, as the result's JSON has them
 (estimator.doctor.catalog.JOIN; not imported: this module reads stored results without the estimator)."""
+
+
+def micrometres(gap_m: float | None) -> str:
+    """A gap (m) in words: "35.0 µm", or "diverged" where the model has none (null in stored JSON)."""
+    return f"{gap_m * 1e6:.1f} µm" if gap_m is not None and math.isfinite(gap_m) else "diverged"
 
 
 def family(effect: str) -> str:

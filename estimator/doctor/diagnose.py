@@ -309,10 +309,9 @@ def gap_words(effects: str, before_m: float, after_m: float) -> str:
             if effects
             else "nothing named: the model diverges"
         )
-    after = f"{after_m * 1e6:.1f} µm" if math.isfinite(after_m) else "diverged"
+    before, after = (f"{m * 1e6:.1f} µm" if math.isfinite(m) else "diverged" for m in (before_m, after_m))
     if not effects:
         return f"nothing named: the gap is {after}"
-    before = f"{before_m * 1e6:.1f} µm" if math.isfinite(before_m) else "diverged"
     return f"named {effects}: the gap {'fell' if after_m <= before_m else 'rose'} from {before} to {after}"
 
 

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -13,7 +12,7 @@ from typing import TYPE_CHECKING
 from estimator.vehicle import TyreModel
 from service.cli.errors import CliError
 from service.cli.recording_input import RECORDING_HELP, VEHICLE_HELP, read_recording_and_vehicle
-from service.doctor_words import fit_verdict, shape
+from service.doctor_words import fit_verdict, micrometres, shape
 
 if TYPE_CHECKING:
     from estimator.doctor.diagnose import DiagnoseProgress
@@ -24,34 +23,30 @@ DOCTOR_POINTS = {"quarter-car": 30, "axle": 15}
 import the doctor (tests/service/test_readme_cli.py checks they are the same)."""
 
 
-def _micro(value: float) -> str:
-    return f"{value * 1e6:.1f} µm" if math.isfinite(value) else "diverged"
-
-
 def summary(result: DiagnosisResult) -> str:
     """Readable report of a diagnosis."""
     lines = [
         f"starting model: {', '.join(result.starting_effects) or 'spring tyre, nothing else'} "
         f"beyond the vehicle file",
-        f"gap before: {_micro(result.gap_before_m)} (sensor noise {_micro(result.noise_floor_m)})",
+        f"gap before: {micrometres(result.gap_before_m)} (sensor noise {micrometres(result.noise_floor_m)})",
         f"where: {result.located_before.describe()}",
     ]
     for number, step in enumerate(result.steps, start=1):
         lines += [
             f"\nstep {number}: {step.effect} (p = {step.p_value:.2g}): {shape(step.effect, step.parameters)}",
-            f"  gap {_micro(step.gap_before_m)} -> {_micro(step.gap_after_m)}",
+            f"  gap {micrometres(step.gap_before_m)} -> {micrometres(step.gap_after_m)}",
             f"  evidence: {step.evidence}",
         ]
     lines += [
-        f"\ngap after: {_micro(result.gap_after_m)}; the final model re-identified on synthetic recordings "
-        f"of itself with this recording's noise reaches {_micro(result.expected_gap_m)}",
+        f"\ngap after: {micrometres(result.gap_after_m)}; the final model re-identified on synthetic "
+        f"recordings of itself with this recording's noise reaches {micrometres(result.expected_gap_m)}",
         f"goodness of fit: {fit_verdict(result.p_value, result.alpha, result.unexplained, result.where)}",
         f"conclusion: {result.conclusion}",
     ]
     if result.refit is not None:
         lines.append(
             f"model (--json): the final one with its curve refined on the free-simulation gap, as something "
-            f"it lacks biases the equations' fit: gap {_micro(result.refit[1])}"
+            f"it lacks biases the equations' fit: gap {micrometres(result.refit[1])}"
         )
     return "\n".join(lines)
 
