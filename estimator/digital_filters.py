@@ -1,6 +1,6 @@
 """The few signal-processing routines identify needs, in numpy and LAPACK: the Butterworth low-pass design
 (second-order sections), zero-phase filtering forward and backward, a first-order recursive filter, Welch's
-power density and the analytic signal.
+power density, a short-time spectrum's magnitude and the analytic signal.
 
 Why not scipy.signal: importing it costs 1-2 s on this project's machines (it imports scipy.stats,
 scipy.interpolate and scipy.optimize, and rewrites the docstrings of some hundred functions at import),
@@ -185,3 +185,20 @@ def analytic_signal(x: np.ndarray) -> np.ndarray:
     else:
         weights[1 : (size + 1) // 2] = 2.0
     return np.fft.ifft(np.fft.fft(x) * weights)
+
+
+def short_time_magnitude(
+    x: np.ndarray, sample_rate_Hz: float, segment: int, fft_size: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Frequencies, segment centre times and |STFT| (frequencies, segments) as scipy.signal.stft(x, fs,
+    nperseg=segment, noverlap=3·segment//4, nfft=fft_size) has them up to its scale 1/Σwindow, in numpy
+    (importing scipy.signal costs a diagnosis 1-2 s): periodic Hann window, segment//2 zeros either end."""
+    step = segment - 3 * segment // 4
+    half = segment // 2
+    padded = np.concatenate([np.zeros(half), np.asarray(x, dtype=float), np.zeros(half)])
+    padded = np.concatenate([padded, np.zeros((-(padded.size - segment) % step) % segment)])
+    starts = np.arange(0, padded.size - segment + 1, step)
+    window = 0.5 - 0.5 * np.cos(2.0 * np.pi * np.arange(segment) / segment)
+    spectrum = np.fft.rfft(window * padded[starts[:, None] + np.arange(segment)], n=fft_size, axis=1)
+    times = starts / sample_rate_Hz  # the segment centres, less the leading zeros
+    return np.fft.rfftfreq(fft_size, 1.0 / sample_rate_Hz), times, np.abs(spectrum).T

@@ -10,6 +10,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from estimator.damper import PiecewiseLinearCurve
+
 
 def _end_slope(h0: float, h1: float, m0: float, m1: float) -> float:
     """Moler's one-sided three-point slope at an end, kept shape-preserving (scipy's _edge_case)."""
@@ -96,3 +98,19 @@ def increasing(values: np.ndarray) -> np.ndarray:
             sizes[-2] = size
             del means[-1], sizes[-1]
     return np.repeat(means, sizes)
+
+
+SMOOTH_POINTS = 240  # knots of the dense table of the smooth truth's damper curve
+
+
+def smooth_curve(curve: PiecewiseLinearCurve) -> PiecewiseLinearCurve:
+    """A monotone cubic (PCHIP) through the curve's points made non-decreasing (increasing), linear beyond
+    them with the end slopes, tabulated densely over three times the curve's velocity span."""
+    lo, hi = float(curve.velocity_m_s[0]), float(curve.velocity_m_s[-1])
+    span = hi - lo
+    cubic = Pchip.through(curve.velocity_m_s, increasing(curve.force_N))
+    inside = np.linspace(lo, hi, SMOOTH_POINTS)
+    below = float(cubic.value(lo)) - float(cubic.slope(lo)) * span
+    above = float(cubic.value(hi)) + float(cubic.slope(hi)) * span
+    grid = np.concatenate([[lo - span], inside, [hi + span]])
+    return PiecewiseLinearCurve(grid, np.concatenate([[below], cubic.value(inside), [above]]))

@@ -29,7 +29,12 @@ from functools import lru_cache
 
 import numpy as np
 
-from estimator.digital_filters import butterworth_lowpass_sos, sosfiltfilt, welch_density
+from estimator.digital_filters import (
+    butterworth_lowpass_sos,
+    short_time_magnitude,
+    sosfiltfilt,
+    welch_density,
+)
 from estimator.order_statistics import median
 
 SNR_DB = 20.0
@@ -144,3 +149,25 @@ def initial_state(x_m: np.ndarray, sample_time_s: float, noise_m: float) -> tupl
         if misfit <= 2.0 * noise_m or window <= 8:
             return float(coefficients[2]), float(coefficients[1])
         window //= 2
+
+
+SWEEP_WINDOW_S = 0.5  # short-time spectrum window for the sweep frequency
+REST_FRACTION = 0.1
+"""Where the plate's amplitude is below this fraction of its largest, the plate rests (no sweep frequency)."""
+
+
+def sweep_frequency_Hz(plate_m: np.ndarray, sample_time_s: float) -> np.ndarray:
+    """The sweep's instantaneous frequency at every sample (NaN where the plate rests)."""
+    rate = 1.0 / sample_time_s
+    window = max(16, round(SWEEP_WINDOW_S * rate))
+    freqs, times, magnitude = short_time_magnitude(plate_m - np.mean(plate_m), rate, window, 8 * window)
+    peak = freqs[np.argmax(magnitude, axis=0)]
+    amplitude = magnitude.max(axis=0)
+    peak = np.where(amplitude >= REST_FRACTION * amplitude.max(), peak, np.nan)
+    t = np.arange(plate_m.size) * sample_time_s
+    inside = np.isfinite(peak)
+    if not np.any(inside):
+        return np.full(plate_m.size, np.nan)
+    frequency = np.interp(t, times[inside], peak[inside])
+    resting = np.interp(t, times, (~inside).astype(float)) > 0.5
+    return np.where(resting, np.nan, frequency)

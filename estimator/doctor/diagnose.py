@@ -52,7 +52,7 @@ from estimator.doctor.expected import plausible_truth, synthetic_recordings
 from estimator.doctor.fitting import fit, fit_added, one_step
 from estimator.doctor.model import FitSettings, FittedModel, Reference, starting_structure
 from estimator.doctor.parameters import implausible, report
-from estimator.doctor.residuals import locate, sweep_frequency_Hz
+from estimator.doctor.residuals import locate
 from estimator.doctor.result import CandidateScore, DiagnosisResult, DiagnosisStep, model_json
 from estimator.doctor.simulation import simulate_models
 from estimator.forked_map import forked_map
@@ -60,6 +60,7 @@ from estimator.identify import identify_unstated
 from estimator.model_io import ModelFormatError, model_from_json
 from estimator.output_error import IdentifiedModel
 from estimator.recording import Recording
+from estimator.signals import sweep_frequency_Hz
 from estimator.validation import refined_on
 from estimator.vehicle import TyreModel, VehicleConstant, VehicleParameters
 

@@ -13,48 +13,12 @@ from estimator.autocorrelation import ljung_box
 from estimator.digital_filters import welch_density
 from estimator.doctor.model import FittedModel
 from estimator.doctor.simulation import RUNAWAY_GAP_RATIO, diverged
+from estimator.signals import sweep_frequency_Hz
 
 BAND_WIDTH_HZ = 2.0
-WINDOW_S = 0.5  # short-time spectrum window for the sweep frequency
-REST_FRACTION = 0.1
-"""Where the plate's amplitude is below this fraction of its largest, the plate rests (no sweep frequency)."""
 BINS = 8
 TIME_WINDOW_S = 0.5
 WHITENESS_LEVEL = 0.01
-
-
-def short_time_magnitude(
-    x: np.ndarray, sample_rate_Hz: float, segment: int, fft_size: int
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Frequencies, segment centre times and |STFT| (frequencies, segments) as scipy.signal.stft(x, fs,
-    nperseg=segment, noverlap=3·segment//4, nfft=fft_size) has them up to its scale 1/Σwindow, in numpy
-    (importing scipy.signal costs a diagnosis 1-2 s): periodic Hann window, segment//2 zeros either end."""
-    step = segment - 3 * segment // 4
-    half = segment // 2
-    padded = np.concatenate([np.zeros(half), np.asarray(x, dtype=float), np.zeros(half)])
-    padded = np.concatenate([padded, np.zeros((-(padded.size - segment) % step) % segment)])
-    starts = np.arange(0, padded.size - segment + 1, step)
-    window = 0.5 - 0.5 * np.cos(2.0 * np.pi * np.arange(segment) / segment)
-    spectrum = np.fft.rfft(window * padded[starts[:, None] + np.arange(segment)], n=fft_size, axis=1)
-    times = starts / sample_rate_Hz  # the segment centres, less the leading zeros
-    return np.fft.rfftfreq(fft_size, 1.0 / sample_rate_Hz), times, np.abs(spectrum).T
-
-
-def sweep_frequency_Hz(plate_m: np.ndarray, sample_time_s: float) -> np.ndarray:
-    """The sweep's instantaneous frequency at every sample (NaN where the plate rests)."""
-    rate = 1.0 / sample_time_s
-    window = max(16, round(WINDOW_S * rate))
-    freqs, times, magnitude = short_time_magnitude(plate_m - np.mean(plate_m), rate, window, 8 * window)
-    peak = freqs[np.argmax(magnitude, axis=0)]
-    amplitude = magnitude.max(axis=0)
-    peak = np.where(amplitude >= REST_FRACTION * amplitude.max(), peak, np.nan)
-    t = np.arange(plate_m.size) * sample_time_s
-    inside = np.isfinite(peak)
-    if not np.any(inside):
-        return np.full(plate_m.size, np.nan)
-    frequency = np.interp(t, times[inside], peak[inside])
-    resting = np.interp(t, times, (~inside).astype(float)) > 0.5
-    return np.where(resting, np.nan, frequency)
 
 
 @dataclass(frozen=True)

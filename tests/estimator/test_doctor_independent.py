@@ -21,7 +21,7 @@ from independent_recordings import recorded
 
 from estimator.doctor import DiagnoseOptions, diagnose
 from estimator.doctor.diagnose import DiagnosisResult
-from estimator.doctor.expected import ChannelNoise, measure_channel_noise, reading_quantum_m
+from estimator.noise_law import ChannelNoise, measure_channel_noise, reading_quantum_m
 from estimator.recording import Recording
 from estimator.vehicle import TyreModel, VehicleParameters
 from simulators.independent.cases import Case

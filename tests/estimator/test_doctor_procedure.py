@@ -24,8 +24,9 @@ from estimator.doctor import DiagnoseOptions, DiagnosisResult, diagnose
 from estimator.doctor.catalog import CATALOG, EffectName, interval_mean
 from estimator.doctor.diagnose import gap_words
 from estimator.doctor.model import LOW_SPEED_KNOTS_M_S, low_speed_grids
-from estimator.doctor.residuals import WHITENESS_LEVEL, Localisation, Profile, sweep_frequency_Hz
+from estimator.doctor.residuals import WHITENESS_LEVEL, Localisation, Profile
 from estimator.recording import Recording
+from estimator.signals import sweep_frequency_Hz
 from estimator.sweep import SweepSettings
 from estimator.vehicle import VehicleParameters
 from simulators.foreign.manifest import draw_files, namespace_entropy

@@ -1,4 +1,4 @@
-"""The doctor's short-time spectrum (estimator.doctor.residuals.short_time_magnitude) is scipy.signal.stft's,
+"""The doctor's short-time spectrum (estimator.digital_filters.short_time_magnitude) is scipy.signal.stft's,
 so that the sweep frequency it reads off the plate is the same without importing scipy.signal in a
 diagnosis."""
 
@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from estimator.doctor.residuals import short_time_magnitude
+from estimator.digital_filters import short_time_magnitude
 
 
 @pytest.mark.parametrize("segment", [16, 17, 250, 333, 500])

@@ -21,15 +21,11 @@ from hypothesis import strategies as st
 from scipy.optimize import isotonic_regression, nnls
 
 from estimator.damper import PiecewiseLinearCurve
-from estimator.doctor.expected import (
-    TRUTH_POINTS_FACTOR,
-    plausible_truth,
-    smooth_curve,
-)
+from estimator.doctor.expected import TRUTH_POINTS_FACTOR, plausible_truth
 from estimator.doctor.fitting import fit
 from estimator.doctor.model import LOW_SPEED_KNOTS_M_S, FitSettings, Reference, starting_structure
 from estimator.linear_algebra import small_nnls
-from estimator.monotone import increasing
+from estimator.monotone import increasing, smooth_curve
 from estimator.sweep import SweepSettings
 from estimator.vehicle import TyreModel
 from simulators.vehicle_sim import SimulationSettings, default_quarter_car, simulate
