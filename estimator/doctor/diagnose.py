@@ -9,7 +9,7 @@ leaves more than its own noise would.
    the load path's two rates together (catalog.LOAD_PATH), and its unknowns moved by one linearised step from
    the current model (fitting.one_step: the paper's objective, exact solver; channel parameters by a
    Gauss-Newton step), side by side in forked processes.
-3. *Each candidate is tested* (estimator.doctor.criteria, score_candidate): in the equations (a Wald test of
+3. *Each candidate is tested* (estimator.doctor.candidates, criteria): in the equations (a Wald test of
    its unknowns) and in the free simulation from the measured plate (a likelihood ratio of the gap); its
    p-value is the larger of the two (one with p > α in the equations is not simulated). A candidate whose
    fitted values are physically impossible (estimator.doctor.parameters.implausible), or families together
@@ -31,27 +31,31 @@ from __future__ import annotations
 import math
 import threading
 from collections.abc import Callable
-from dataclasses import dataclass, replace
-from functools import cached_property, partial
+from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 
-from estimator.autocorrelation import effective_samples
-from estimator.distributions import log_chi_square_survival
-from estimator.doctor.catalog import CATALOG, Candidate, EffectName, label, members, round_candidates
+from estimator.doctor.candidates import (
+    Simulated,
+    _calibrated,
+    _evidence,
+    _log_p,
+    _report,
+    _scales,
+    _simulate,
+    _verdict,
+    trial,
+)
+from estimator.doctor.catalog import CATALOG, Candidate, label, round_candidates
 from estimator.doctor.criteria import (
     ALPHA,
-    EachMember,
     GoodnessOfFit,
     Selection,
-    SimulationTest,
-    TestResult,
-    intersection_union,
 )
 from estimator.doctor.expected import plausible_truth, synthetic_recordings
 from estimator.doctor.fitting import fit, fit_added, one_step
 from estimator.doctor.model import FitSettings, FittedModel, Reference, starting_structure
-from estimator.doctor.parameters import implausible, report
 from estimator.doctor.residuals import locate
 from estimator.doctor.result import CandidateScore, DiagnosisResult, DiagnosisStep, model_json
 from estimator.doctor.simulation import simulate_models
@@ -90,29 +94,6 @@ class DiagnoseOptions:
 class DiagnoseProgress:
     step: int
     stage: str
-
-
-@dataclass
-class Simulated:
-    """A model's free simulation: its gap (m) and output residual and prediction per channel."""
-
-    gap_m: float
-    residual: dict[str, np.ndarray]
-    predicted: dict[str, np.ndarray]
-
-    @cached_property
-    def effective_samples(self) -> float:
-        """The residual's effective number of independent samples, summed over its channels."""
-        return float(sum(effective_samples(r) for r in self.residual.values()))
-
-
-def _simulate(models: list[FittedModel], recording: Recording) -> list[Simulated]:
-    batch = simulate_models(models, recording)
-    gaps = batch.gap_m()
-    return [
-        Simulated(float(gaps[k]), batch.column(k), {name: p[:, k] for name, p in batch.predicted.items()})
-        for k in range(len(models))
-    ]
 
 
 @dataclass
@@ -314,139 +295,6 @@ def gap_words(effects: str, before_m: float, after_m: float) -> str:
     if not effects:
         return f"nothing named: the gap is {after}"
     return f"named {effects}: the gap {'fell' if after_m <= before_m else 'rose'} from {before} to {after}"
-
-
-def trial(
-    reference: Reference,
-    current: FittedModel,
-    simulated: Simulated,
-    candidate: Candidate,
-    screen: float | None = None,
-) -> CandidateScore:
-    """Step 3 for one candidate: its one step from the current model and its tests. Both tests must
-    reject: with `screen` (α), one whose equations give p above it cannot be named, and is not simulated.
-    (Run in a worker: the score is returned, not the stepped model, which is large.)"""
-    model, wald = one_step(reference, current, candidate, screen)
-    tried = screen is None or _equations(candidate, current, model, wald).p_value <= screen
-    (outcome,) = _simulate([model], reference.recording) if tried else (None,)
-    return score_candidate(candidate, current, simulated, model, wald, outcome)
-
-
-def _equations(
-    candidate: Candidate, current: FittedModel, model: FittedModel, wald: TestResult
-) -> TestResult:
-    """The candidate's test in the equations: the Wald test of its unknowns; tyre_liftoff has none, and
-    passes when the equations hold better with it."""
-    if candidate[0].name is EffectName.TYRE_LIFTOFF:
-        better = model.objective < current.objective
-        return TestResult(current.objective - model.objective, 0, 0.0 if better else 1.0)
-    return wald
-
-
-def score_candidate(
-    candidate: Candidate,
-    current: FittedModel,
-    simulated: Simulated,
-    model: FittedModel,
-    wald: TestResult,
-    outcome: Simulated | None,
-) -> CandidateScore:
-    """A candidate's tests (module docstring, step 3): the one-step Wald test of its unknowns and the
-    likelihood ratio of its free simulation against the current model's (outcome None: not simulated, the
-    equations decide: p above α there already)."""
-    equations = _equations(candidate, current, model, wald)
-    if outcome is None:
-        simulation, gap, ratio = TestResult(math.nan, wald.unknowns, math.nan), None, None
-        p_value = equations.p_value
-    else:
-        samples = simulated.effective_samples if np.isfinite(simulated.gap_m) else 0.0  # 0: diverged before
-        simulation = SimulationTest().test(samples, simulated.gap_m, outcome.gap_m, wald.unknowns)
-        gap, p_value = outcome.gap_m, intersection_union(equations, simulation)
-        ratio = outcome.gap_m / simulated.gap_m if np.isfinite(simulated.gap_m) else None
-    reason = next(filter(None, (implausible(e, model) for e in candidate)), None)
-    if len(candidate) > 1 and reason is None and outcome is not None:
-        index = members(candidate, model.system.parameter_names, current.system.parameter_names)
-        reason = EachMember().redundant(model.system, model.theta, index, model.signals.sample_time_s)
-    return CandidateScore(
-        effect=label(candidate),
-        objective_ratio=model.objective / current.objective,
-        gap_m=gap,
-        gap_ratio=ratio,
-        equation_statistic=equations.statistic,
-        simulation_statistic=simulation.statistic,
-        unknowns=wald.unknowns,
-        equation_p=equations.p_value,
-        simulation_p=simulation.p_value,
-        p_value=p_value,
-        parameters=_report(candidate, model),
-        verdict=reason or "tested",
-    )
-
-
-def _log_p_values(score: CandidateScore, wald_scale: float, ratio_scale: float) -> tuple[float, float]:
-    """ln of the candidate's equation and simulation p-values, the statistics divided by their calibration
-    scales (tyre_liftoff's equation test is no Wald test: its p-value as it is)."""
-    q = max(score.unknowns, 1)
-    if score.effect.startswith(EffectName.TYRE_LIFTOFF.value):
-        equation = math.log(score.equation_p) if score.equation_p > 0 else -math.inf
-    else:
-        equation = log_chi_square_survival(score.equation_statistic / wald_scale, q)
-    if math.isnan(score.simulation_statistic):  # neither model simulates: the equations decide
-        return equation, -math.inf
-    return equation, log_chi_square_survival(max(score.simulation_statistic, 0.0) / ratio_scale, q)
-
-
-def _log_p(score: CandidateScore, wald_scale: float = 1.0, ratio_scale: float = 1.0) -> float:
-    """ln of the candidate's p-value, the larger of its two tests' (for Selection: no underflow to 0)."""
-    return max(_log_p_values(score, wald_scale, ratio_scale))
-
-
-def _calibrated(score: CandidateScore, wald_scale: float, ratio_scale: float) -> CandidateScore:
-    """The score with its p-values from the statistics divided by their bootstrap scales."""
-    equation, simulation = (min(1.0, math.exp(v)) for v in _log_p_values(score, wald_scale, ratio_scale))
-    if score.effect.startswith(EffectName.TYRE_LIFTOFF.value):
-        equation = score.equation_p
-    return replace(score, equation_p=equation, simulation_p=simulation, p_value=max(equation, simulation))
-
-
-def _scales(
-    score: CandidateScore, values: tuple[list[float], list[float]], draws: int | None = None
-) -> tuple[float, float]:
-    """A candidate's Wald and likelihood-ratio scales (calibrate): the mean of its finite statistics on the
-    draws, or their sum over `draws` (a lower bound), over the degrees of freedom, at least 1."""
-    q = max(score.unknowns, 1)
-    return tuple(  # type: ignore[return-value]
-        max(1.0, sum(kept) / ((draws or len(kept)) * q)) if kept else 1.0 for kept in values
-    )
-
-
-def _report(candidate: Candidate, model: FittedModel) -> dict[str, float | str]:
-    return {key: value for effect in candidate for key, value in report(effect, model).items()}
-
-
-def _verdict(
-    score: CandidateScore, candidate: Candidate, chosen: Candidate | None, bound: float
-) -> CandidateScore:
-    if score.verdict != "tested":
-        return score
-    if candidate == chosen:
-        return replace(score, verdict="named")
-    if score.p_value > bound:
-        untried = ": not simulated" if score.gap_m is None else ""
-        verdict = f"not significant (p = {score.p_value:.2g} > α/m = {bound:.2g}){untried}"
-        return replace(score, verdict=verdict)
-    if chosen is not None and len(candidate) > len(chosen):
-        return replace(score, verdict="significant, but a smaller candidate is too (tested first)")
-    return replace(score, verdict="significant, but another candidate is more so")
-
-
-def _evidence(score: CandidateScore) -> str:
-    ratio = f"{score.gap_ratio:.2f}x" if score.gap_ratio is not None else "finite (it diverged before)"
-    return (
-        f"equations: W = {score.equation_statistic:.1f} on {score.unknowns} unknowns "
-        f"(p = {score.equation_p:.2g}); simulation: the gap {ratio} (likelihood ratio "
-        f"{score.simulation_statistic:.1f}, p = {score.simulation_p:.2g})"
-    )
 
 
 def diagnose(
