@@ -41,7 +41,7 @@ class Simulated:
         return float(sum(effective_samples(r) for r in self.residual.values()))
 
 
-def _simulate(models: list[FittedModel], recording: Recording) -> list[Simulated]:
+def free_simulations(models: list[FittedModel], recording: Recording) -> list[Simulated]:
     batch = simulate_models(models, recording)
     gaps = batch.gap_m()
     return [
@@ -62,7 +62,7 @@ def trial(
     (Run in a worker: the score is returned, not the stepped model, which is large.)"""
     model, wald = one_step(reference, current, candidate, screen)
     tried = screen is None or _equations(candidate, current, model, wald).p_value <= screen
-    (outcome,) = _simulate([model], reference.recording) if tried else (None,)
+    (outcome,) = free_simulations([model], reference.recording) if tried else (None,)
     return score_candidate(candidate, current, simulated, model, wald, outcome)
 
 
@@ -112,7 +112,7 @@ def score_candidate(
         equation_p=equations.p_value,
         simulation_p=simulation.p_value,
         p_value=p_value,
-        parameters=_report(candidate, model),
+        parameters=parameters_of(candidate, model),
         verdict=reason or "tested",
     )
 
@@ -130,12 +130,12 @@ def _log_p_values(score: CandidateScore, wald_scale: float, ratio_scale: float) 
     return equation, log_chi_square_survival(max(score.simulation_statistic, 0.0) / ratio_scale, q)
 
 
-def _log_p(score: CandidateScore, wald_scale: float = 1.0, ratio_scale: float = 1.0) -> float:
+def log_p_value(score: CandidateScore, wald_scale: float = 1.0, ratio_scale: float = 1.0) -> float:
     """ln of the candidate's p-value, the larger of its two tests' (for Selection: no underflow to 0)."""
     return max(_log_p_values(score, wald_scale, ratio_scale))
 
 
-def _calibrated(score: CandidateScore, wald_scale: float, ratio_scale: float) -> CandidateScore:
+def calibrated(score: CandidateScore, wald_scale: float, ratio_scale: float) -> CandidateScore:
     """The score with its p-values from the statistics divided by their bootstrap scales."""
     equation, simulation = (min(1.0, math.exp(v)) for v in _log_p_values(score, wald_scale, ratio_scale))
     if score.effect.startswith(EffectName.TYRE_LIFTOFF.value):
@@ -143,7 +143,7 @@ def _calibrated(score: CandidateScore, wald_scale: float, ratio_scale: float) ->
     return replace(score, equation_p=equation, simulation_p=simulation, p_value=max(equation, simulation))
 
 
-def _scales(
+def calibration_scales(
     score: CandidateScore, values: tuple[list[float], list[float]], draws: int | None = None
 ) -> tuple[float, float]:
     """A candidate's Wald and likelihood-ratio scales (calibrate): the mean of its finite statistics on the
@@ -154,11 +154,11 @@ def _scales(
     )
 
 
-def _report(candidate: Candidate, model: FittedModel) -> dict[str, float | str]:
+def parameters_of(candidate: Candidate, model: FittedModel) -> dict[str, float | str]:
     return {key: value for effect in candidate for key, value in report(effect, model).items()}
 
 
-def _verdict(
+def verdict_of(
     score: CandidateScore, candidate: Candidate, chosen: Candidate | None, bound: float
 ) -> CandidateScore:
     if score.verdict != "tested":
@@ -174,7 +174,7 @@ def _verdict(
     return replace(score, verdict="significant, but another candidate is more so")
 
 
-def _evidence(score: CandidateScore) -> str:
+def evidence_of(score: CandidateScore) -> str:
     ratio = f"{score.gap_ratio:.2f}x" if score.gap_ratio is not None else "finite (it diverged before)"
     return (
         f"equations: W = {score.equation_statistic:.1f} on {score.unknowns} unknowns "

@@ -38,14 +38,14 @@ import numpy as np
 
 from estimator.doctor.candidates import (
     Simulated,
-    _calibrated,
-    _evidence,
-    _log_p,
-    _report,
-    _scales,
-    _simulate,
-    _verdict,
+    calibrated,
+    calibration_scales,
+    evidence_of,
+    free_simulations,
+    log_p_value,
+    parameters_of,
     trial,
+    verdict_of,
 )
 from estimator.doctor.catalog import CATALOG, Candidate, label, round_candidates
 from estimator.doctor.criteria import (
@@ -124,7 +124,7 @@ class _Doctor:
         options, reference, recording = self.options, self.reference, self.reference.recording
         self.report(0, "identifying the starting model")
         start = current = fit(reference, starting_structure(options.tyre))  # step 1
-        (initial,) = _simulate([current], recording)
+        (initial,) = free_simulations([current], recording)
         simulated, path = initial, [(current, initial)]  # the model and its simulation after each step
         steps: list[DiagnosisStep] = []
         rounds: list[list[CandidateScore]] = []
@@ -143,7 +143,9 @@ class _Doctor:
                 break
             round_of = partial(trial, reference, current, simulated, screen=options.alpha)
             scores = self.map(round_of, candidates)  # steps 2 and 3
-            log_p = {c: _log_p(s) for c, s in zip(candidates, scores, strict=True) if s.verdict == "tested"}
+            log_p = {
+                c: log_p_value(s) for c, s in zip(candidates, scores, strict=True) if s.verdict == "tested"
+            }
             bound = options.alpha / max(len(log_p), 1)
             # step 4: calibration can only raise a p-value (its scales are at least 1): only the candidates
             # significant uncalibrated need the bootstrap
@@ -153,12 +155,12 @@ class _Doctor:
                 observed = {c: scores[candidates.index(c)] for c in significant}
                 for candidate, scales in self.calibrate(current, simulated, observed, bound).items():
                     k = candidates.index(candidate)
-                    scores[k] = _calibrated(scores[k], *scales)
-                    log_p[candidate] = _log_p(scores[k], *scales)
+                    scores[k] = calibrated(scores[k], *scales)
+                    log_p[candidate] = log_p_value(scores[k], *scales)
             # a load path's families together only where none alone is significant (the smaller model first)
             tiers = [{c: v for c, v in log_p.items() if (len(c) == 1) == alone} for alone in (True, False)]
             chosen = Selection(options.alpha).choose(tiers, len(log_p))
-            scores = [_verdict(s, c, chosen, bound) for s, c in zip(scores, candidates, strict=True)]
+            scores = [verdict_of(s, c, chosen, bound) for s, c in zip(scores, candidates, strict=True)]
             rounds.append(scores)
             if chosen is None:
                 break
@@ -166,14 +168,14 @@ class _Doctor:
             self.report(step, f"fitting {label(chosen)}")
             stepped, _ = one_step(reference, current, chosen)  # (its worker's is not kept: see trial)
             model = fit_added(reference, current, chosen, stepped)
-            (outcome,) = _simulate([model], recording)
+            (outcome,) = free_simulations([model], recording)
             steps.append(
                 DiagnosisStep(
                     effect=label(chosen),
-                    parameters=_report(chosen, model),
+                    parameters=parameters_of(chosen, model),
                     gap_before_m=simulated.gap_m,
                     gap_after_m=outcome.gap_m,
-                    evidence=_evidence(scores[index]),
+                    evidence=evidence_of(scores[index]),
                     p_value=scores[index].p_value,
                     located_after=locate(model, outcome.residual, outcome.gap_m),
                     predicted_after=outcome.predicted,
@@ -232,7 +234,7 @@ class _Doctor:
         """`draws` recordings of the model's (or its plausible truth's) response read with the noise measured
         on its output residual; none when the truth diverges."""
         reference, recording = self.reference, self.reference.recording
-        (response,) = _simulate([plausible_truth(model, reference) if plausible else model], recording)
+        (response,) = free_simulations([plausible_truth(model, reference) if plausible else model], recording)
         if not np.isfinite(response.gap_m):
             return []
         seeds = range(self.options.seed, self.options.seed + self.options.draws)
@@ -265,11 +267,11 @@ class _Doctor:
                     for kept, statistic in zip(values[candidate], statistics, strict=True):
                         if np.isfinite(statistic):
                             kept.append(max(statistic, 0.0))
-            lower = {c: _scales(observed[c], values[c], len(synthetic)) for c in alive}
-            alive = [c for c in alive if _log_p(observed[c], *lower[c]) <= math.log(bound)]
+            lower = {c: calibration_scales(observed[c], values[c], len(synthetic)) for c in alive}
+            alive = [c for c in alive if log_p_value(observed[c], *lower[c]) <= math.log(bound)]
             if not alive:
                 break
-        return {c: _scales(observed[c], values[c]) for c in observed}
+        return {c: calibration_scales(observed[c], values[c]) for c in observed}
 
     def draw_statistics(
         self, current: FittedModel, recording: Recording, candidates: tuple[Candidate, ...]
@@ -277,7 +279,7 @@ class _Doctor:
         """Each candidate's Wald and likelihood-ratio statistics on one synthetic recording, as measured."""
         on = self.reference.on(recording)
         base = fit(on, current.structure, warm=current)
-        (simulated,) = _simulate([base], recording)
+        (simulated,) = free_simulations([base], recording)
         scores = {c: trial(on, base, simulated, c) for c in candidates}
         return {c: (s.equation_statistic, s.simulation_statistic) for c, s in scores.items()}
 

@@ -11,7 +11,7 @@ import math
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from estimator.doctor.diagnose import _log_p, _scales
+from estimator.doctor.candidates import calibration_scales, log_p_value
 from estimator.doctor.result import CandidateScore
 
 statistic = st.floats(0.0, 1e4, allow_nan=False)
@@ -50,18 +50,18 @@ def test_a_candidate_ruled_out_early_is_not_significant_after_every_draw(
     made = min(made, len(draws) - 1)
     early = ([w for w, _ in draws[:made]], [r for _, r in draws[:made]])
     full = ([w for w, _ in draws], [r for _, r in draws])
-    if _log_p(score, *_scales(score, early, len(draws))) > math.log(bound):
-        assert _log_p(score, *_scales(score, full)) > math.log(bound)
+    if log_p_value(score, *calibration_scales(score, early, len(draws))) > math.log(bound):
+        assert log_p_value(score, *calibration_scales(score, full)) > math.log(bound)
 
 
 def test_the_lower_bound_spreads_the_sum_over_every_draw() -> None:
     score = _score(100.0, 100.0, 2, "spring_curve")
     # 3 of 8 draws made, statistics summing to 48 and 80: scales at least 48/16 = 3 and 80/16 = 5
-    assert _scales(score, ([16.0, 16.0, 16.0], [20.0, 30.0, 30.0]), 8) == (3.0, 5.0)
+    assert calibration_scales(score, ([16.0, 16.0, 16.0], [20.0, 30.0, 30.0]), 8) == (3.0, 5.0)
     # all made: their means over q
-    assert _scales(score, ([16.0, 16.0, 16.0], [20.0, 30.0, 30.0])) == (8.0, 80.0 / 6.0)
+    assert calibration_scales(score, ([16.0, 16.0, 16.0], [20.0, 30.0, 30.0])) == (8.0, 80.0 / 6.0)
     # below 1: no scale; no finite draw: none
-    assert _scales(score, ([0.5], []), 8) == (1.0, 1.0)
+    assert calibration_scales(score, ([0.5], []), 8) == (1.0, 1.0)
 
 
 def test_where_neither_model_simulates_the_equations_decide() -> None:
@@ -70,11 +70,11 @@ def test_where_neither_model_simulates_the_equations_decide() -> None:
     import math
 
     from estimator.distributions import log_chi_square_survival
-    from estimator.doctor.diagnose import _calibrated
+    from estimator.doctor.candidates import calibrated
 
     score = _score(40.0, math.nan, 2, "spring_curve")
-    assert _log_p(score) == log_chi_square_survival(40.0, 2)
-    assert _log_p(score, 4.0, 3.0) == log_chi_square_survival(10.0, 2)
-    calibrated = _calibrated(score, 4.0, 3.0)
+    assert log_p_value(score) == log_chi_square_survival(40.0, 2)
+    assert log_p_value(score, 4.0, 3.0) == log_chi_square_survival(10.0, 2)
+    calibrated = calibrated(score, 4.0, 3.0)
     assert calibrated.simulation_p == 0.0
     assert calibrated.p_value == calibrated.equation_p == math.exp(log_chi_square_survival(10.0, 2))
