@@ -1,9 +1,12 @@
 """The suspension's friction laws, as the simulation (estimator.dynamics, the compiled kernel) and the model
 doctor's equations (estimator.doctor.catalog) use them: Coulomb friction with a smoothed sign and a Stribeck
 peak, the steepest slope of that law (how many Runge-Kutta steps it needs), and hysteretic friction by
-Dahl's state, integrated in time or run along a measured deflection."""
+Dahl's state, integrated in time or run along a measured deflection; a step's mean over each sample
+interval, as the equations take it."""
 
 from __future__ import annotations
+
+from collections.abc import Callable
 
 import numpy as np
 
@@ -15,6 +18,22 @@ def coulomb_sign(velocity_m_s: np.ndarray) -> np.ndarray:
     """The smooth sign the Coulomb friction force is F_c times: tanh(v / COULOMB_SMOOTHING_M_S) (the
     compiled kernel, estimator.simulation_kernel_numba, spells the same law out)."""
     return np.tanh(velocity_m_s / COULOMB_SMOOTHING_M_S)
+
+
+INTERVAL_POINTS = 16  # points per sample interval at which interval_mean evaluates its function
+
+
+def interval_mean(function: Callable[[np.ndarray], np.ndarray], series: np.ndarray) -> np.ndarray:
+    """Per sample, the mean of function(series(t)) over its own interval (the series linear between samples):
+    a force that steps at a zero crossing acts for its share of the interval, not a sample early or late."""
+    before = np.concatenate([series[:1], series[:-1]])
+    after = np.concatenate([series[1:], series[-1:]])
+    total = np.zeros_like(series, dtype=float)
+    for k in range(INTERVAL_POINTS):
+        fraction = (k + 0.5) / INTERVAL_POINTS - 0.5
+        neighbour = before if fraction < 0.0 else after
+        total += function(series + (neighbour - series) * abs(fraction))
+    return total / INTERVAL_POINTS
 
 
 def hysteresis_rate(velocity_m_s: np.ndarray, hysteresis: np.ndarray, presliding_m: np.ndarray) -> np.ndarray:

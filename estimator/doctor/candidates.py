@@ -12,14 +12,15 @@ import numpy as np
 
 from estimator.autocorrelation import effective_samples
 from estimator.distributions import log_chi_square_survival
-from estimator.doctor.catalog import Candidate, EffectName, label, members
+from estimator.doctor.catalog import Candidate, EffectName, label, members, unscaled
 from estimator.doctor.criteria import (
     EachMember,
+    ScaleSearch,
     SimulationTest,
     TestResult,
     intersection_union,
 )
-from estimator.doctor.fitting import one_step
+from estimator.doctor.fitting import ScaleProfile, one_step, score_profile
 from estimator.doctor.model import FittedModel, Reference
 from estimator.doctor.parameters import implausible, report
 from estimator.doctor.result import CandidateScore
@@ -56,14 +57,32 @@ def trial(
     simulated: Simulated,
     candidate: Candidate,
     screen: float | None = None,
-) -> CandidateScore:
+) -> tuple[CandidateScore, Candidate, ScaleProfile | None]:
     """Step 3 for one candidate: its one step from the current model and its tests. Both tests must
     reject: with `screen` (α), one whose equations give p above it cannot be named, and is not simulated.
-    (Run in a worker: the score is returned, not the stepped model, which is large.)"""
-    model, wald = one_step(reference, current, candidate, screen)
+    A low_speed_friction form has its scale searched first (fitting.score_profile): the friction law with
+    the largest score statistic is stepped. (Run in a worker: the score, the scaled candidate and the
+    profile are returned, not the stepped model, which is large.)"""
+    profile = score_profile(reference, current, candidate[0]) if unscaled(candidate[0]) else None
+    if profile is None:
+        model, wald = one_step(reference, current, candidate, screen)
+    else:  # the largest statistic whose fit is friction's (implausible: the step's law and the fit's differ)
+        order, variation = profile.ranked()
+        for best in order:
+            candidate = (profile.form_at(best),)
+            model, wald = one_step(reference, current, candidate, screen)
+            if implausible(candidate[0], model) is None:
+                break
     tried = screen is None or _equations(candidate, current, model, wald).p_value <= screen
     (outcome,) = free_simulations([model], reference.recording) if tried else (None,)
-    return score_candidate(candidate, current, simulated, model, wald, outcome)
+    score = score_candidate(candidate, current, simulated, model, wald, outcome)
+    if profile is None:
+        return score, candidate, None
+    if reason := profile.elastic(best):
+        score = replace(score, verdict=reason)
+    # the search's variation, measured on √T, in units of √W (the Wald statistic the screen tests)
+    to_wald = max(score.equation_statistic, 0.0) / max(float(profile.statistic[best]), 1e-300)
+    return replace(score, search_variation=variation * math.sqrt(to_wald)), candidate, profile
 
 
 def _equations(
@@ -124,7 +143,8 @@ def _log_p_values(score: CandidateScore, wald_scale: float, ratio_scale: float) 
     if score.effect.startswith(EffectName.TYRE_LIFTOFF.value):
         equation = math.log(score.equation_p) if score.equation_p > 0 else -math.inf
     else:
-        equation = log_chi_square_survival(score.equation_statistic / wald_scale, q)
+        searched = ScaleSearch(score.search_variation / math.sqrt(wald_scale))
+        equation = searched.log_p(score.equation_statistic / wald_scale, q)
     if math.isnan(score.simulation_statistic):  # neither model simulates: the equations decide
         return equation, -math.inf
     return equation, log_chi_square_survival(max(score.simulation_statistic, 0.0) / ratio_scale, q)

@@ -8,15 +8,15 @@ selected sample, residual forces in N), so that the equations still hold exactly
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass, replace
 from enum import StrEnum
+from functools import cached_property
 
 import numpy as np
 
 from estimator.digital_filters import first_order_filter
 from estimator.equations import LinearResiduals
-from estimator.friction import coulomb_sign, hysteresis_interval_mean
+from estimator.friction import coulomb_sign, hysteresis_interval_mean, interval_mean
 from estimator.recording import Recording
 from estimator.signals import lowpass
 from estimator.vehicle import VehicleConstant, VehicleParameters
@@ -38,8 +38,9 @@ class EffectName(StrEnum):
 @dataclass(frozen=True, order=True)
 class EffectInstance:
     """A family as added to a model; channel families name their channel, sensor_dynamics its variant
-    ("lag" or "average"), low_speed_friction its Stribeck velocity ("5 mm/s") or, hysteretic, its
-    presliding displacement ("presliding 0.1 mm")."""
+    ("lag" or "average"), low_speed_friction its form with its fitted scale: the Stribeck velocity
+    ("5 mm/s") or, hysteretic, the presliding displacement ("presliding 0.1 mm"); before the fit only the
+    form (STRIBECK, HYSTERETIC)."""
 
     name: EffectName
     channel: str | None = None
@@ -53,12 +54,10 @@ class EffectInstance:
 
 HINGE_FRACTIONS = (0.4, 0.7)
 """spring_curve's hinge knots: these fractions of the largest deflection (0.1% / 99.9% quantile) each way."""
-STRIBECK_VELOCITIES_M_S = (0.0025, 0.005, 0.01, 0.02, 0.04)
-"""low_speed_friction's variants: the velocity v_s over which the static peak decays (exp(−(v/v_s)²))."""
-PRESLIDING_M = (0.0001, 0.0002, 0.0004, 0.0008)
-"""low_speed_friction's hysteretic (Dahl) variants: the presliding displacement z over which a reversed
-friction builds up (estimator.friction), in octaves from a sample's travel: below 0.1 mm (0.1 m/s for 1 ms)
-the force reverses within a sample, a step the Stribeck variants already take."""
+STRIBECK, HYSTERETIC = "stribeck", "hysteretic"
+"""low_speed_friction's two forms, their scale fitted to the recording (fitting.fitted_scale, within
+scale_range): a static peak decaying over the velocity v_s (exp(−(v/v_s)²)), or a reversed friction built up
+over the presliding displacement z (Dahl's state, estimator.friction)."""
 PRESLIDING = "presliding "
 
 FRICTION_UNKNOWNS = ("friction_sliding_N", "friction_static_excess_N")
@@ -71,7 +70,6 @@ CHANNEL_PARAMETERS = {
     (EffectName.SENSOR_OFFSET, None): ("offset",),
 }
 """The Gauss-Newton parameters (kinds of estimator.doctor.model.corrections_of) of each channel family."""
-INTERVAL_POINTS = 16  # points per sample interval at which interval_mean evaluates its function
 
 
 Candidate = tuple[EffectInstance, ...]
@@ -142,6 +140,11 @@ class EquationSignals:
                 )
             )
 
+    @cached_property
+    def sliding_column(self) -> np.ndarray:
+        """A force step at zero suspension velocity (low_speed_friction's sliding level), as a column."""
+        return self.suspension_column([interval_mean(coulomb_sign, c.velocity_m_s) for c in self.corners])
+
     @property
     def equations(self) -> tuple[str, ...]:
         return ("left wheel", "right wheel", "heave", "roll") if self.vehicle.is_axle else ("body", "wheel")
@@ -187,19 +190,6 @@ def with_columns(
     return replace(system, matrix=matrix, offset=offset, parameter_names=names, tyre_theta=None, _flat=None)
 
 
-def interval_mean(function: Callable[[np.ndarray], np.ndarray], series: np.ndarray) -> np.ndarray:
-    """Per sample, the mean of function(series(t)) over its own interval (the series linear between samples):
-    a force that steps at a zero crossing acts for its share of the interval, not a sample early or late."""
-    before = np.concatenate([series[:1], series[:-1]])
-    after = np.concatenate([series[1:], series[-1:]])
-    total = np.zeros_like(series, dtype=float)
-    for k in range(INTERVAL_POINTS):
-        fraction = (k + 0.5) / INTERVAL_POINTS - 0.5
-        neighbour = before if fraction < 0.0 else after
-        total += function(series + (neighbour - series) * abs(fraction))
-    return total / INTERVAL_POINTS
-
-
 def stribeck_velocity_m_s(effect: EffectInstance) -> float:
     """v_s of a low_speed_friction variant ("5 mm/s"; 0 for a hysteretic one)."""
     variant = str(effect.variant)
@@ -210,6 +200,37 @@ def presliding_m(effect: EffectInstance) -> float:
     """z of a hysteretic low_speed_friction variant ("presliding 0.1 mm"; 0 for a Stribeck one)."""
     variant = str(effect.variant)
     return float(variant.removeprefix(PRESLIDING)[:-3]) / 1000.0 if variant.startswith(PRESLIDING) else 0.0
+
+
+def unscaled(effect: EffectInstance) -> bool:
+    """A low_speed_friction form whose scale is still to be fitted."""
+    return effect.variant in (STRIBECK, HYSTERETIC)
+
+
+def with_scale(effect: EffectInstance, scale: float) -> EffectInstance:
+    """The form with its scale (m/s or m; three significant digits, as the label reports it)."""
+    unit = (" mm/s", "") if effect.variant == STRIBECK else (" mm", PRESLIDING)
+    return replace(effect, variant=f"{unit[1]}{scale * 1e3:.3g}{unit[0]}")
+
+
+def scale_range(effect: EffectInstance, corners: list[Corner]) -> tuple[float, float]:
+    """The scales (m/s or m) between which a form's shape changes on this recording. A Stribeck peak
+    narrower than the velocity's smallest change over a sample at a zero crossing lies within one sample at
+    every reversal, whatever its v_s; one as wide as the velocities measured is a force step with a slope,
+    which the curve has. A presliding displacement under one sample's median travel reverses within about
+    a sample (the Stribeck form's step); one beyond half the deflection's travel never saturates (a spring).
+    Extremes as the 0.1% / 99.9% quantiles (hinge_knots_m's)."""
+    if effect.variant == STRIBECK:
+        series = [c.velocity_m_s for c in corners]
+        steps = np.concatenate([np.abs(np.diff(v))[np.signbit(v[1:]) != np.signbit(v[:-1])] for v in series])
+        low = float(np.min(steps[steps > 0.0], initial=np.inf))
+    else:
+        series = [c.deflection_m for c in corners]
+        low = float(np.median(np.concatenate([np.abs(np.diff(z)) for z in series])))
+    extremes = np.quantile(np.concatenate(series), [0.001, 0.999])
+    high = float(np.max(np.abs(extremes)) if effect.variant == STRIBECK else np.ptp(extremes) / 2.0)
+    low = min(low, high / 2.0)  # (a deflection that never reverses: one octave below the extremes)
+    return low, max(high, 2.0 * low)
 
 
 def hinge_knots_m(recording: Recording, vehicle: VehicleParameters) -> tuple[float, ...]:
@@ -253,9 +274,7 @@ class Effect:
             known = vehicle.anti_roll_bar_stiffness_N_per_m > 0
             return [EffectInstance(self.name)] if vehicle.is_axle and not known else []
         if self.name is EffectName.LOW_SPEED_FRICTION:
-            variants = [f"{v * 1e3:g} mm/s" for v in STRIBECK_VELOCITIES_M_S]
-            variants += [f"{PRESLIDING}{z * 1e3:g} mm" for z in PRESLIDING_M]
-            return [EffectInstance(self.name, None, v) for v in variants]
+            return [EffectInstance(self.name, None, v) for v in (STRIBECK, HYSTERETIC)]
         if not any(self.name is n for n, _ in CHANNEL_PARAMETERS):  # a force family
             return [EffectInstance(self.name)]
         names = sorted(recording.channels)
@@ -292,10 +311,8 @@ class Effect:
                 return coulomb_sign(v) * np.exp(-np.square(v / stribeck_velocity_m_s(effect)))
 
             # each step's share of the sample interval, not its value at the sample instant
-            sliding = [interval_mean(coulomb_sign, c.velocity_m_s) for c in corners]
-            static = [interval_mean(peak, c.velocity_m_s) for c in corners]
-            columns = map(signals.suspension_column, (sliding, static))
-            return dict(zip(FRICTION_UNKNOWNS, columns, strict=True))
+            static = signals.suspension_column([interval_mean(peak, c.velocity_m_s) for c in corners])
+            return dict(zip(FRICTION_UNKNOWNS, (signals.sliding_column, static), strict=True))
         if self.name is EffectName.SPRING_CURVE:
             deflection = [c.spring_deflection_m for c in corners]
             out = {}

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from estimator.distributions import chi_square_survival, student_upper_tail
+from estimator.distributions import chi_square_survival, log_davies_bound, student_upper_tail
 from estimator.uncertainty import confidence_intervals
 
 ALPHA = 0.05
@@ -57,6 +57,20 @@ def _wald(vector: np.ndarray, covariance: np.ndarray) -> TestResult:
     statistic = float(vector @ np.linalg.lstsq(covariance, vector, rcond=None)[0])
     p_value = chi_square_survival(statistic, vector.size) if np.isfinite(statistic) else 1.0
     return TestResult(statistic, vector.size, p_value)
+
+
+@dataclass(frozen=True)
+class ScaleSearch:
+    """A Wald test whose family has a scale searched for (low_speed_friction's v_s or z: a parameter that
+    exists only under the alternative). The largest W along the search is not χ²(q); Davies' (1987) bound
+    gives its p-value: P(χ²(q) > W) + V·W^((q−1)/2)·e^(−W/2) / (2^(q/2)·Γ(q/2)), V the total variation of √W
+    along the search (measured on its grid). V = 0 is the plain χ² test."""
+
+    variation: float = 0.0
+
+    def log_p(self, statistic: float, unknowns: int) -> float:
+        """ln of the bound (at most 0)."""
+        return log_davies_bound(statistic, unknowns, self.variation)
 
 
 @dataclass(frozen=True)

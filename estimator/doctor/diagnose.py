@@ -8,14 +8,15 @@ leaves more than its own noise would.
 2. *A round*: every family of the catalogue the model lacks (estimator.doctor.catalog) is added in turn, and
    the load path's two rates together (catalog.LOAD_PATH), and its unknowns moved by one linearised step from
    the current model (fitting.one_step: the paper's objective, exact solver; channel parameters by a
-   Gauss-Newton step), side by side in forked processes.
+   Gauss-Newton step; a friction form at the scale its score profile finds), side by side in forked processes.
 3. *Each candidate is tested* (estimator.doctor.candidates, criteria): in the equations (a Wald test of
    its unknowns) and in the free simulation from the measured plate (a likelihood ratio of the gap); its
    p-value is the larger of the two (one with p > α in the equations is not simulated). A candidate whose
    fitted values are physically impossible (estimator.doctor.parameters.implausible), or families together
    one of which the others make redundant (criteria.EachMember), is not named whatever its p-value.
 4. *Calibrate*: a candidate significant as it stands has both statistics divided by their mean over bootstrap
-   draws of the current model (a scaled χ²; calibrate). *Select*: the candidate with the smallest p-value is
+   draws of the current model (a scaled χ²; calibrate; a friction form's profile scale by scale, its search
+   paid for by Davies' bound, criteria.ScaleSearch). *Select*: the candidate with the smallest p-value is
    named when it is at most α/m (Bonferroni over the m candidates of the round), a family alone before
    families together (these only where no family alone is significant); it is then fitted fully
    (fitting.fit_added). Repeat from 2 with it added, until a round names nothing; the model kept is the
@@ -31,7 +32,7 @@ from __future__ import annotations
 import math
 import threading
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import partial
 
 import numpy as np
@@ -54,7 +55,7 @@ from estimator.doctor.criteria import (
     Selection,
 )
 from estimator.doctor.expected import plausible_truth, synthetic_recordings
-from estimator.doctor.fitting import fit, fit_added, one_step
+from estimator.doctor.fitting import ScaleProfile, fit, fit_added, one_step, score_profile
 from estimator.doctor.model import FitSettings, FittedModel, Reference, starting_structure
 from estimator.doctor.residuals import locate
 from estimator.doctor.result import CandidateScore, DiagnosisResult, DiagnosisStep, model_json
@@ -130,7 +131,7 @@ class _Doctor:
         rounds: list[list[CandidateScore]] = []
         for step in range(options.max_steps + 1):
             self.report(step, "fitting and testing the candidates")
-            # step 2: the families the model lacks (a family with variants, per channel or v_s, in one only)
+            # step 2: the families the model lacks (a family with variants, per channel or form, in one only)
             present = {(e.name, e.channel) for e in current.structure.effects}
             singles = [
                 c
@@ -142,7 +143,9 @@ class _Doctor:
             if not candidates or step == options.max_steps:
                 break
             round_of = partial(trial, reference, current, simulated, screen=options.alpha)
-            scores = self.map(round_of, candidates)  # steps 2 and 3
+            tried = self.map(round_of, candidates)  # steps 2 and 3 (friction's scales searched)
+            scores, candidates = [s for s, _, _ in tried], [c for _, c, _ in tried]
+            profiles = {c: p for _, c, p in tried if p is not None}
             log_p = {
                 c: log_p_value(s) for c, s in zip(candidates, scores, strict=True) if s.verdict == "tested"
             }
@@ -153,10 +156,17 @@ class _Doctor:
             if significant:
                 self.report(step, "calibrating the significant candidates by a bootstrap of the model")
                 observed = {c: scores[candidates.index(c)] for c in significant}
-                for candidate, scales in self.calibrate(current, simulated, observed, bound).items():
-                    k = candidates.index(candidate)
-                    scores[k] = calibrated(scores[k], *scales)
-                    log_p[candidate] = log_p_value(scores[k], *scales)
+                calibrations = self.calibrate(current, simulated, observed, bound, profiles)
+                for candidate, (*scales, profile_scales) in calibrations.items():
+                    k, screened = candidates.index(candidate), -math.inf
+                    if profile_scales is not None:  # the profile standardised scale by scale, chosen again
+                        screened = log_p.pop(candidate)
+                        scores[k], candidates[k], scales = self.rescaled(
+                            current, simulated, profiles[candidate], profile_scales, scales[1]
+                        )
+                    if scores[k].verdict == "tested":  # (a profiled form: both its tests must reject)
+                        scores[k] = calibrated(scores[k], *scales)
+                        log_p[candidates[k]] = max(screened, log_p_value(scores[k], *scales))
             # a load path's families together only where none alone is significant (the smaller model first)
             tiers = [{c: v for c, v in log_p.items() if (len(c) == 1) == alone} for alone in (True, False)]
             chosen = Selection(options.alpha).choose(tiers, len(log_p))
@@ -246,7 +256,8 @@ class _Doctor:
         simulated: Simulated,
         observed: dict[Candidate, CandidateScore],
         bound: float,
-    ) -> dict[Candidate, tuple[float, float]]:
+        profiles: dict[Candidate, ScaleProfile],
+    ) -> dict[Candidate, tuple[float, float, np.ndarray | None]]:
         """Per candidate, the scales of its Wald and likelihood-ratio statistics under the current model:
         their mean over bootstrap draws of it (each tested as the measurement; below 0 counts as 0) over the
         degrees of freedom, at least 1 (a scaled χ²: the model's own approximation and the noise's colour
@@ -257,31 +268,79 @@ class _Doctor:
         named, and is left out of the other draws; the round's decision is the one every draw would give."""
         synthetic = self.synthetic(current, simulated, plausible=False)
         if not synthetic:
-            return {c: (1.0, 1.0) for c in observed}
+            return {c: (1.0, 1.0, None) for c in observed}
         values: dict[Candidate, tuple[list[float], list[float]]] = {c: ([], []) for c in observed}
+        traces: dict[Candidate, list[np.ndarray]] = {c: [] for c in observed if c in profiles}
         alive = list(observed)
         for first in range(0, len(synthetic), max(self.options.workers, 1)):
             chunk = synthetic[first : first + max(self.options.workers, 1)]
-            for draw in self.map(lambda r, cs=tuple(alive): self.draw_statistics(current, r, cs), chunk):
-                for candidate, statistics in draw.items():
+            drawn = self.map(lambda r, cs=tuple(alive): self.draw_statistics(current, r, cs, profiles), chunk)
+            for draw in drawn:
+                for candidate, (*statistics, trace) in draw.items():
                     for kept, statistic in zip(values[candidate], statistics, strict=True):
                         if np.isfinite(statistic):
                             kept.append(max(statistic, 0.0))
+                    if trace is not None:
+                        traces[candidate].append(trace)
             lower = {c: calibration_scales(observed[c], values[c], len(synthetic)) for c in alive}
-            alive = [c for c in alive if log_p_value(observed[c], *lower[c]) <= math.log(bound)]
+            # a profiled form is chosen again after every draw: it stays to the end
+            alive = [
+                c for c in alive if c in traces or log_p_value(observed[c], *lower[c]) <= math.log(bound)
+            ]
             if not alive:
                 break
-        return {c: calibration_scales(observed[c], values[c]) for c in observed}
+        q = {c: max(observed[c].unknowns, 1) for c in traces}
+        profile_scales = {
+            c: np.maximum(1.0, np.mean(t, axis=0) / q[c]) if t else None for c, t in traces.items()
+        }
+        return {c: (*calibration_scales(observed[c], values[c]), profile_scales.get(c)) for c in observed}
+
+    def rescaled(
+        self,
+        current: FittedModel,
+        simulated: Simulated,
+        profile: ScaleProfile,
+        profile_scales: np.ndarray,
+        ratio_scale: float,
+    ) -> tuple[CandidateScore, Candidate, tuple[float, float]]:
+        """A profiled form tested where its standardised profile Z = T/c is largest (c: T's bootstrap mean per
+        scale over q): the score statistic there against Davies' bound with √Z's variation; the simulation's
+        likelihood ratio there, with the scale measured at the profile's raw choice."""
+        order, variation = profile.ranked(profile_scales)
+        for best in order:
+            candidate = (profile.form_at(best),)
+            score, _, _ = trial(self.reference, current, simulated, candidate)
+            if reason := profile.elastic(best):
+                score = replace(score, verdict=reason)
+            if score.verdict == "tested" or reason:
+                break
+        wald_scale, statistic = float(profile_scales[best]), float(profile.statistic[best])
+        score = replace(
+            score, equation_statistic=statistic, search_variation=variation * math.sqrt(wald_scale)
+        )
+        return score, candidate, (wald_scale, ratio_scale)
 
     def draw_statistics(
-        self, current: FittedModel, recording: Recording, candidates: tuple[Candidate, ...]
-    ) -> dict[Candidate, tuple[float, float]]:
-        """Each candidate's Wald and likelihood-ratio statistics on one synthetic recording, as measured."""
+        self,
+        current: FittedModel,
+        recording: Recording,
+        candidates: tuple[Candidate, ...],
+        profiles: dict[Candidate, ScaleProfile],
+    ) -> dict[Candidate, tuple[float, float, np.ndarray | None]]:
+        """Each candidate's Wald and likelihood-ratio statistics on one synthetic recording, as measured (a
+        profiled form: its likelihood ratio at the measured choice, and its profile on the measured grid)."""
         on = self.reference.on(recording)
         base = fit(on, current.structure, warm=current)
         (simulated,) = free_simulations([base], recording)
-        scores = {c: trial(on, base, simulated, c) for c in candidates}
-        return {c: (s.equation_statistic, s.simulation_statistic) for c, s in scores.items()}
+        out: dict[Candidate, tuple[float, float, np.ndarray | None]] = {}
+        for c in candidates:
+            score = trial(on, base, simulated, c)[0]
+            if c in profiles:  # (its Wald statistic is not needed: its profile is standardised instead)
+                trace = score_profile(on, base, profiles[c].form, profiles[c].grid_log2).statistic
+                out[c] = (math.nan, score.simulation_statistic, trace)
+            else:
+                out[c] = (score.equation_statistic, score.simulation_statistic, None)
+        return out
 
 
 def gap_words(effects: str, before_m: float, after_m: float) -> str:

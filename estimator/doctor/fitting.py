@@ -8,13 +8,25 @@ family a round names is fitted fully (fit_added)."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
-from estimator.doctor.catalog import Candidate, EffectName, with_columns
+from estimator.doctor.catalog import (
+    CATALOG,
+    HYSTERETIC,
+    Candidate,
+    EffectInstance,
+    EffectName,
+    scale_range,
+    with_columns,
+    with_scale,
+)
 from estimator.doctor.criteria import EquationTest, TestResult
 from estimator.doctor.model import FittedModel, ModelStructure, Reference, build_extended
 from estimator.equations import LinearResiduals
 from estimator.newton_refit import MAX_NEWTON_ITERATIONS, newton_refit
+from estimator.score_test import AddedColumnsScore, ScoreProfile, log_grid
 from estimator.signals import MIN_CUTOFF_HZ
 from estimator.solvers.exact import solve_exact
 
@@ -196,3 +208,40 @@ def one_step(
         system, signals, airborne = build_extended(reference, structure, values, current.tyre)
         theta, objective = minimise(system, start)
     return FittedModel(structure, vehicle, theta, system, signals, values, airborne, objective, knots), test
+
+
+@dataclass(frozen=True)
+class ScaleProfile(ScoreProfile):
+    """A low_speed_friction form's score profile at the current model over its catalog.scale_range,
+    admissible where the one-step law is friction's (its forces at least 0: it dissipates, and its static
+    level is not below the sliding one; a law that rises is a damper's)."""
+
+    form: EffectInstance
+
+    def form_at(self, index: int) -> EffectInstance:
+        return with_scale(self.form, 2.0 ** self.grid_log2[index])
+
+    def elastic(self, index: int) -> str | None:
+        """Why a presliding build-up at the top of its range is no friction: it would not saturate within
+        the deflection's travel, an elastic element (None otherwise)."""
+        if self.form.variant == HYSTERETIC and index == self.grid_log2.size - 1:
+            return "the build-up would not saturate within the deflection's travel: an elastic element"
+        return None
+
+
+def score_profile(
+    reference: Reference, current: FittedModel, form: EffectInstance, grid_log2: np.ndarray | None = None
+) -> ScaleProfile:
+    """T(s) of the form over catalog.scale_range (or on the grid given: a bootstrap draw is profiled where
+    the measurement was): the score test's gᵀS⁻¹g at the current model (estimator.score_test), twice the
+    objective's fall by one Newton step with the form's columns added, a profile likelihood to first order."""
+    if grid_log2 is None:
+        grid_log2 = log_grid(*scale_range(form, current.signals.corners))
+    score, family = AddedColumnsScore(current.system, current.theta), CATALOG[form.name]
+    signals, airborne, knots = current.signals, current.airborne, current.knots_m
+    steps = [
+        score.of(family.columns(with_scale(form, 2.0**x), signals, airborne, knots, reference.identified))
+        for x in grid_log2
+    ]
+    friction = np.array([bool(np.all(law >= 0.0)) for _, law in steps])
+    return ScaleProfile(grid_log2, np.array([t for t, _ in steps]), friction, form)

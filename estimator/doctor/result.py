@@ -70,6 +70,8 @@ class CandidateScore:
     p_value: float
     parameters: dict[str, float | str]
     verdict: str
+    search_variation: float = 0.0
+    """Total variation of √W along the scale searched (criteria.ScaleSearch; 0: none searched)."""
 
     def to_json(self) -> dict[str, object]:
         finite = ("objective_ratio", "gap_m", "gap_ratio", "equation_statistic", "simulation_statistic")

@@ -220,6 +220,11 @@ class CandidateOut(ResultPart):
     p_value: MaybeNumber = Field(None, description="the larger of the two: both tests must reject")
     parameters: dict[str, ParameterValue]
     verdict: str = Field(description="named, or why not")
+    search_variation: MaybeNumber = Field(
+        None,
+        description="total variation of √(Wald statistic) along the scale searched (a friction form's "
+        "v_s or presliding displacement; Davies' bound turns it into the search's p-value); 0: none searched",
+    )
 
 
 class ModelCurveOut(ResultPart):

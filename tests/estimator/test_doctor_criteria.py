@@ -7,7 +7,8 @@ alternative it rejects.
   two equations with white residuals, as many samples as the doctor selects (DiagnoseOptions.nsample);
 - SimulationTest: the likelihood ratio of a gap, on nested least-squares fits of white noise;
 - Selection: Bonferroni over a round's candidates: the chance of naming anything when nothing is missing;
-- GoodnessOfFit: the prediction interval of a gap among bootstrap draws of the same model.
+- GoodnessOfFit: the prediction interval of a gap among bootstrap draws of the same model;
+- ScaleSearch: Davies' bound for the largest Wald statistic along a searched scale, on a smooth χ² process.
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ from estimator.doctor.criteria import (
     EachMember,
     EquationTest,
     GoodnessOfFit,
+    ScaleSearch,
     Selection,
     SimulationTest,
     intersection_union,
@@ -251,3 +253,39 @@ def test_a_statistic_whose_half_underflows_has_p_one() -> None:
 
     assert log_chi_square_survival(5e-324, 2) == 0.0
     assert log_chi_square_survival(5e-324, 3) == 0.0
+
+
+def searched_wald(rng: np.random.Generator, grid: np.ndarray, effect: float) -> tuple[float, float]:
+    """The largest W along a scale grid, and the total variation of √W: W(θ) = |Z(θ)|², Z's two components
+    smooth Gaussian processes of unit variance (white noise through a kernel half an octave wide), plus
+    `effect` in the first at θ = 0 (the true scale)."""
+    centres = np.linspace(grid[0] - 1.0, grid[-1] + 1.0, 200)
+    kernel = np.exp(-0.5 * np.square((grid[:, None] - centres[None, :]) / 0.5))
+    kernel /= np.linalg.norm(kernel, axis=1, keepdims=True)
+    z = kernel @ rng.normal(size=(centres.size, 2))
+    z[:, 0] += effect * kernel @ kernel[np.argmin(np.abs(grid))]
+    w = np.sum(z**2, axis=1)
+    return float(w.max()), float(np.sum(np.abs(np.diff(np.sqrt(w)))))
+
+
+def test_a_searched_scale_holds_its_size_where_the_pointwise_test_does_not() -> None:
+    """Over six octaves searched on quarter octaves (as fitting.fitted_scale does), the χ² p-value of the
+    largest W rejects far more often than α; Davies' bound at most α (it is an upper bound), and it still
+    finds a clear effect at one scale."""
+    rng = np.random.default_rng(29)
+    grid, draws = np.linspace(-3.0, 3.0, 25), 2000
+    null = [searched_wald(rng, grid, 0.0) for _ in range(draws)]
+    pointwise = sum(ScaleSearch().log_p(w, 2) < math.log(ALPHA) for w, _ in null)
+    davies = sum(ScaleSearch(v).log_p(w, 2) < math.log(ALPHA) for w, v in null)
+    print(f"searched scale: pointwise {pointwise}/{draws}, Davies {davies}/{draws} rejections at α = {ALPHA}")
+    assert rejection_interval(pointwise, draws)[0] > 2 * ALPHA
+    assert rejection_interval(davies, draws)[0] <= ALPHA
+    assert davies > 0  # a bound, not a test that never rejects
+    found = [searched_wald(rng, grid, 8.0) for _ in range(100)]
+    assert sum(ScaleSearch(v).log_p(w, 2) < math.log(ALPHA) for w, v in found) >= 95
+
+
+def test_an_unsearched_scale_is_the_chi_square_test() -> None:
+    assert ScaleSearch(0.0).log_p(9.0, 2) == pytest.approx(math.log(stats.chi2.sf(9.0, 2)))
+    assert ScaleSearch(3.0).log_p(9.0, 2) > ScaleSearch(0.0).log_p(9.0, 2)
+    assert ScaleSearch(3.0).log_p(0.0, 2) == 0.0 and ScaleSearch(50.0).log_p(0.5, 1) == 0.0

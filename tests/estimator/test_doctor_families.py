@@ -9,6 +9,7 @@ friction, a wheel laser reading 3% high and a plate laser 0.3 mm off, and the sa
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 from functools import cache
 
@@ -16,20 +17,27 @@ import numpy as np
 import pytest
 
 from estimator.damper import PiecewiseLinearCurve
+from estimator.doctor.candidates import free_simulations
 from estimator.doctor.catalog import (
     CATALOG,
     FRICTION_UNKNOWNS,
     HINGE_FRACTIONS,
+    HYSTERETIC,
     SPRING_RATE_UNKNOWN,
+    STRIBECK,
     EffectInstance,
     EffectName,
     hinge,
     hinge_knots_m,
     hinge_unknowns,
     presliding_m,
+    scale_range,
     stribeck_velocity_m_s,
+    unscaled,
+    with_scale,
 )
-from estimator.doctor.fitting import channel_limit_s, fit, fit_added, one_step
+from estimator.doctor.diagnose import DiagnoseOptions, _Doctor
+from estimator.doctor.fitting import channel_limit_s, fit, fit_added, one_step, score_profile
 from estimator.doctor.model import FitSettings, FittedModel, Reference, starting_structure
 from estimator.doctor.parameters import implausible, report, spring_curve_points
 from estimator.friction import hysteresis_interval_mean
@@ -151,10 +159,10 @@ def test_the_hysteretic_friction_is_dahls_state_along_the_measured_deflection() 
     ones by their labels."""
     model = starting()
     family = CATALOG[EffectName.LOW_SPEED_FRICTION]
-    variants = [e.variant for e in family.instances(model.vehicle, model.signals.recording)]
-    assert variants == ["2.5 mm/s", "5 mm/s", "10 mm/s", "20 mm/s", "40 mm/s"] + [
-        f"presliding {z} mm" for z in ("0.1", "0.2", "0.4", "0.8")
-    ]
+    forms = family.instances(model.vehicle, model.signals.recording)
+    assert [e.variant for e in forms] == [STRIBECK, HYSTERETIC] and all(map(unscaled, forms))
+    assert [with_scale(e, 0.000274).variant for e in forms] == ["0.274 mm/s", "presliding 0.274 mm"]
+    assert not unscaled(with_scale(forms[0], 0.005))
     hysteretic = EffectInstance(EffectName.LOW_SPEED_FRICTION, None, "presliding 0.2 mm")
     assert presliding_m(hysteretic) == 0.0002 and stribeck_velocity_m_s(hysteretic) == 0.0
     assert presliding_m(FRICTION) == 0.0
@@ -314,6 +322,26 @@ def test_the_friction_reports_its_levels_cannot_feed_energy_in_nor_rise_with_vel
     rising = fit(Reference.of(recording, car.known, FitSettings(points=30)), START.with_effect(rising_law))
     assert rising.value(FRICTION_UNKNOWNS[1]) < -50.0
     assert "rise with velocity" in str(implausible(rising_law, rising))
+
+
+def test_a_friction_forms_scale_is_found_where_the_equations_fit_best() -> None:
+    """A static peak of 80 N over the 100 N sliding force, decaying over 8 mm/s, in the doctor's own model's
+    response read with its noise: the Stribeck form's score profile (fitting.score_profile) peaks within half
+    an octave of v_s (the columns are built on the low-passed velocity, whose zero crossings the filter
+    widens), among the friction laws, inside the range the recording resolves, and varies along it."""
+    ref, form = reference(), EffectInstance(EffectName.LOW_SPEED_FRICTION, None, "8 mm/s")
+    model = with_values(fitted(form), **{FRICTION_UNKNOWNS[1]: 80.0})
+    (simulated,) = free_simulations([model], ref.recording)
+    (recording,) = _Doctor(ref, DiagnoseOptions(draws=1), None, None).synthetic(model, simulated, False)
+    on = ref.on(recording)
+    base = fit(on, START)
+    searched = EffectInstance(EffectName.LOW_SPEED_FRICTION, None, STRIBECK)
+    profile = score_profile(on, base, searched)
+    order, variation = profile.ranked()
+    found = profile.form_at(order[0])
+    low, high = scale_range(searched, base.signals.corners)
+    assert low < 0.008 < high and variation > 0.0 and profile.admissible[order[0]]
+    assert 0.008 / math.sqrt(2.0) < stribeck_velocity_m_s(found) < 0.008 * math.sqrt(2.0)
 
 
 def test_the_sensor_families_report_their_kind_and_constants() -> None:

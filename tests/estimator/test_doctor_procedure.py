@@ -20,11 +20,13 @@ from cases import random_axle
 from daq.formats.recording_csv import read_recording_csv
 from daq.formats.vehicle_file import read_vehicle
 from estimator.autocorrelation import effective_samples, ljung_box
+from estimator.binned_rms import Profile
 from estimator.doctor import DiagnoseOptions, DiagnosisResult, diagnose
-from estimator.doctor.catalog import CATALOG, EffectName, interval_mean
+from estimator.doctor.catalog import CATALOG, EffectName
 from estimator.doctor.diagnose import gap_words
 from estimator.doctor.model import LOW_SPEED_KNOTS_M_S, low_speed_grids
-from estimator.doctor.residuals import WHITENESS_LEVEL, Localisation, Profile
+from estimator.doctor.residuals import WHITENESS_LEVEL, Localisation
+from estimator.friction import interval_mean
 from estimator.recording import Recording
 from estimator.signals import sweep_frequency_Hz
 from estimator.sweep import SweepSettings
@@ -129,7 +131,7 @@ def test_low_speed_knots_join_the_uniform_ones() -> None:
 
 
 def test_a_step_counts_by_its_share_of_each_sample_interval() -> None:
-    """catalog.interval_mean: velocity -3, -1, 3, 5 (per sample) crosses zero a quarter sample after the
+    """friction.interval_mean: velocity -3, -1, 3, 5 (per sample) crosses zero a quarter sample after the
     second sample, so over that sample's interval a sign is -1 for three quarters and +1 for one: -0.5,
     where the sample instant says -1. For a function linear in the series the mean is the value."""
     velocity = np.array([-3.0, -1.0, 3.0, 5.0])
