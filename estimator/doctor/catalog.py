@@ -55,7 +55,7 @@ class EffectInstance:
 HINGE_FRACTIONS = (0.4, 0.7)
 """spring_curve's hinge knots: these fractions of the largest deflection (0.1% / 99.9% quantile) each way."""
 STRIBECK, HYSTERETIC = "stribeck", "hysteretic"
-"""low_speed_friction's two forms, their scale fitted to the recording (fitting.fitted_scale, within
+"""low_speed_friction's two forms, their scale searched on the recording (fitting.score_profile, within
 scale_range): a static peak decaying over the velocity v_s (exp(−(v/v_s)²)), or a reversed friction built up
 over the presliding displacement z (Dahl's state, estimator.friction)."""
 PRESLIDING = "presliding "

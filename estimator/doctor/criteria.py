@@ -5,6 +5,7 @@
   residual coloured by the laser's filters and by what the model still lacks is not counted as independent.
 - SimulationTest: does the family shrink the free simulation's gap more than chance? A likelihood ratio, the
   output error's samples counted as its effective number of independent ones.
+- ScaleSearch: the Wald test of a family whose scale was searched (a friction form's v_s or z): Davies' bound.
 - intersection_union: significant when both are (size at most the larger, no correction owed). The equations
   alone over-detect where the model's own approximation (a piecewise-linear curve for a smooth damper)
   correlates with a family's columns; the simulation alone is blind to what the curve or masses stand in for.

@@ -269,7 +269,7 @@ def searched_wald(rng: np.random.Generator, grid: np.ndarray, effect: float) -> 
 
 
 def test_a_searched_scale_holds_its_size_where_the_pointwise_test_does_not() -> None:
-    """Over six octaves searched on quarter octaves (as fitting.fitted_scale does), the χ² p-value of the
+    """Over six octaves searched on quarter octaves (as fitting.score_profile does), the χ² p-value of the
     largest W rejects far more often than α; Davies' bound at most α (it is an upper bound), and it still
     finds a clear effect at one scale."""
     rng = np.random.default_rng(29)
