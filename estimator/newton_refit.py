@@ -42,6 +42,14 @@ class NewtonRefit:
     iterations: int
 
 
+def hessian_factors(columns: np.ndarray, unit: np.ndarray, root: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """GF's Hessian in the coefficients of `columns` (p, e, n), Σᵢ Aᵢᵀ(I − uᵢuᵢᵀ)Aᵢ / ||rᵢ||, as
+    flat·flatᵀ − along·alongᵀ: flat (p, e·n) the columns over √||rᵢ|| (root), along (p, n) uᵢᵀAᵢ / √||rᵢ||
+    (unit: the residuals over their norms, (e, n)). Two sets' cross block is flat₁·flat₂ᵀ − along₁·along₂ᵀ."""
+    along = np.einsum("pen,en->pn", columns, unit) / root
+    return (columns / root).reshape(columns.shape[0], -1), along
+
+
 class _Problem:
     """GF and its derivatives over z = (θ scaled by its columns' norms[, log τ]).
 
@@ -117,8 +125,7 @@ class _Problem:
             across = columns[:, 1] * (unit[0] / root) - columns[:, 0] * (unit[1] / root)
             hessian = across @ across.T
         else:
-            along = np.einsum("pen,en->pn", columns, unit) / root  # u_iᵀ A_i / sqrt(||r_i||)
-            flat = (columns / root).reshape(columns.shape[0], -1)
+            flat, along = hessian_factors(columns, unit, root)
             hessian = flat @ flat.T - along @ along.T
         for i, j, value in second:
             hessian[i, j] += value

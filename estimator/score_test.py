@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from estimator.equations import LinearResiduals
+from estimator.newton_refit import hessian_factors
 
 
 class AddedColumnsScore:
@@ -31,9 +32,7 @@ class AddedColumnsScore:
         self.inverse = np.linalg.pinv(bread)
 
     def _parts(self, columns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        root = np.sqrt(self.norms)
-        along = np.einsum("qen,en->qn", columns, self.unit) / root
-        return (columns / root).reshape(columns.shape[0], -1), along
+        return hessian_factors(columns, self.unit, np.sqrt(self.norms))
 
     def of(self, columns: dict[str, np.ndarray]) -> tuple[float, np.ndarray]:
         added = np.stack(list(columns.values()))
@@ -70,6 +69,5 @@ class ScoreProfile:
         the total variation of √Z along the grid (Davies' V, estimator.distributions.log_davies_bound)."""
         z = np.maximum(self.statistic / scales, 0.0)
         order = sorted(range(z.size), key=lambda k: (not self.admissible[k], -z[k]))
-        return [k for k in order if self.admissible[k]] or order[:1], float(
-            np.sum(np.abs(np.diff(np.sqrt(z))))
-        )
+        variation = float(np.sum(np.abs(np.diff(np.sqrt(z)))))
+        return [k for k in order if self.admissible[k]] or order[:1], variation

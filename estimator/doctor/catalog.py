@@ -209,8 +209,8 @@ def unscaled(effect: EffectInstance) -> bool:
 
 def with_scale(effect: EffectInstance, scale: float) -> EffectInstance:
     """The form with its scale (m/s or m; three significant digits, as the label reports it)."""
-    unit = (" mm/s", "") if effect.variant == STRIBECK else (" mm", PRESLIDING)
-    return replace(effect, variant=f"{unit[1]}{scale * 1e3:.3g}{unit[0]}")
+    prefix, unit = ("", " mm/s") if effect.variant == STRIBECK else (PRESLIDING, " mm")
+    return replace(effect, variant=f"{prefix}{scale * 1e3:.3g}{unit}")
 
 
 def scale_range(effect: EffectInstance, corners: list[Corner]) -> tuple[float, float]:
@@ -229,8 +229,7 @@ def scale_range(effect: EffectInstance, corners: list[Corner]) -> tuple[float, f
         low = float(np.median(np.concatenate([np.abs(np.diff(z)) for z in series])))
     extremes = np.quantile(np.concatenate(series), [0.001, 0.999])
     high = float(np.max(np.abs(extremes)) if effect.variant == STRIBECK else np.ptp(extremes) / 2.0)
-    low = min(low, high / 2.0)  # (a deflection that never reverses: one octave below the extremes)
-    return low, max(high, 2.0 * low)
+    return min(low, high / 2.0), high  # (no reversal: one octave below the extremes)
 
 
 def hinge_knots_m(recording: Recording, vehicle: VehicleParameters) -> tuple[float, ...]:
