@@ -105,3 +105,23 @@ def friction_slope_Ns_per_m(
     rise = (coulomb + peak * decay) * (1.0 - step * step) / band  # the smoothed sign's step
     bend = step * peak * decay * 2.0 * velocity / v_s**2  # the peak's decay away from zero
     return float(np.max(np.abs(rise - bend)))
+
+
+def friction_peak_N(coulomb_friction_N: float, stribeck_peak_N: float, stribeck_velocity_m_s: float) -> float:
+    """The largest force |F(v)| of the friction law F(v) = (F_c + peak·exp(−(v/v_s)²))·s(v), s the smoothed
+    sign (coulomb_sign): the breakaway force the law holds, what a report calls static friction. It is
+    F_c + peak only where the peak outlasts the sign's smoothing (v_s well above COULOMB_SMOOTHING_M_S);
+    a peak far narrower than the smoothing reaches only about 0.43·v_s/band of its height, so a fitted
+    peak there stands for a step sharper than the law's, and its parameter is no force the strut holds.
+    At least |F_c|, the law's limit at speed; a zero v_s is no Stribeck term. The velocities looked at run
+    geometrically from a hundredth of the narrower scale to 4 times the wider, where both have settled."""
+    coulomb = float(coulomb_friction_N)
+    if stribeck_velocity_m_s <= 0.0 or stribeck_peak_N == 0.0:
+        return abs(coulomb)
+    narrow = min(COULOMB_SMOOTHING_M_S, stribeck_velocity_m_s)
+    wide = max(COULOMB_SMOOTHING_M_S, stribeck_velocity_m_s)
+    velocity = np.geomspace(narrow / 100.0, 4.0 * wide, FRICTION_SLOPE_GRID)
+    law = (coulomb + stribeck_peak_N * np.exp(-np.square(velocity / stribeck_velocity_m_s))) * coulomb_sign(
+        velocity
+    )
+    return float(max(np.max(np.abs(law)), abs(coulomb)))

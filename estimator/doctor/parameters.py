@@ -19,6 +19,7 @@ from estimator.doctor.catalog import (
 )
 from estimator.doctor.criteria import ALPHA
 from estimator.doctor.model import FittedModel
+from estimator.friction import friction_peak_N
 from estimator.uncertainty import confidence_intervals
 
 
@@ -50,9 +51,10 @@ def report(effect: EffectInstance, model: FittedModel) -> dict[str, float | str]
         return out
     if name is EffectName.LOW_SPEED_FRICTION:
         sliding, excess = (model.value(n) for n in FRICTION_UNKNOWNS)
+        velocity = model.stribeck_velocity_m_s  # the breakaway force the fitted law holds, not its parameter
         return {
             "sliding_friction_N": sliding,
-            "static_friction_N": sliding + excess,
+            "static_friction_N": friction_peak_N(sliding, excess, velocity) if velocity else sliding + excess,
             "stribeck_velocity_m_s": model.stribeck_velocity_m_s,
             "presliding_m": model.presliding_m,
         }

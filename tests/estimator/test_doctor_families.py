@@ -40,7 +40,7 @@ from estimator.doctor.diagnose import DiagnoseOptions, _Doctor
 from estimator.doctor.fitting import channel_limit_s, fit, fit_added, one_step, score_profile
 from estimator.doctor.model import FitSettings, FittedModel, Reference, starting_structure
 from estimator.doctor.parameters import implausible, report, spring_curve_points
-from estimator.friction import hysteresis_interval_mean
+from estimator.friction import friction_peak_N, hysteresis_interval_mean
 from estimator.signals import MIN_CUTOFF_HZ
 from estimator.sweep import SweepSettings
 from estimator.vehicle import TyreModel, VehicleConstant
@@ -305,7 +305,8 @@ def test_the_friction_reports_its_levels_cannot_feed_energy_in_nor_rise_with_vel
     model = fitted(FRICTION)
     values = report(FRICTION, model)
     sliding, excess = (model.value(n) for n in FRICTION_UNKNOWNS)
-    assert values["sliding_friction_N"] == sliding and values["static_friction_N"] == sliding + excess
+    static = friction_peak_N(sliding, excess, STRIBECK_VELOCITY_M_S)
+    assert values["sliding_friction_N"] == sliding and values["static_friction_N"] == static
     assert values["stribeck_velocity_m_s"] == STRIBECK_VELOCITY_M_S
     assert sliding == pytest.approx(FRICTION_N, rel=0.3) and implausible(FRICTION, model) is None
     negative = with_values(model, **{FRICTION_UNKNOWNS[0]: -50.0, FRICTION_UNKNOWNS[1]: 0.0})

@@ -26,7 +26,7 @@ from estimator.dynamics import (
     model_substeps,
     sample_substeps,
 )
-from estimator.friction import COULOMB_SMOOTHING_M_S, coulomb_sign, friction_slope_Ns_per_m
+from estimator.friction import COULOMB_SMOOTHING_M_S, coulomb_sign, friction_peak_N, friction_slope_Ns_per_m
 from estimator.model_io import ModelFormatError, SpringHinge, model_from_json
 from estimator.simulation_kernel import integrate_compiled
 
@@ -164,6 +164,30 @@ def test_the_friction_slope_is_the_steepest_slope_of_the_corner_s_friction(
     force = _extra_N(corner, np.zeros_like(velocity), velocity)
     steepest = float(np.max(np.abs(np.gradient(force, velocity))))
     assert friction_slope_Ns_per_m(coulomb_N, peak_N, stribeck_m_s) == pytest.approx(steepest, rel=0.01)
+
+
+@pytest.mark.parametrize(("coulomb_N", "peak_N", "stribeck_m_s"), FRICTION_LAWS)
+def test_the_breakaway_force_is_the_largest_force_of_the_corner_s_friction(
+    coulomb_N: float, peak_N: float, stribeck_m_s: float
+) -> None:
+    """friction_peak_N (what the doctor reports as static friction) against the corner's own friction force
+    on a fine grid out to 0.3 m/s, beyond which it is |F_c| within 1e-9."""
+    stribeck = {"stribeck_peak_N": peak_N, "stribeck_velocity_m_s": stribeck_m_s} if stribeck_m_s else {}
+    corner = _corner(coulomb_friction_N=coulomb_N, **stribeck)
+    velocity = np.linspace(0.0, 0.3, 600_001)
+    largest = float(np.max(np.abs(_extra_N(corner, np.zeros_like(velocity), velocity))))
+    assert friction_peak_N(coulomb_N, peak_N, stribeck_m_s) == pytest.approx(largest, rel=1e-3)
+
+
+def test_a_peak_narrower_than_the_sign_s_smoothing_holds_no_breakaway_force() -> None:
+    """A wide peak develops fully: 100 N sliding with 80 N more decaying over 0.2 m/s breaks away at about
+    180 N. One at the smoothing band never rises above sliding. Lab rig 200223's diagnosis named 2.0 N
+    sliding with a 726 N peak over 0.031 mm/s (a Stribeck peak standing for a step sharper than the law's),
+    which the report gave as 728 N of static friction on a rig whose damper's is 0.45 N: the law holds
+    nothing above its sliding level there."""
+    assert friction_peak_N(100.0, 80.0, 0.2) == pytest.approx(180.0, rel=0.01)
+    assert friction_peak_N(100.0, 80.0, COULOMB_SMOOTHING_M_S) == pytest.approx(100.0)
+    assert friction_peak_N(2.02, 726.2, 3.1e-5) == pytest.approx(2.02)
 
 
 def test_a_peak_of_the_other_sign_is_not_counted_as_friction() -> None:
