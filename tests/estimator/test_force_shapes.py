@@ -171,7 +171,7 @@ def test_the_breakaway_force_is_the_largest_force_of_the_corner_s_friction(
     coulomb_N: float, peak_N: float, stribeck_m_s: float
 ) -> None:
     """friction_peak_N (what the doctor reports as static friction) against the corner's own friction force
-    on a fine grid out to 0.3 m/s, beyond which it is |F_c| within 1e-9."""
+    on a fine grid out to 0.3 m/s, where every law here has settled to its sliding level."""
     stribeck = {"stribeck_peak_N": peak_N, "stribeck_velocity_m_s": stribeck_m_s} if stribeck_m_s else {}
     corner = _corner(coulomb_friction_N=coulomb_N, **stribeck)
     velocity = np.linspace(0.0, 0.3, 600_001)
