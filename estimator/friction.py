@@ -113,8 +113,9 @@ def friction_peak_N(coulomb_friction_N: float, stribeck_peak_N: float, stribeck_
     F_c + peak only where the peak outlasts the sign's smoothing (v_s well above COULOMB_SMOOTHING_M_S);
     a peak far narrower than the smoothing reaches only about 0.43·v_s/band of its height, so a fitted
     peak there stands for a step sharper than the law's, and its parameter is no force the strut holds.
-    At least |F_c|, the law's limit at speed; a zero v_s is no Stribeck term. The velocities looked at run
-    geometrically from a hundredth of the narrower scale to 4 times the wider, where both have settled."""
+    At least |F_c|, the law's limit at speed; a zero v_s is no Stribeck term. The velocities looked at
+    (FRICTION_SLOPE_GRID of them) run geometrically from a hundredth of the narrower scale to 4 times the
+    wider, where both have settled."""
     coulomb = float(coulomb_friction_N)
     if stribeck_velocity_m_s <= 0.0 or stribeck_peak_N == 0.0:
         return abs(coulomb)

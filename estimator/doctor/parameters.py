@@ -51,11 +51,12 @@ def report(effect: EffectInstance, model: FittedModel) -> dict[str, float | str]
         return out
     if name is EffectName.LOW_SPEED_FRICTION:
         sliding, excess = (model.value(n) for n in FRICTION_UNKNOWNS)
-        velocity = model.stribeck_velocity_m_s  # the breakaway force the fitted law holds, not its parameter
+        velocity = model.stribeck_velocity_m_s
         return {
             "sliding_friction_N": sliding,
+            # the breakaway force the fitted law holds, not its peak parameter
             "static_friction_N": friction_peak_N(sliding, excess, velocity) if velocity else sliding + excess,
-            "stribeck_velocity_m_s": model.stribeck_velocity_m_s,
+            "stribeck_velocity_m_s": velocity,
             "presliding_m": model.presliding_m,
         }
     if name is EffectName.TYRE_STIFFNESS:
