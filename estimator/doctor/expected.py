@@ -5,20 +5,18 @@ noise like the measured one make synthetic recordings, on which the model's stru
 simulated again. Their gaps hold what a complete model still shows on this sweep (sensor noise, the curve's
 discretisation of a smooth damper, identification errors) and nothing a missing effect adds.
 
-The truth is the same structure identified at TRUTH_POINTS_FACTOR times the curve's resolution (the uniform
-points and the low-speed knots, where a valve's dead band or bleed acts), its curve made smooth (a monotone
-cubic through the points, linear beyond them). A truth at the doctor's own resolution is followed by the same
-knots almost exactly, so the bootstrap would miss what the knots miss of a real damper's knee, which is most
-of a complete model's gap. The truth's damper force rises with velocity (the points made non-decreasing
-first): a curve that falls somewhere stands in for something the structure lacks (a zig-zag for a compliant
-top mount), is not reproducible on its own response, and would excuse any gap. The hypothesis tested is "a
-vehicle of this structure with a possible damper", not "this fit, whatever its shape".
+The truth: the same structure identified at identify's finest resolution (truth_settings), its curve made
+smooth (a monotone cubic through the points, linear beyond them). At the doctor's own resolution the same
+knots would follow it almost exactly, and the bootstrap would miss what they miss of a real damper's knee,
+most of a complete model's gap. Its force rises with velocity (the points made non-decreasing first): a
+curve that falls somewhere stands in for something the structure lacks (a zig-zag for a compliant top
+mount), is not reproducible on its own response, and would excuse any gap. The hypothesis tested is "a
+vehicle of this structure with a damper identify can take", not "this fit, whatever its shape".
 
 The noise, per channel: the law measured on the output residual (estimator.noise_law: AR(1), white and
 1/f parts and the readings' quantum), bounded by the measured reading's density (misfit and response are
 each independent of it), fitted above the equations' low-pass cutoff (identify's, estimator.signals: the
-band no fit of the model sees, so its residual is not shrunk by the fit's unknowns) and read at the
-measured resolution.
+band no fit sees, so its residual is not shrunk by the fit's unknowns), read at the measured resolution.
 """
 
 from __future__ import annotations
@@ -28,25 +26,29 @@ from dataclasses import replace
 import numpy as np
 
 from estimator.doctor.fitting import fit
-from estimator.doctor.model import FittedModel, Reference
+from estimator.doctor.model import FitSettings, FittedModel, Reference
 from estimator.doctor.simulation import diverged
+from estimator.equations import default_points
+from estimator.identify_options import IdentifyOptions
 from estimator.monotone import smooth_curve
 from estimator.noise_law import measure_channel_noise, reading_quantum_m
 from estimator.recording import Recording
+from estimator.vehicle import VehicleParameters
 
-TRUTH_POINTS_FACTOR = 2  # the plausible truth's curve has this many times the doctor's resolution
+
+def truth_settings(settings: FitSettings, vehicle: VehicleParameters) -> FitSettings:
+    """The truth's resolution: identify's finest (IdentifyOptions.MAX_POINTS: more resolve nothing the
+    recording carries; an axle's side half, as identify's default halves it), each interval between low-speed
+    knots (a valve's bleed or dead band) split in as many as that multiplies the doctor's points, or none."""
+    points, low = settings.points or default_points(vehicle), np.asarray(settings.low_speed_knots_m_s)
+    ratio = max(1, round((finest := IdentifyOptions.MAX_POINTS // vehicle.wheels) / points))
+    knots = tuple(float(k) for k in np.linspace(low[0], low[-1], ratio * (low.size - 1) + 1))
+    return replace(settings, points=max(finest, points), low_speed_knots_m_s=knots)
 
 
 def plausible_truth(model: FittedModel, reference: Reference) -> FittedModel:
-    """The plausible truth of a model fitted on `reference` (module docstring): its structure identified at
-    TRUTH_POINTS_FACTOR times the points and low-speed knots, its damper curves non-decreasing and smooth."""
-    settings = reference.settings
-    points, low = settings.points, np.asarray(settings.low_speed_knots_m_s)
-    fine = replace(
-        settings,
-        points=None if points is None else TRUTH_POINTS_FACTOR * points,
-        low_speed_knots_m_s=tuple(np.linspace(low[0], low[-1], TRUTH_POINTS_FACTOR * (low.size - 1) + 1)),
-    )
+    """The plausible truth of a model fitted on `reference` (module docstring), at truth_settings'."""
+    fine = truth_settings(reference.settings, model.vehicle)
     on = Reference.of(reference.recording, model.vehicle, fine, reference.identified)
     truth = fit(on, model.structure, warm=model)
     return replace(truth, curve_override=tuple(smooth_curve(c) for c in truth.curves))

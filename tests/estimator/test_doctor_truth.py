@@ -1,10 +1,11 @@
 """The goodness of fit's bootstrap truth (estimator.doctor.expected): a physically possible damper (force
-non-decreasing in velocity) at twice the doctor's resolution, near zero velocity too.
+non-decreasing in velocity) at identify's finest resolution, near zero velocity too.
 
 - increasing is the least-squares isotonic regression (checked against scipy's on random sequences);
 - a fitted curve that falls somewhere (the zig-zag a missing series compliance leaves) becomes a smooth curve
   that never falls, and a curve that already rises keeps its points;
-- the truth of a fitted model has knots at twice the resolution, the low-speed ones included;
+- the truth of a fitted model has identify's most points, its low-speed knots refined by the same ratio
+  (four to an interval from an axle's 15 points a side, none from a doctor already at the finest);
 - small_nnls (the noise law's non-negative fit, one per lag-1 correlation of a stack) is scipy's nnls on each
   design, singular ones (two equal columns, as ρ = 0 gives) included.
 
@@ -21,14 +22,15 @@ from hypothesis import strategies as st
 from scipy.optimize import isotonic_regression, nnls
 
 from estimator.damper import PiecewiseLinearCurve
-from estimator.doctor.expected import TRUTH_POINTS_FACTOR, plausible_truth
+from estimator.doctor.expected import plausible_truth, truth_settings
 from estimator.doctor.fitting import fit
 from estimator.doctor.model import LOW_SPEED_KNOTS_M_S, FitSettings, Reference, starting_structure
+from estimator.identify_options import IdentifyOptions
 from estimator.linear_algebra import small_nnls
 from estimator.monotone import increasing, smooth_curve
 from estimator.sweep import SweepSettings
 from estimator.vehicle import TyreModel
-from simulators.vehicle_sim import SimulationSettings, default_quarter_car, simulate
+from simulators.vehicle_sim import SimulationSettings, default_axle, default_quarter_car, simulate
 
 
 @settings(max_examples=200, deadline=None)
@@ -72,7 +74,7 @@ def test_a_curve_that_falls_becomes_one_that_does_not() -> None:
     np.testing.assert_allclose(kept.force(velocity), rising, rtol=2e-3, atol=1.0)  # tabulated densely
 
 
-def test_the_truth_has_twice_the_resolution_near_zero_velocity_too() -> None:
+def test_the_truth_has_identifys_finest_resolution_near_zero_velocity_too() -> None:
     car = default_quarter_car()
     recording = simulate(car, SimulationSettings(sweep=SweepSettings(duration_s=4.0), seed=3)).recording
     reference = Reference.of(recording, car.known, FitSettings(points=20))
@@ -81,8 +83,33 @@ def test_the_truth_has_twice_the_resolution_near_zero_velocity_too() -> None:
     knots = model.system.grids_m_s[0]
     fine = truth.system.grids_m_s[0]
     spacing = LOW_SPEED_KNOTS_M_S[1] - LOW_SPEED_KNOTS_M_S[0]
-    low = {round(s * k * spacing / TRUTH_POINTS_FACTOR, 9) for k in range(3) for s in (-1.0, 1.0)}
+    low = {round(s * k * spacing / 3, 9) for k in range(4) for s in (-1.0, 1.0)}  # 60 / 20: three to one
     assert low <= {round(float(v), 9) for v in fine}
-    assert not {round(0.5 * spacing, 9)} <= {round(float(v), 9) for v in knots}
-    assert fine.size > 1.5 * knots.size
+    assert not {round(spacing / 3, 9)} <= {round(float(v), 9) for v in knots}
+    assert fine.size > 2.5 * knots.size
     assert np.all(np.diff(truth.curves[0].force(np.linspace(fine[0], fine[-1], 500))) >= -1e-9)
+
+
+@pytest.mark.parametrize(
+    ("axle", "points", "finest", "intervals"),
+    [
+        (False, 15, 60, 4),
+        (False, 30, 60, 2),
+        (False, 40, 60, 2),
+        (False, 60, 60, 1),
+        (True, 15, 30, 2),
+        (True, 45, 45, 1),
+    ],
+)
+def test_the_truth_is_at_identifys_finest_its_low_speed_knots_split_as_its_points_multiply(
+    axle: bool, points: int, finest: int, intervals: int
+) -> None:
+    """An axle's side has half identify's most points (as its defaults halve an axle's), never fewer than
+    the doctor's."""
+    assert IdentifyOptions.MAX_POINTS == 60
+    low = LOW_SPEED_KNOTS_M_S
+    vehicle = default_axle().known if axle else default_quarter_car().known
+    fine = truth_settings(FitSettings(points=points), vehicle)
+    assert fine.points == finest
+    expected = np.linspace(low[0], low[-1], intervals * (len(low) - 1) + 1)
+    np.testing.assert_allclose(fine.low_speed_knots_m_s, expected, rtol=0, atol=1e-15)
