@@ -107,6 +107,16 @@ def friction_slope_Ns_per_m(
     return float(np.max(np.abs(rise - bend)))
 
 
+def friction_force_N(
+    velocity_m_s: np.ndarray, coulomb_friction_N: float, stribeck_peak_N: float, stribeck_velocity_m_s: float
+) -> np.ndarray:
+    """The friction law F(v) = (F_c + peak·exp(−(v/v_s)²))·s(v), s the smoothed sign (coulomb_sign), v_s > 0:
+    what CornerPhysics.suspension_force_N and the compiled kernel add for a strut's sliding friction with
+    a Stribeck peak (they also carry Dahl's hysteretic sign, which this leaves out)."""
+    decay = np.exp(-np.square(velocity_m_s / stribeck_velocity_m_s))
+    return (coulomb_friction_N + stribeck_peak_N * decay) * coulomb_sign(velocity_m_s)
+
+
 def friction_peak_N(coulomb_friction_N: float, stribeck_peak_N: float, stribeck_velocity_m_s: float) -> float:
     """The largest force |F(v)| of the friction law F(v) = (F_c + peak·exp(−(v/v_s)²))·s(v), s the smoothed
     sign (coulomb_sign): the breakaway force the law holds, what a report calls static friction. It is
@@ -122,7 +132,5 @@ def friction_peak_N(coulomb_friction_N: float, stribeck_peak_N: float, stribeck_
     narrow = min(COULOMB_SMOOTHING_M_S, stribeck_velocity_m_s)
     wide = max(COULOMB_SMOOTHING_M_S, stribeck_velocity_m_s)
     velocity = np.geomspace(narrow / 100.0, 4.0 * wide, FRICTION_SLOPE_GRID)
-    law = (coulomb + stribeck_peak_N * np.exp(-np.square(velocity / stribeck_velocity_m_s))) * coulomb_sign(
-        velocity
-    )
+    law = friction_force_N(velocity, coulomb, stribeck_peak_N, stribeck_velocity_m_s)
     return float(max(np.max(np.abs(law)), abs(coulomb)))

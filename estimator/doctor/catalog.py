@@ -16,7 +16,7 @@ import numpy as np
 
 from estimator.digital_filters import first_order_filter
 from estimator.equations import LinearResiduals
-from estimator.friction import coulomb_sign, hysteresis_interval_mean, interval_mean
+from estimator.friction import coulomb_sign, friction_force_N, hysteresis_interval_mean, interval_mean
 from estimator.recording import Recording
 from estimator.signals import lowpass
 from estimator.vehicle import VehicleConstant, VehicleParameters
@@ -307,7 +307,7 @@ class Effect:
         if self.name is EffectName.LOW_SPEED_FRICTION:
 
             def peak(v: np.ndarray) -> np.ndarray:
-                return coulomb_sign(v) * np.exp(-np.square(v / stribeck_velocity_m_s(effect)))
+                return friction_force_N(v, 0.0, 1.0, stribeck_velocity_m_s(effect))  # the peak's unit step
 
             # each step's share of the sample interval, not its value at the sample instant
             static = signals.suspension_column([interval_mean(peak, c.velocity_m_s) for c in corners])
