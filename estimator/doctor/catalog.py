@@ -174,9 +174,7 @@ class EquationSignals:
         """(equations, samples) column of a force in each tyre (in its wheel equation, beside K_t·δ)."""
         parts = [self.eq(series) for series in per_corner]
         zero = np.zeros_like(parts[0])
-        if not self.vehicle.is_axle:
-            return np.stack([zero, parts[0]])
-        return np.stack([parts[0], parts[1], zero, zero])
+        return np.stack([parts[0], parts[1], zero, zero] if self.vehicle.is_axle else [zero, parts[0]])
 
 
 def with_columns(

@@ -19,8 +19,8 @@ leaves more than its own noise would.
    paid for by Davies' bound, criteria.ScaleSearch). *Select*: the candidate with the smallest p-value is
    named when it is at most α/m (Bonferroni over the m candidates of the round), a family alone before
    families together (these only where no family alone is significant); it is then fitted fully
-   (fitting.fit_added). Repeat from 2 with it added, until a round names nothing; the model kept is the
-   one on this path whose free simulation has the smallest gap (steps after it are left out, and said).
+   (fitting.fit_added; if that fit is physically impossible, the next). Repeat from 2 until a round names
+   nothing; the model kept is the path's with the smallest free-simulation gap (later steps left out, said).
 5. *Goodness of fit*: the final model against a parametric bootstrap of its plausible truth
    (estimator.doctor.expected); p < α: "unexplained", with where the disagreement is largest
    (estimator.doctor.residuals.Localisation); the model handed out then has its curve refined on the
@@ -49,14 +49,11 @@ from estimator.doctor.candidates import (
     verdict_of,
 )
 from estimator.doctor.catalog import CATALOG, Candidate, label, round_candidates
-from estimator.doctor.criteria import (
-    ALPHA,
-    GoodnessOfFit,
-    Selection,
-)
+from estimator.doctor.criteria import ALPHA, GoodnessOfFit, Selection
 from estimator.doctor.expected import plausible_truth, synthetic_recordings
 from estimator.doctor.fitting import ScaleProfile, fit, fit_added, one_step, score_profile
 from estimator.doctor.model import FitSettings, FittedModel, Reference, starting_structure
+from estimator.doctor.parameters import implausible
 from estimator.doctor.residuals import locate
 from estimator.doctor.result import CandidateScore, DiagnosisResult, DiagnosisStep, model_json
 from estimator.doctor.simulation import simulate_models
@@ -169,15 +166,20 @@ class _Doctor:
                         log_p[candidates[k]] = max(screened, log_p_value(scores[k], *scales))
             # a load path's families together only where none alone is significant (the smaller model first)
             tiers = [{c: v for c, v in log_p.items() if (len(c) == 1) == alone} for alone in (True, False)]
-            chosen = Selection(options.alpha).choose(tiers, len(log_p))
+            while (chosen := Selection(options.alpha).choose(tiers, len(log_p))) is not None:
+                self.report(step, f"fitting {label(chosen)}")
+                model = fit_added(reference, current, chosen, one_step(reference, current, chosen)[0])
+                if not (reason := next(filter(None, (implausible(e, model) for e in chosen)), None)):
+                    break
+                # impossible once fitted fully (its one step was not): the next most significant
+                tiers = [{c: v for c, v in t.items() if c != chosen} for t in tiers]
+                k = candidates.index(chosen)
+                scores[k] = replace(scores[k], verdict=f"{reason} once fitted fully")
             scores = [verdict_of(s, c, chosen, bound) for s, c in zip(scores, candidates, strict=True)]
             rounds.append(scores)
             if chosen is None:
                 break
             index = candidates.index(chosen)
-            self.report(step, f"fitting {label(chosen)}")
-            stepped, _ = one_step(reference, current, chosen)  # (its worker's is not kept: see trial)
-            model = fit_added(reference, current, chosen, stepped)
             (outcome,) = free_simulations([model], recording)
             steps.append(
                 DiagnosisStep(

@@ -214,3 +214,29 @@ def test_steps_whose_full_fits_raised_the_gap_are_left_out(tmp_path) -> None:
     assert result.gap_after_m == result.steps[-1].gap_after_m
     assert result.gap_after_m <= min(step.gap_after_m for step in result.steps)
     assert not set(left_out) & set(result.final_effects), result.final_effects
+
+
+def test_a_candidate_whose_full_fit_is_impossible_is_not_named(monkeypatch) -> None:
+    """Step 4: the chosen candidate is fitted fully, and a full fit that is physically impossible (its one
+    step was not: parameters.implausible judged that in the round) is not named; the next most significant
+    candidate is. Forced here by calling every full fit with a spring curve impossible: the soft spring's own
+    family (named without this: test_a_round_judges_every_candidate_and_names_one) then cannot be named,
+    and the round says why."""
+    import importlib
+
+    procedure = importlib.import_module("estimator.doctor.diagnose")
+
+    def spring_impossible(effect, model):  # the full fits only: the round's one steps keep the real check
+        return "the spring curve is impossible (test)" if effect.name is EffectName.SPRING_CURVE else None
+
+    monkeypatch.setattr(procedure, "implausible", spring_impossible)
+    result = diagnose(*soft_spring(), OPTIONS)
+    first = {c.effect: c for c in result.rounds[0]}
+    assert first["spring_curve"].verdict == "the spring curve is impossible (test) once fitted fully"
+    assert "spring_curve" not in result.effects_named
+    named = [c for c in result.rounds[0] if c.verdict == "named"]
+    tested = [c for c in result.rounds[0] if c.verdict == "named" or "significant" in c.verdict]
+    bound = result.alpha / (len(tested) + sum("once fitted fully" in c.verdict for c in result.rounds[0]))
+    for c in named:  # what is named instead is significant on its own evidence
+        assert "spring_curve" not in c.effect and c.p_value <= bound
+    assert diagnosed().effects_named == ["spring_curve"]  # without the forced verdict it is named
