@@ -123,16 +123,15 @@ class Outcome:
     @property
     def doctor_meets(self) -> bool:
         """Item 5 for the doctor: rate corrections named (rates_right), held-out gap ≤ 40%, unexplained."""
-        held = self.doctor_heldout_percent
-        return self.rates_right and held is not None and held <= LIMIT_PERCENT and self.unexplained
+        return self.rates_right and _within(self.doctor_heldout_percent) and self.unexplained
 
     @property
     def mass_only_meets(self) -> bool:
-        held = self.mass_only_heldout_percent
-        return held is not None and held <= LIMIT_PERCENT
+        return _within(self.mass_only_heldout_percent)
 
 
 def _within(percent: float | None) -> bool:
+    """A gap (%) within item 5's bound; None (diverged) is not."""
     return percent is not None and percent <= LIMIT_PERCENT
 
 
@@ -361,9 +360,7 @@ def print_report(outcomes: list[Outcome]) -> None:
         if o.error:
             print(f"  ERROR: {o.error}")
     count = len(outcomes)
-    held_within = sum(
-        o.doctor_heldout_percent is not None and o.doctor_heldout_percent <= LIMIT_PERCENT for o in outcomes
-    )
+    held_within = sum(_within(o.doctor_heldout_percent) for o in outcomes)
     medians = {
         "doctor gap on A before": _median([o.doctor_before_percent for o in outcomes]),
         "after": _median([o.doctor_after_percent for o in outcomes]),
@@ -391,9 +388,7 @@ def print_report(outcomes: list[Outcome]) -> None:
         f"own physics held-out ≤ {limit}": sum(_within(o.own_physics_percent) for o in outcomes),
     }
     print("; ".join(f"{k}: {v}/{count}" for k, v in counts.items()))
-    reachable = [
-        o for o in outcomes if o.unrecorded_percent is not None and o.unrecorded_percent <= LIMIT_PERCENT
-    ]
+    reachable = [o for o in outcomes if _within(o.unrecorded_percent)]
     doctor_met, mass_met = sum(o.doctor_meets for o in reachable), sum(o.mass_only_meets for o in reachable)
     print(
         f"rigs whose unpredictable part of B is ≤ {limit}: {len(reachable)}/{count}; on them the doctor "
