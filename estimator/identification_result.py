@@ -45,9 +45,16 @@ class IdentificationResult:
     intervals: Intervals | None = None
     """95% confidence intervals of θ (estimator.uncertainty), None when not asked for."""
 
+    @property
+    def refined(self) -> bool:
+        """The curve and the tyre damping were refined on the output error (refine_output_error)."""
+        return self.refined_gap_m is not None
+
     def curve_band(self, index: int) -> tuple[np.ndarray, np.ndarray] | None:
-        """(low, high) force at the grid points of curve `index`, None without intervals."""
-        if self.intervals is None:
+        """(low, high) force at the grid points of curve `index`, None without intervals, and None after the
+        output-error refinement: the bands are the equation fit's, and the refinement moves the curve off
+        that fit (its points may lie outside them), so they are no band of the curve reported."""
+        if self.intervals is None or self.refined:
             return None
         where = self.system.curve_slices[index]
         return self.intervals.low[where], self.intervals.high[where]
@@ -69,7 +76,7 @@ class IdentificationResult:
                 if (interval := self.intervals.interval(name)) is not None
             },
         }
-        damping = self.intervals.interval(TYRE_DAMPING)
+        damping = None if self.refined else self.intervals.interval(TYRE_DAMPING)  # as curve_band's
         out["tyre_damping_Ns_per_m_interval"] = list(damping) if damping is not None else None
         inertia = self.intervals.interval("roll_inertia_kg_m2")
         if inertia is not None:

@@ -228,6 +228,13 @@ def identify(
         model, refined_gap = refine_on_output_error(
             model, recording, system.kinematics, noise_m, cancel=cancel
         )
+        warnings.append(
+            "refined on the output error: the model predicts the motion better, but its damper curve is no "
+            "truer a damper curve (it takes up more of what the model lacks; identify without refining for "
+            "the damper)"
+            + ("; the curve and the tyre damping have no 95% band (the equation fit's bands, which the "
+               "refinement moves off)" if intervals is not None else "")
+        )  # fmt: skip
     inspection, balance = _inspection(model, recording, system)
     corners = ["single"] if not vehicle.is_axle else ["left", "right"]
     fitted = [

@@ -3,8 +3,13 @@ the truth about as often as they claim, and are not made wide to do so."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 from band_coverage import Coverage, check, draws, identify_case
+from cases import quarter_car_case
+
+from estimator.identify import IdentifyOptions, identify
 
 DRAWS = 9
 """Three each: every constant stated; mass only at 1 kHz; mass only at 500 Hz (band_coverage.draws)."""
@@ -42,3 +47,27 @@ def test_the_intervals_are_in_the_json_beside_the_values() -> None:
         assert lo < out["stiffness_N_per_m"][name] < hi  # type: ignore[index]
     damping_low, damping_high = out["tyre_damping_Ns_per_m_interval"]  # type: ignore[misc]
     assert damping_low < out["tyre_damping_Ns_per_m"] < damping_high  # type: ignore[operator]
+
+
+def test_after_the_output_error_refinement_the_curve_and_tyre_damping_have_no_band() -> None:
+    """The bands are the equation fit's; the refinement moves the curve and the tyre damping off that fit, to
+    where its bands need not hold them. So none is handed out for them (the masses' and rates' stay: the
+    refinement does not touch those), and a warning says why. Case: a vehicle file stating the tyre rate
+    50% high, a model lacking something, where the refinement moves the curve."""
+    case = quarter_car_case(100)
+    stated = case.vehicle.known
+    wrong = replace(stated, tyre_stiffness_N_per_m=1.5 * stated.tyre_stiffness_N_per_m)
+    plain = identify(case.result.recording, wrong, IdentifyOptions())
+    refined = identify(case.result.recording, wrong, IdentifyOptions(refine_output_error=True))
+    assert refined.refined_gap_m is not None and plain.gap_m is not None
+    assert refined.refined_gap_m < plain.gap_m  # it moved the model
+    band = plain.curve_band(0)
+    assert band is not None
+    moved = refined.model.curves[0].force_N
+    assert np.any((moved < band[0]) | (moved > band[1]))  # the equation fit's band does not hold it
+    out = refined.to_json()
+    assert all("force_N_low" not in c and "force_N_high" not in c for c in out["curves"])  # type: ignore[union-attr]
+    assert out["tyre_damping_Ns_per_m_interval"] is None
+    assert out["masses_kg_interval"] == plain.to_json()["masses_kg_interval"]
+    assert any("no 95% band" in w and "no truer a damper curve" in w for w in refined.warnings)
+    assert not any("refined on the output error" in w for w in plain.warnings)
