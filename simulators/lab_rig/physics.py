@@ -72,7 +72,7 @@ class RigPhysics:
         body, body_rate, wheel, wheel_rate, pad, coil, cable = state
         length, rate = body - wheel, body_rate - wheel_rate
         spring = rig.spring_N_per_m * (rig.spring_free_length_m - length)
-        damper = rig.damper_Ns_per_m * rate + rig.damper_friction.force(rate)
+        damper = rig.damper_force_N(rate)
         unrecorded = 0.0
         if self.unrecorded:
             act = rig.actuator

@@ -123,6 +123,11 @@ class LabRig:
     def total_mass_kg(self) -> float:
         return self.sprung_mass_kg + self.unsprung_mass_kg
 
+    def damper_force_N(self, rate_m_s: float) -> float:
+        """The rig's own damper at suspension rate ζ' (body minus wheel velocity): its viscous part and its
+        guide's friction, the force a vehicle model's damper curve stands for (same sign as ζ')."""
+        return self.damper_Ns_per_m * rate_m_s + self.damper_friction.force(rate_m_s)
+
     @property
     def tyre_loss_stiffness_N_per_m(self) -> float:
         return self.tyre_loss_Ns_per_m / self.tyre_loss_relaxation_s

@@ -88,6 +88,20 @@ def test_at_rest_it_sits_in_static_equilibrium_the_springs_carrying_the_weights(
         assert np.max(np.abs(still.recording.true[name])) < 1e-12
 
 
+def test_the_damper_it_applies_is_the_rigs_damper_force_and_opposes_the_rate() -> None:
+    """LabRig.damper_force_N is what benchmarks hold a model's damper curve against: it must be the force
+    the physics applies between body and wheel, and a damper (it takes energy out at every rate)."""
+    for seed in range(5):
+        rig = draw_rig(seed, run_s=RUN_S).rig
+        physics = RigPhysics(rig, Still(), Still())
+        for rate_m_s in (-0.3, -0.01, -1e-4, 1e-4, 0.02, 0.5):
+            state = physics.rest_state()
+            state[1] = rate_m_s  # the body moving, the wheel still: the suspension's rate is the body's
+            applied = physics.forces(0.0, state).damper_N
+            assert applied == rig.damper_force_N(rate_m_s)
+            assert applied * rate_m_s > 0.0  # subtracted from the body's force: against the motion
+
+
 def test_without_losses_it_keeps_its_energy() -> None:
     """The signs of gravity, springs and the tyre: released 2 mm above rest, a lossless rig neither gains
     nor loses energy."""
