@@ -26,7 +26,10 @@ and written as recording CSV with the vehicle file stating the wrong rates (A.to
 (c) `identify` on run A from the mass-only file (every rate and ϑ free; estimator.identify, the call of
     `shockbench identify`), its model validated on run B: held-out gap %; and the same with its
     output-error refinement (`shockbench identify --refine`);
-(d) two ceilings from the truth, no estimate involved: the part of run B no model driven by the recorded
+(d) each model's damper curve against the rig's own damper (viscous and its guide's friction,
+    LabRig.damper_force_N) over run A's excited suspension rates, % of the damper's peak: what a user reads
+    the curve as;
+(e) two ceilings from the truth, no estimate involved: the part of run B no model driven by the recorded
     plate can predict (unpredictable_percent), and run B as the rig's own physics without the unrecorded
     force simulates it (own_physics_percent), what a model right in every constant would score.
 
@@ -41,7 +44,6 @@ import argparse
 import json
 import math
 import platform
-import statistics
 import sys
 import tempfile
 import time
@@ -52,7 +54,13 @@ from pathlib import Path
 
 import numpy as np
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "estimator"))
+
+from cases import curve_error_percent  # the tests' measure of a curve against the truth
+from lab_rig_outcomes import RATE_EFFECTS, Outcome, named_text, outcome_from_json, percent_cell, print_report
+
 from simulators.lab_rig.draws import RigDraw, draw_rig
+from simulators.lab_rig.rig import LabRig
 from simulators.lab_rig.signals import Still
 from simulators.lab_rig.world import RunFiles, simulate_run, write_run
 
@@ -61,78 +69,6 @@ HELD_OUT_SEEDS = range(200_000, 201_000)
 """Frozen. 100000-100999 were the first held-out range, retired: one run on them came before the world's
 last change (the coil's strength), so they are no longer unseen."""
 """Frozen: never looked at while designing. Only these count for the published figures."""
-RATE_EFFECTS = {
-    "spring_curve": ("spring_stiffness", "rate_at_static_load_N_per_m"),
-    "tyre_stiffness": ("tyre_stiffness", "tyre_stiffness_N_per_m"),
-}
-"""The doctor's families that correct a stated rate (estimator.doctor.catalog): family -> the rate's name
-here and the key of the rate it fitted in the step's parameters (estimator.doctor.parameters.report)."""
-LIMIT_PERCENT = 40.0
-
-
-@dataclass(frozen=True)
-class Outcome:
-    seed: int
-    description: str
-    true_spring_N_per_m: float
-    true_tyre_N_per_m: float
-    named: tuple[str, ...]
-    rates_named: dict[str, float]
-    """effect -> the rate the doctor corrected to (N/m)."""
-    unexplained: bool
-    conclusion: str
-    located: str
-    doctor_before_percent: float | None
-    doctor_after_percent: float | None
-    doctor_heldout_percent: float | None
-    mass_only_in_sample_percent: float | None
-    mass_only_heldout_percent: float | None
-    mass_only_rates_N_per_m: tuple[float, float] | None
-    unrecorded_percent: float | None
-    """What no model driven by the recorded plate can predict on run B (unpredictable_percent)."""
-    own_physics_percent: float | None
-    """The rig's own physics without the unrecorded force, held out on run B (own_physics_percent)."""
-    mass_only_refined_heldout_percent: float | None
-    """Mass-only identify with its output-error refinement (`identify --refine`), held out on run B."""
-    simulate_s: float
-    doctor_s: float
-    identify_s: float
-    error: str = ""
-
-    stated_spring_N_per_m: float | None = None
-    stated_tyre_N_per_m: float | None = None
-
-    @property
-    def both_named(self) -> bool:
-        """Both rate families named (each rig's file states both rates 40-80% off)."""
-        return all(name in self.named for name in RATE_EFFECTS)  # the families: they take no channel
-
-    @property
-    def rates_right(self) -> bool:
-        """Both rates named, each corrected toward the truth: closer to it than the rate stated (a rig of a
-        results file without the stated rates: named)."""
-        if not self.both_named or self.stated_spring_N_per_m is None or self.stated_tyre_N_per_m is None:
-            return self.both_named
-        truth = {"spring_stiffness": self.true_spring_N_per_m, "tyre_stiffness": self.true_tyre_N_per_m}
-        stated = {"spring_stiffness": self.stated_spring_N_per_m, "tyre_stiffness": self.stated_tyre_N_per_m}
-        return all(
-            abs(self.rates_named[family] - truth[rate]) < abs(stated[rate] - truth[rate])
-            for family, (rate, _) in RATE_EFFECTS.items()
-        )
-
-    @property
-    def doctor_meets(self) -> bool:
-        """Item 5 for the doctor: rate corrections named (rates_right), held-out gap ≤ 40%, unexplained."""
-        return self.rates_right and _within(self.doctor_heldout_percent) and self.unexplained
-
-    @property
-    def mass_only_meets(self) -> bool:
-        return _within(self.mass_only_heldout_percent)
-
-
-def _within(percent: float | None) -> bool:
-    """A gap (%) within item 5's bound; None (diverged) is not."""
-    return percent is not None and percent <= LIMIT_PERCENT
 
 
 def _percent(value: float) -> float | None:
@@ -158,6 +94,16 @@ def rig_files(seed: int, folder: str, run_s: float) -> tuple[RigDraw, dict[str, 
     simulate_s = time.perf_counter() - start
     facts_path.write_text(json.dumps({"simulate_s": simulate_s}))
     return draw, files, simulate_s
+
+
+@dataclass(frozen=True)
+class RigDamper:
+    """The rig's own damper as a force curve (cases.curve_error_percent's truth): LabRig.damper_force_N."""
+
+    rig: LabRig
+
+    def force(self, rates_m_s: np.ndarray) -> np.ndarray:
+        return np.array([self.rig.damper_force_N(float(v)) for v in rates_m_s])
 
 
 def unpredictable_percent(draw: RigDraw, measured_b: dict[str, np.ndarray]) -> float:
@@ -234,11 +180,12 @@ def run_rig(seed: int, folder: str, run_s: float) -> Outcome:
         "doctor_after_percent": None,
         "doctor_heldout_percent": None,
     }
+    doctor_model = None
     start = time.perf_counter()
     try:
         result = diagnose(run_a, read_vehicle(a.vehicle_toml), DiagnoseOptions(tyre=TyreModel.MAXWELL))
         data = result.to_json()
-        model = model_from_json(data)
+        doctor_model = model = model_from_json(data)
         in_sample, held_out = validate(model, run_a), validate(model, run_b)
         response = in_sample.response_rms_m
         rates = {
@@ -267,24 +214,34 @@ def run_rig(seed: int, folder: str, run_s: float) -> Outcome:
         "mass_only_rates_N_per_m": None,
         "mass_only_refined_heldout_percent": None,
     }
+    truth = RigDamper(rig)
+    rates_m_s = None
     start = time.perf_counter()
     try:
         fitted = identify(run_a, read_vehicle(a.mass_only_toml), IdentifyOptions())
         model = model_from_json(fitted.to_json())
         vehicle = fitted.model.vehicle
+        rates_m_s = fitted.system.velocity_m_s[0]  # run A's suspension rate, as the equations saw it
         identified = {
             "mass_only_in_sample_percent": _percent(validate(model, run_a).gap_ratio),
             "mass_only_heldout_percent": _percent(validate(model, run_b).gap_ratio),
             "mass_only_rates_N_per_m": (vehicle.spring_stiffness_N_per_m, vehicle.tyre_stiffness_N_per_m),
+            "mass_only_curve_percent": curve_error_percent(model.curves[0], truth, rates_m_s),
         }
+        if doctor_model is not None:
+            identified["doctor_curve_percent"] = curve_error_percent(doctor_model.curves[0], truth, rates_m_s)
     except Exception as exc:
         errors.append(f"identify: {type(exc).__name__}: {exc}")
         traceback.print_exc()
     identify_s = time.perf_counter() - start
     try:
         refined = identify(run_a, read_vehicle(a.mass_only_toml), IdentifyOptions(refine_output_error=True))
-        refined_gap = validate(model_from_json(refined.to_json()), run_b).gap_ratio
-        identified["mass_only_refined_heldout_percent"] = _percent(refined_gap)
+        refined_model = model_from_json(refined.to_json())
+        identified["mass_only_refined_heldout_percent"] = _percent(validate(refined_model, run_b).gap_ratio)
+        if rates_m_s is not None:
+            identified["mass_only_refined_curve_percent"] = curve_error_percent(
+                refined_model.curves[0], truth, rates_m_s
+            )
     except Exception as exc:
         errors.append(f"identify --refine: {type(exc).__name__}: {exc}")
         traceback.print_exc()
@@ -295,127 +252,6 @@ def run_rig(seed: int, folder: str, run_s: float) -> Outcome:
         doctor_s=doctor_s,
         identify_s=identify_s,
         error="; ".join(errors),
-    )
-
-
-def _cell(value: float | None) -> str:
-    return "diverged" if value is None else f"{value:.0f}%"
-
-
-def _named(o: Outcome) -> str:
-    truth = {"spring_stiffness": o.true_spring_N_per_m, "tyre_stiffness": o.true_tyre_N_per_m}
-    parts = []
-    for name in o.named:
-        if name in o.rates_named:
-            rate, true = o.rates_named[name], truth[RATE_EFFECTS[name][0]]
-            parts.append(f"{name} {rate:.0f} ({100 * (rate / true - 1):+.0f}% of true)")
-        else:
-            parts.append(name)
-    return ", ".join(parts) or "nothing"
-
-
-def _median(values: list[float | None]) -> str:
-    """The median, a diverged gap (None) counting as the largest."""
-    ordered = sorted(math.inf if v is None else v for v in values)
-    if not ordered:
-        return "—"
-    middle = statistics.median(ordered)
-    return _cell(middle if math.isfinite(middle) else None)
-
-
-def print_report(outcomes: list[Outcome]) -> None:
-    print(
-        "\n| rig | doctor named (rate, error against the truth) | verdict | doctor gap A: before → after "
-        "| doctor held-out B | mass-only identify A / held-out B / refined held-out B | unpredictable B "
-        "| own physics B | doctor (s) |"
-    )
-    print("|---:|---|---|---|---:|---|---:|---:|---:|")
-    for o in outcomes:
-        verdict = "unexplained" if o.unexplained else ("error" if o.error else "explained")
-        print(
-            f"| {o.seed} | {_named(o)} | {verdict} | {_cell(o.doctor_before_percent)} → "
-            f"{_cell(o.doctor_after_percent)} | {_cell(o.doctor_heldout_percent)} | "
-            f"{_cell(o.mass_only_in_sample_percent)} / {_cell(o.mass_only_heldout_percent)} / "
-            f"{_cell(o.mass_only_refined_heldout_percent)} | {_cell(o.unrecorded_percent)} | "
-            f"{_cell(o.own_physics_percent)} | {o.doctor_s:.0f} |"
-        )
-    print(
-        "\nGaps are % of the response RMS (measured body and wheel motion about their means) of that run. "
-        "Unpredictable B: run B without the coil's unrecorded reference command against B as measured "
-        "(unpredictable_percent), a floor of any held-out gap. Own physics B: the rig's true physics without "
-        "the coil, cogging and cable (own_physics_percent), what a model right in every constant scores."
-    )
-    print("\nRigs:")
-    for o in outcomes:
-        print(f"- {o.description}")
-        if o.mass_only_rates_N_per_m is not None:
-            spring, tyre = o.mass_only_rates_N_per_m
-            spring_error, tyre_error = spring / o.true_spring_N_per_m - 1, tyre / o.true_tyre_N_per_m - 1
-            print(
-                f"  mass-only identify: spring {spring:.0f} N/m ({100 * spring_error:+.0f}% of true), "
-                f"tyre {tyre:.0f} N/m ({100 * tyre_error:+.0f}%)"
-            )
-        if o.located:
-            print(f"  doctor, where: {o.located}")
-        if o.error:
-            print(f"  ERROR: {o.error}")
-    count = len(outcomes)
-    held_within = sum(_within(o.doctor_heldout_percent) for o in outcomes)
-    medians = {
-        "doctor gap on A before": _median([o.doctor_before_percent for o in outcomes]),
-        "after": _median([o.doctor_after_percent for o in outcomes]),
-        "doctor held-out on B": _median([o.doctor_heldout_percent for o in outcomes]),
-        "mass-only identify on A": _median([o.mass_only_in_sample_percent for o in outcomes]),
-        "mass-only held-out on B": _median([o.mass_only_heldout_percent for o in outcomes]),
-        "mass-only refined held-out on B": _median([o.mass_only_refined_heldout_percent for o in outcomes]),
-        "unpredictable part of B": _median([o.unrecorded_percent for o in outcomes]),
-        "own physics on B": _median([o.own_physics_percent for o in outcomes]),
-    }
-    print(f"\nmedians over {count} rigs: " + ", ".join(f"{k} {v}" for k, v in medians.items()))
-    limit = f"{LIMIT_PERCENT:.0f}%"
-    counts = {
-        "both rate families named": sum(o.both_named for o in outcomes),
-        "both rates named closer to the truth than stated": sum(o.rates_right for o in outcomes),
-        "unexplained": sum(o.unexplained for o in outcomes),
-        f"doctor held-out ≤ {limit}": held_within,
-        f"doctor meets item 5 (rates named, held-out ≤ {limit}, unexplained)": sum(
-            o.doctor_meets for o in outcomes
-        ),
-        f"mass-only held-out ≤ {limit}": sum(o.mass_only_meets for o in outcomes),
-        f"mass-only refined held-out ≤ {limit}": sum(
-            _within(o.mass_only_refined_heldout_percent) for o in outcomes
-        ),
-        f"own physics held-out ≤ {limit}": sum(_within(o.own_physics_percent) for o in outcomes),
-    }
-    print("; ".join(f"{k}: {v}/{count}" for k, v in counts.items()))
-    reachable = [o for o in outcomes if _within(o.unrecorded_percent)]
-    doctor_met, mass_met = sum(o.doctor_meets for o in reachable), sum(o.mass_only_meets for o in reachable)
-    print(
-        f"rigs whose unpredictable part of B is ≤ {limit}: {len(reachable)}/{count}; on them the doctor "
-        f"meets item 5 on {doctor_met}, mass-only on {mass_met}"
-    )
-    own = [o for o in outcomes if _within(o.own_physics_percent)]
-    refined_met = sum(_within(o.mass_only_refined_heldout_percent) for o in own)
-    print(
-        f"rigs whose own physics (every constant right, no unrecorded force) is ≤ {limit} on B: "
-        f"{len(own)}/{count}; on them the doctor meets item 5 on {sum(o.doctor_meets for o in own)}, "
-        f"mass-only on {sum(o.mass_only_meets for o in own)}, mass-only refined on {refined_met}"
-    )
-    doctor_s = [o.doctor_s for o in outcomes]
-    print(f"doctor wall time per rig: median {statistics.median(doctor_s):.0f} s (max {max(doctor_s):.0f} s)")
-
-
-def _outcome_from_json(row: dict[str, object]) -> Outcome:
-    rates = row.get("mass_only_rates_N_per_m")
-    return Outcome(
-        **{  # type: ignore[arg-type]
-            **row,
-            "named": tuple(row["named"]),  # type: ignore[arg-type]
-            "mass_only_rates_N_per_m": tuple(rates) if rates else None,  # type: ignore[arg-type]
-            "unrecorded_percent": row.get("unrecorded_percent"),
-            "own_physics_percent": row.get("own_physics_percent"),
-            "mass_only_refined_heldout_percent": row.get("mass_only_refined_heldout_percent"),
-        }
     )
 
 
@@ -434,7 +270,7 @@ def main() -> None:
     args = parser.parse_args()
     if args.from_results:
         rows = [json.loads(line) for line in Path(args.from_results).read_text().splitlines() if line]
-        print_report(sorted((_outcome_from_json(r) for r in rows), key=lambda o: o.seed))
+        print_report(sorted((outcome_from_json(r) for r in rows), key=lambda o: o.seed))
         return
     seeds = DEV_SEEDS if args.set == "dev" else HELD_OUT_SEEDS
     if not (args.rigs > 0 and args.offset >= 0 and args.offset + args.rigs <= len(seeds)):
@@ -454,8 +290,9 @@ def main() -> None:
         for done, future in enumerate(as_completed(futures), start=1):
             o = future.result()
             print(
-                f"[{done}/{len(chosen)}] rig {o.seed}: {_named(o)}; held-out doctor "
-                f"{_cell(o.doctor_heldout_percent)}, mass-only {_cell(o.mass_only_heldout_percent)}",
+                f"[{done}/{len(chosen)}] rig {o.seed}: {named_text(o)}; held-out doctor "
+                f"{percent_cell(o.doctor_heldout_percent)}, "
+                f"mass-only {percent_cell(o.mass_only_heldout_percent)}",
                 file=sys.stderr,
             )
             if args.results:

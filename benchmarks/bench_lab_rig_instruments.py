@@ -19,10 +19,9 @@ held-out --offset N`: bench_lab_rig.py's frozen seeds from 200000 + N, for scori
 runs A and B are simulated as bench_lab_rig.py does (`--cache` shares its files), and printed: mass-only
 identify's held-out gap (its model from run A validated on run B, % of B's response RMS), that of identify
 with `refine_output_error` (DE over the curve points and the tyre damping on run A's free-simulation gap,
-estimator.output_error.refine_on_output_error: an output-error fit is not biased by a disturbance the plate
-does not cause) and the instrumental-variable model's, in-sample and held-out, with the rates against the
-truth. A model that cannot
-be simulated (a rate not positive) is reported as such.
+estimator.output_error.refine_on_output_error: an output-error fit is not biased by the part of a
+disturbance the plate does not cause) and the instrumental-variable model's, in-sample and held-out, with
+the rates against the truth. A model that cannot be simulated (a rate not positive) is reported as such.
 """
 
 from __future__ import annotations
