@@ -121,8 +121,10 @@ def refined_on(
     `recording` (estimator.output_error.refine_on_output_error: a short DE within ±15% of each value, the
     model's effects kept) and that model's validate gap (m); None when refining does not lower the gap.
     Why: a fit of the equations is biased by a force the model lacks (it is in their residual and moves the
-    motions they are built from), a fit of the simulated motion to the measured one is not when the plate
-    does not cause that force. InterruptedError when `cancel` is set meanwhile."""
+    motions they are built from), a fit of the simulated motion to the measured one is not by the part of it
+    the plate does not cause. A model to predict with: the part that depends on the motion both fits take
+    up into the curve, this one more, so the refined curve is no truer a damper curve (docs/method.md).
+    InterruptedError when `cancel` is set meanwhile."""
     check_model_fits(model, recording)
     start = _driven(model, recording)  # the refined model keeps the effects: the same start
     before = _compared(model, recording, start).gap_m
