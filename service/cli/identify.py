@@ -275,7 +275,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--points", type=int, default=None, help="curve points (default 20, axle 10 per side)")
     p.add_argument("--solver", choices=SOLVERS, default="exact")
     add_options(p, DE_OPTIONS)
-    p.add_argument("--refine", action="store_true", help="refine the curve by DE on the output-error gap")
+    p.add_argument(
+        "--refine",
+        action="store_true",
+        help="refine the curve by DE on the output-error gap: a model that predicts the motion better "
+        "(for validate), whose curve is no truer a damper curve and has no 95%% band",
+    )
     p.add_argument(
         "--free",
         default=None,

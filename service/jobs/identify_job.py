@@ -56,7 +56,11 @@ class IdentifyJobOptions(BaseModel):
     )
     generations: int = pydantic_field(DESettings, "generations")
     seed: int = pydantic_field(DESettings, "seed")
-    refine: Flag = Field(False, description="refine the curve by DE on the output-error gap (true|false)")
+    refine: Flag = Field(
+        False,
+        description="refine the curve by DE on the output-error gap (true|false): a model that predicts "
+        "the motion better, whose curve is no truer a damper curve and has no 95% band",
+    )
     output_error: Flag = Field(
         True,
         description="simulate the identified model for the output-error gap (off saves seconds; true|false)",
