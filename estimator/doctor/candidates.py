@@ -179,7 +179,7 @@ def parameters_of(candidate: Candidate, model: FittedModel) -> dict[str, float |
 
 
 def verdict_of(
-    score: CandidateScore, candidate: Candidate, chosen: Candidate | None, bound: float
+    score: CandidateScore, candidate: Candidate, chosen: Candidate | None, bound: float, waiting: list
 ) -> CandidateScore:
     if score.verdict != "tested":
         return score
@@ -189,8 +189,8 @@ def verdict_of(
         untried = ": not simulated" if score.gap_m is None else ""
         verdict = f"not significant (p = {score.p_value:.2g} > α/m = {bound:.2g}){untried}"
         return replace(score, verdict=verdict)
-    if chosen is not None and len(candidate) > len(chosen):
-        return replace(score, verdict="significant, but a smaller candidate is too (tested first)")
+    if candidate in waiting:
+        return replace(score, verdict="significant, but one of its families alone is too (tested first)")
     return replace(score, verdict="significant, but another candidate is more so")
 
 

@@ -122,21 +122,21 @@ def intersection_union(*results: TestResult) -> float:
 
 @dataclass(frozen=True)
 class Selection:
-    """Bonferroni over a round's m tested candidates, taken in tiers: the smallest p-value of the first tier
-    with one at most α/m wins (tiers order the models by size: a larger one only where no smaller one is
-    significant; the family-wise error stays at most α, as every candidate is held to α/m). Given as
-    logarithms: those of large effects underflow to 0 together, and which is the most significant must still
-    be decided."""
+    """Bonferroni over a round's m candidates (tuples of families): the smallest p-value wins if at most α/m
+    (the family-wise error stays at most α). Nested models, the smaller first: families together only where
+    none alone is significant; models not nested compete on p-values (their tests count their unknowns).
+    Logarithms: those of large effects underflow to 0 together, and which is the most must be decided."""
 
     alpha: float = ALPHA
 
-    def choose(self, tiers: list[dict], tested: int) -> object | None:
+    def waiting(self, log_p: dict[tuple, float], tested: int) -> list[tuple]:  # the smaller first
         bound = math.log(self.alpha / max(tested, 1))
-        for log_p in tiers:
-            best = min(log_p, key=lambda k: (log_p[k], str(k)), default=None)
-            if best is not None and log_p[best] <= bound:
-                return best
-        return None
+        return [c for c in log_p if len(c) > 1 and any(log_p.get((m,), 0.0) <= bound for m in c)]
+
+    def choose(self, log_p: dict[tuple, float], tested: int) -> tuple | None:
+        waiting = self.waiting(log_p, tested)
+        best = min((c for c in log_p if c not in waiting), key=lambda k: (log_p[k], str(k)), default=None)
+        return best if best is not None and log_p[best] <= math.log(self.alpha / max(tested, 1)) else None
 
 
 @dataclass(frozen=True)

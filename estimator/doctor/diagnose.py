@@ -17,8 +17,8 @@ leaves more than its own noise would.
 4. *Calibrate*: a candidate significant as it stands has both statistics divided by their mean over bootstrap
    draws of the current model (a scaled χ²; calibrate; a friction form's profile scale by scale, its search
    paid for by Davies' bound, criteria.ScaleSearch). *Select*: the candidate with the smallest p-value is
-   named when it is at most α/m (Bonferroni over the m candidates of the round), a family alone before
-   families together (these only where no family alone is significant); it is then fitted fully
+   named when it is at most α/m (Bonferroni over the m candidates of the round; families together only
+   where none of them alone is significant, against other families by p-value); it is then fitted fully
    (fitting.fit_added; if that fit is physically impossible, the next). Repeat from 2 until a round names
    nothing; the model kept is the path's with the smallest free-simulation gap (later steps left out, said).
 5. *Goodness of fit*: the final model against a parametric bootstrap of its plausible truth
@@ -164,18 +164,18 @@ class _Doctor:
                     if scores[k].verdict == "tested":  # (a profiled form: both its tests must reject)
                         scores[k] = calibrated(scores[k], *scales)
                         log_p[candidates[k]] = max(screened, log_p_value(scores[k], *scales))
-            # a load path's families together only where none alone is significant (the smaller model first)
-            tiers = [{c: v for c, v in log_p.items() if (len(c) == 1) == alone} for alone in (True, False)]
-            while (chosen := Selection(options.alpha).choose(tiers, len(log_p))) is not None:
+            left, selection = dict(log_p), Selection(options.alpha)  # families together after their members
+            while (chosen := selection.choose(left, len(log_p))) is not None:
                 self.report(step, f"fitting {label(chosen)}")
                 model = fit_added(reference, current, chosen, one_step(reference, current, chosen)[0])
                 if not (reason := next(filter(None, (implausible(e, model) for e in chosen)), None)):
                     break
                 # impossible once fitted fully (its one step was not): the next most significant
-                tiers = [{c: v for c, v in t.items() if c != chosen} for t in tiers]
+                del left[chosen]
                 k = candidates.index(chosen)
                 scores[k] = replace(scores[k], verdict=f"{reason} once fitted fully")
-            scores = [verdict_of(s, c, chosen, bound) for s, c in zip(scores, candidates, strict=True)]
+            waits = selection.waiting(log_p, len(log_p))
+            scores = [verdict_of(s, c, chosen, bound, waits) for s, c in zip(scores, candidates, strict=True)]
             rounds.append(scores)
             if chosen is None:
                 break

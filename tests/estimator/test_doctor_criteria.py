@@ -140,7 +140,7 @@ def test_selection_names_nothing_missing_at_most_alpha_of_the_time(candidates: i
     selection = Selection()
     named = sum(
         selection.choose(
-            [{f"family {k}": math.log(p) for k, p in enumerate(rng.uniform(size=candidates))}], candidates
+            {(f"family {k}",): math.log(p) for k, p in enumerate(rng.uniform(size=candidates))}, candidates
         )
         is not None
         for _ in range(draws)
@@ -156,44 +156,53 @@ def test_selection_names_the_most_significant_candidate() -> None:
     selection = Selection()
     bound = ALPHA / 3
 
-    def log(p_values: dict[str, float]) -> list[dict[str, float]]:
-        return [{k: math.log(p) for k, p in p_values.items()}]
+    def log(p_values: dict[str, float]) -> dict[tuple, float]:
+        return {(k,): math.log(p) for k, p in p_values.items()}
 
-    def choose(tiers: list[dict[str, float]]) -> str | None:
-        return selection.choose(tiers, sum(map(len, tiers)))  # type: ignore[return-value]
+    def choose(log_p: dict[tuple, float]) -> str | None:
+        chosen = selection.choose(log_p, len(log_p))
+        return None if chosen is None else chosen[0]
 
     assert choose(log({"a": 0.5, "b": 1e-8, "c": 1e-5})) == "b"
     assert choose(log({"a": 0.5, "b": 1.01 * bound, "c": 0.9})) is None
     assert choose(log({"a": 0.5, "b": 0.99 * bound, "c": 0.9})) == "b"
     assert choose(log({"b": 1e-9, "a": 1e-9})) == "a"  # a tie: by name, whatever the order
-    assert choose([{"a": -900.0, "b": -1200.0, "c": 0.0}]) == "b"  # both p-values underflow
-    assert choose([{}]) is None
+    assert choose({("a",): -900.0, ("b",): -1200.0, ("c",): 0.0}) == "b"  # both p-values underflow
+    assert choose({}) is None
     assert Selection(alpha=0.01).choose(log({"a": 0.02, "b": 0.006}), 2) is None  # α/m = 0.005
 
 
-def test_selection_takes_a_larger_candidate_only_where_no_smaller_one_is_significant() -> None:
-    """Tiers: the load path's families together (second tier) are named only where no family alone is,
-    however small their p-value; every candidate is held to α over all m tested."""
-    selection, bound = Selection(), ALPHA / 3
-    alone, together = {"spring": math.log(0.5 * bound), "tyre": math.log(0.9)}, {"spring + tyre": -50.0}
-    assert selection.choose([alone, together], 3) == "spring"
-    alone["spring"] = math.log(1.01 * bound)
-    assert selection.choose([alone, together], 3) == "spring + tyre"
-    assert selection.choose([alone, {"spring + tyre": math.log(1.01 * bound)}], 3) is None
-    assert selection.choose([alone, {"spring + tyre": math.log(0.99 * bound)}], 3) == "spring + tyre"
+def test_families_together_come_after_their_members_and_compete_with_the_others() -> None:
+    """Nested models, the smaller first: the load path's families together only where neither alone is
+    significant, however small their p-value. Against a family that is not one of theirs (a sensor family
+    standing in for two wrong rates in series) they compete on p-values. Every candidate is held to α/m."""
+    selection, bound = Selection(), ALPHA / 4
+    pair = ("spring", "tyre")
+    log_p = {("spring",): math.log(0.5 * bound), ("tyre",): math.log(0.9), ("gain",): -30.0, pair: -50.0}
+    assert selection.choose(log_p, 4) == ("gain",)  # spring is significant: the pair waits for it
+    log_p[("spring",)] = math.log(1.01 * bound)
+    assert selection.choose(log_p, 4) == pair  # neither alone is: the pair against the gain, on p
+    log_p[pair] = -20.0
+    assert selection.choose(log_p, 4) == ("gain",)
+    log_p[("gain",)] = math.log(1.01 * bound)
+    log_p[pair] = math.log(1.01 * bound)
+    assert selection.choose(log_p, 4) is None
+    log_p[pair] = math.log(0.99 * bound)
+    assert selection.choose(log_p, 4) == pair
 
 
-def test_tiers_keep_the_family_wise_error_at_most_alpha() -> None:
-    """Nothing missing (every p-value uniform): a round of 13 families and one load path names something
-    at most α of the time, as one tier would."""
+def test_selection_with_families_together_keeps_the_family_wise_error_at_most_alpha() -> None:
+    """Nothing missing (every p-value uniform): a round of 13 families and one load path of two of them
+    names something at most α of the time, as Bonferroni over the 14 would."""
     rng, draws, selection = np.random.default_rng(29), 4000, Selection()
     named = 0
     for _ in range(draws):
         p = rng.uniform(size=14)
-        tiers = [{f"family {k}": math.log(v) for k, v in enumerate(p[:13])}, {"path": math.log(p[13])}]
-        named += selection.choose(tiers, 14) is not None
+        log_p = {(f"family {k}",): math.log(v) for k, v in enumerate(p[:13])}
+        log_p[("family 0", "family 1")] = math.log(p[13])
+        named += selection.choose(log_p, 14) is not None
     low, _ = rejection_interval(named, draws)
-    print(f"two tiers: named something in {named}/{draws} rounds with nothing missing")
+    print(f"a load path among 13 families: named something in {named}/{draws} rounds with nothing missing")
     assert low <= ALPHA and named / draws <= ALPHA + 0.01
 
 
