@@ -49,18 +49,17 @@ import tempfile
 import time
 import traceback
 from concurrent.futures import ProcessPoolExecutor, as_completed
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, replace
 from pathlib import Path
 
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "estimator"))
 
-from cases import curve_error_percent  # the tests' measure of a curve against the truth
+from cases import PointwiseForce, curve_error_percent  # the tests' measure of a curve against the truth
 from lab_rig_outcomes import RATE_EFFECTS, Outcome, named_text, outcome_from_json, percent_cell, print_report
 
 from simulators.lab_rig.draws import RigDraw, draw_rig
-from simulators.lab_rig.rig import LabRig
 from simulators.lab_rig.signals import Still
 from simulators.lab_rig.world import RunFiles, simulate_run, write_run
 
@@ -94,16 +93,6 @@ def rig_files(seed: int, folder: str, run_s: float) -> tuple[RigDraw, dict[str, 
     simulate_s = time.perf_counter() - start
     facts_path.write_text(json.dumps({"simulate_s": simulate_s}))
     return draw, files, simulate_s
-
-
-@dataclass(frozen=True)
-class RigDamper:
-    """The rig's own damper as a force curve (cases.curve_error_percent's truth): LabRig.damper_force_N."""
-
-    rig: LabRig
-
-    def force(self, rates_m_s: np.ndarray) -> np.ndarray:
-        return np.array([self.rig.damper_force_N(float(v)) for v in rates_m_s])
 
 
 def unpredictable_percent(draw: RigDraw, measured_b: dict[str, np.ndarray]) -> float:
@@ -214,7 +203,7 @@ def run_rig(seed: int, folder: str, run_s: float) -> Outcome:
         "mass_only_rates_N_per_m": None,
         "mass_only_refined_heldout_percent": None,
     }
-    truth = RigDamper(rig)
+    truth = PointwiseForce(rig.damper_force_N)  # the rig's own damper
     rates_m_s = None
     start = time.perf_counter()
     try:

@@ -31,7 +31,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "estimator"))
 
-from cases import curve_error_percent  # the tests' measure of a curve against the truth
+from cases import PointwiseForce, curve_error_percent  # the tests' measure of a curve against the truth
 
 from simulators.foreign.draws import CLASSES, draw
 from simulators.foreign.manifest import draw_files, namespace_entropy
@@ -55,16 +55,6 @@ class Pair:
         return self.refined_gap_percent < self.gap_percent
 
 
-@dataclass(frozen=True)
-class TableTruth:
-    """A damper table as a force curve over an array of velocities (cases.curve_error_percent's truth)."""
-
-    damper: object
-
-    def force(self, velocity_m_s: np.ndarray) -> np.ndarray:
-        return np.array([self.damper.force(float(v)) for v in velocity_m_s])  # type: ignore[attr-defined]
-
-
 def run_draw(label: str, index: int, cache: str, entropy: int) -> Pair:
     """Identify one DEV draw both ways (a worker process)."""
     from daq.formats.recording_csv import read_recording_csv
@@ -79,7 +69,7 @@ def run_draw(label: str, index: int, cache: str, entropy: int) -> Pair:
     for refine in (False, True):
         result = identify(recording, vehicle, IdentifyOptions(intervals=False, refine_output_error=refine))
         errors = [
-            curve_error_percent(curve, TableTruth(corner.damper), velocity)
+            curve_error_percent(curve, PointwiseForce(corner.damper.force), velocity)
             for curve, corner, velocity in zip(
                 result.model.curves, corners, result.system.velocity_m_s, strict=True
             )

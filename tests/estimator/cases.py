@@ -3,6 +3,7 @@ what an identification got wrong about them."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from functools import cache
 
@@ -94,6 +95,17 @@ def axle_case(seed: int) -> Case:
     vehicle = random_axle(seed)
     settings = SimulationSettings(sweep=SweepSettings(duration_s=SWEEP_S), seed=seed)
     return Case(f"axle seed {seed}", vehicle, simulate(vehicle, settings))
+
+
+@dataclass(frozen=True)
+class PointwiseForce:
+    """A force law of one velocity at a time (a simulator's damper: force_at(v) in N, v in m/s) as a
+    ForceCurve over an array, for curve_error_percent's truth."""
+
+    force_at: Callable[[float], float]
+
+    def force(self, velocity_m_s: np.ndarray) -> np.ndarray:
+        return np.array([self.force_at(float(v)) for v in velocity_m_s])
 
 
 def curve_error_percent(identified: ForceCurve, truth: ForceCurve, velocity_m_s: np.ndarray) -> float:
