@@ -213,7 +213,7 @@ def test_a_force_effect_s_size_is_measured_on_its_recording() -> None:
 
 @pytest.mark.parametrize(
     "frozen",
-    [MANIFEST, *(MANIFEST.with_name(f"manifest-{n}.json") for n in (2, 3, 4, 5, 6, 7))],
+    [MANIFEST, *(MANIFEST.with_name(f"manifest-{n}.json") for n in (2, 3, 4, 5, 6, 7, 8))],
     ids=lambda p: p.name,
 )
 def test_the_held_out_draws_reproduce_their_frozen_hashes(frozen: Path) -> None:
