@@ -62,10 +62,9 @@ def _wald(vector: np.ndarray, covariance: np.ndarray) -> TestResult:
 
 @dataclass(frozen=True)
 class ScaleSearch:
-    """A Wald test whose family has a scale searched for (low_speed_friction's v_s or z: a parameter that
-    exists only under the alternative). The largest W along the search is not χ²(q); Davies' (1987) bound
-    gives its p-value: P(χ²(q) > W) + V·W^((q−1)/2)·e^(−W/2) / (2^(q/2)·Γ(q/2)), V the total variation of √W
-    along the search (measured on its grid). V = 0 is the plain χ² test."""
+    """A Wald test whose family has a scale searched for (low_speed_friction's v_s or z: only under the
+    alternative): the largest W is not χ²(q); Davies' (1987) bound P(χ²(q) > W) + V·W^((q−1)/2)·e^(−W/2) /
+    (2^(q/2)·Γ(q/2)) gives its p, V the total variation of √W along the search's grid (V = 0: plain χ²)."""
 
     variation: float = 0.0
 
@@ -76,8 +75,7 @@ class ScaleSearch:
 
 @dataclass(frozen=True)
 class SimulationTest:
-    """Likelihood ratio of the free simulation with and without the family: n_eff·ln(gap_without² /
-    gap_with²) ~ χ²(q)."""
+    """Free simulations with and without a family: n_eff·ln(gap_without²/gap_with²) ~ χ²(q) (a ratio)."""
 
     def test(self, samples: float, gap_without_m: float, gap_with_m: float, unknowns: int) -> TestResult:
         """samples: the effective number of independent samples of the residual without the family
@@ -96,9 +94,8 @@ class SimulationTest:
 
 @dataclass(frozen=True)
 class EachMember:
-    """Families named together (a load path's, estimator.doctor.catalog.LOAD_PATH) must each be significant
-    given the others: the Wald test of each one's unknowns in their joint fit, at α. One the others make
-    redundant is not named with them (their joint test would carry it on the others' evidence)."""
+    """Families named together (catalog.LOAD_PATH) must each be significant given the others (the Wald test of
+    its unknowns in their joint fit, at α): else their joint test would carry one on the others' evidence."""
 
     alpha: float = ALPHA
 
@@ -122,10 +119,10 @@ def intersection_union(*results: TestResult) -> float:
 
 @dataclass(frozen=True)
 class Selection:
-    """Bonferroni over a round's m candidates (tuples of families): the smallest p-value wins if at most α/m
-    (the family-wise error stays at most α). Nested models, the smaller first: families together only where
-    none alone is significant; models not nested compete on p-values (their tests count their unknowns).
-    Logarithms: those of large effects underflow to 0 together, and which is the most must be decided."""
+    """Bonferroni over m candidates (tuples of families): the smallest p (logarithms) wins if at most α/m.
+    Nested models, the smaller first: families together wait while one alone is significant; where they beat
+    the winner (not theirs) on p and on likelihood (the smaller free-simulation gap: models not nested), their
+    most significant member is named instead (a sensor family does not take a round rates in series won)."""
 
     alpha: float = ALPHA
 
@@ -133,16 +130,19 @@ class Selection:
         bound = math.log(self.alpha / max(tested, 1))
         return [c for c in log_p if len(c) > 1 and any(log_p.get((m,), 0.0) <= bound for m in c)]
 
-    def choose(self, log_p: dict[tuple, float], tested: int) -> tuple | None:
-        waiting = self.waiting(log_p, tested)
-        best = min((c for c in log_p if c not in waiting), key=lambda k: (log_p[k], str(k)), default=None)
+    def choose(self, log_p: dict[tuple, float], tested: int, gap_m: dict | None = None) -> tuple | None:
+        waiting, gap, rank = self.waiting(log_p, tested), gap_m or {}, lambda k: (log_p[k], str(k))
+        best = min((c for c in log_p if c not in waiting), key=rank, default=None)
+        for c in sorted(waiting, key=rank):  # (best is one of their members at the least)
+            if rank(c) < rank(best) and best[0] not in c and gap.get(c, math.inf) < gap.get(best, math.inf):
+                best = min(((m,) for m in c if (m,) in log_p), key=rank)
         return best if best is not None and log_p[best] <= math.log(self.alpha / max(tested, 1)) else None
 
 
 @dataclass(frozen=True)
 class GoodnessOfFit:
-    """The final model's gap against its bootstrap draws'. The equation objective is reported, not tested:
-    its null depends on the noise inside the excitation band, not measurable apart from the response."""
+    """The final model's gap against its bootstrap draws' (the equation objective is not tested: its null
+    depends on the noise inside the excitation band, not measurable apart from the response)."""
 
     alpha: float = ALPHA
 

@@ -17,10 +17,9 @@ leaves more than its own noise would.
 4. *Calibrate*: a candidate significant as it stands has both statistics divided by their mean over bootstrap
    draws of the current model (a scaled χ²; calibrate; a friction form's profile scale by scale, its search
    paid for by Davies' bound, criteria.ScaleSearch). *Select*: the candidate with the smallest p-value is
-   named when it is at most α/m (Bonferroni over the m candidates of the round; families together only
-   where none of them alone is significant, against other families by p-value); it is then fitted fully
-   (fitting.fit_added; if that fit is physically impossible, the next). Repeat from 2 until a round names
-   nothing; the model kept is the path's with the smallest free-simulation gap (later steps left out, said).
+   named when it is at most α/m (Bonferroni over the round's m; families together wait for their members,
+   criteria.Selection); it is fitted fully (fitting.fit_added; if that fit is impossible, the next). Repeat
+   from 2 until a round names nothing; the model kept is the path's with the smallest gap (later ones said).
 5. *Goodness of fit*: the final model against a parametric bootstrap of its plausible truth
    (estimator.doctor.expected); p < α: "unexplained", with where the disagreement is largest
    (estimator.doctor.residuals.Localisation); the model handed out then has its curve refined on the
@@ -164,8 +163,9 @@ class _Doctor:
                     if scores[k].verdict == "tested":  # (a profiled form: both its tests must reject)
                         scores[k] = calibrated(scores[k], *scales)
                         log_p[candidates[k]] = max(screened, log_p_value(scores[k], *scales))
-            left, selection = dict(log_p), Selection(options.alpha)  # families together after their members
-            while (chosen := selection.choose(left, len(log_p))) is not None:
+            left, selection = dict(log_p), Selection(options.alpha)
+            gaps = {c: s.gap_m for c, s in zip(candidates, scores, strict=True) if s.gap_m is not None}
+            while (chosen := selection.choose(left, len(log_p), gaps)) is not None:
                 self.report(step, f"fitting {label(chosen)}")
                 model = fit_added(reference, current, chosen, one_step(reference, current, chosen)[0])
                 if not (reason := next(filter(None, (implausible(e, model) for e in chosen)), None)):

@@ -172,23 +172,34 @@ def test_selection_names_the_most_significant_candidate() -> None:
     assert Selection(alpha=0.01).choose(log({"a": 0.02, "b": 0.006}), 2) is None  # α/m = 0.005
 
 
-def test_families_together_come_after_their_members_and_compete_with_the_others() -> None:
-    """Nested models, the smaller first: the load path's families together only where neither alone is
-    significant, however small their p-value. Against a family that is not one of theirs (a sensor family
-    standing in for two wrong rates in series) they compete on p-values. Every candidate is held to α/m."""
+def test_families_together_wait_for_their_members_unless_they_beat_the_winner_on_p_and_likelihood() -> None:
+    """Nested models, the smaller first: the load path's families together wait while one alone is
+    significant. Where they beat the winner (a sensor family standing in for two wrong rates in series) on
+    p-value and on likelihood (the smaller free-simulation gap), their most significant member is named
+    instead; where the winner simulates better, it is named. Every candidate is held to α/m."""
     selection, bound = Selection(), ALPHA / 4
-    pair = ("spring", "tyre")
-    log_p = {("spring",): math.log(0.5 * bound), ("tyre",): math.log(0.9), ("gain",): -30.0, pair: -50.0}
-    assert selection.choose(log_p, 4) == ("gain",)  # spring is significant: the pair waits for it
-    log_p[("spring",)] = math.log(1.01 * bound)
-    assert selection.choose(log_p, 4) == pair  # neither alone is: the pair against the gain, on p
-    log_p[pair] = -20.0
-    assert selection.choose(log_p, 4) == ("gain",)
-    log_p[("gain",)] = math.log(1.01 * bound)
+    pair, spring, tyre, gain = ("spring", "tyre"), ("spring",), ("tyre",), ("gain",)
+    log_p = {spring: math.log(0.5 * bound), tyre: math.log(0.9), gain: -30.0, pair: -50.0}
+    gap_m = {spring: 1.0e-3, tyre: 2.0e-3, gain: 1.4e-3, pair: 0.4e-3}
+    assert selection.choose(log_p, 4) == gain  # no gaps given: the pair waits for spring
+    assert selection.choose(log_p, 4, gap_m) == spring  # the pair beats the gain on p and likelihood
+    log_p[tyre] = math.log(0.1 * bound)
+    assert selection.choose(log_p, 4, gap_m) == tyre  # both members significant: the more so
+    log_p[tyre] = math.log(0.9)
+    gap_m[gain] = 0.1e-3
+    assert selection.choose(log_p, 4, gap_m) == gain  # the gain simulates better: it is named
+    gap_m[gain], log_p[pair] = 1.4e-3, -20.0
+    assert selection.choose(log_p, 4, gap_m) == gain  # the gain beats the pair on p
+    log_p[pair], log_p[gain] = -50.0, math.log(0.01 * bound)
+    assert selection.choose(log_p, 4, gap_m) == spring
+    log_p[spring] = math.log(1.01 * bound)
+    assert selection.choose(log_p, 4, gap_m) == pair  # neither alone is significant: the pair
+    log_p[spring], log_p[gain] = -60.0, -70.0
+    assert selection.choose(log_p, 4, gap_m) == gain  # the winner is the gain, and the pair does not beat it
+    log_p[gain] = math.log(1.01 * bound)
     log_p[pair] = math.log(1.01 * bound)
-    assert selection.choose(log_p, 4) is None
-    log_p[pair] = math.log(0.99 * bound)
-    assert selection.choose(log_p, 4) == pair
+    log_p[spring] = math.log(1.01 * bound)
+    assert selection.choose(log_p, 4, gap_m) is None
 
 
 def test_selection_with_families_together_keeps_the_family_wise_error_at_most_alpha() -> None:
