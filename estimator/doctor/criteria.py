@@ -75,7 +75,7 @@ class ScaleSearch:
 
 @dataclass(frozen=True)
 class SimulationTest:
-    """Free simulations with and without a family: n_eff·ln(gap_without²/gap_with²) ~ χ²(q) (a ratio)."""
+    """Likelihood ratio of free simulations with and without a family: n_eff·ln(gap_without²/gap_with²)."""
 
     def test(self, samples: float, gap_without_m: float, gap_with_m: float, unknowns: int) -> TestResult:
         """samples: the effective number of independent samples of the residual without the family

@@ -19,7 +19,7 @@ leaves more than its own noise would.
    paid for by Davies' bound, criteria.ScaleSearch). *Select*: the candidate with the smallest p-value is
    named when it is at most α/m (Bonferroni over the round's m; families together wait for their members,
    criteria.Selection); it is fitted fully (fitting.fit_added; if that fit is impossible, the next). Repeat
-   from 2 until a round names nothing; the model kept is the path's with the smallest gap (later ones said).
+   from 2 until a round names nothing; the model kept is the path's with the smallest gap (later steps: said).
 5. *Goodness of fit*: the final model against a parametric bootstrap of its plausible truth
    (estimator.doctor.expected); p < α: "unexplained", with where the disagreement is largest
    (estimator.doctor.residuals.Localisation); the model handed out then has its curve refined on the
