@@ -71,6 +71,8 @@ class VehicleParameters:
     tyre_viscoelastic_coefficient: the paper's ϑ = γ/(1+γ), γ = C_d/(K_d·Δt), referred to Δt = 1 ms
         (REFERENCE_SAMPLE_TIME_S) whatever the recording's sample time; see the module docstring.
     track_m: wheel track b (axle only). anti_roll_bar_stiffness_N_per_m: K_e (axle only; 0 = no bar).
+    frame_guides: the body and the wheel ride on guides fixed to a frame (a laboratory quarter-car rig, not a
+        vehicle on a plate), so each feels a friction against the frame (quarter car only).
     """
 
     model: ModelKind
@@ -80,6 +82,7 @@ class VehicleParameters:
     tyre_viscoelastic_coefficient: float | None = None
     track_m: float | None = None
     anti_roll_bar_stiffness_N_per_m: float = 0.0
+    frame_guides: bool = False
 
     def __post_init__(self) -> None:
         if not self.mass_kg > 0:
@@ -95,6 +98,8 @@ class VehicleParameters:
             raise InvalidValueError("an axle needs track_m > 0")
         if self.anti_roll_bar_stiffness_N_per_m < 0:
             raise InvalidValueError("anti_roll_bar_stiffness_N_per_m must be >= 0")
+        if self.frame_guides and self.model is ModelKind.AXLE:
+            raise InvalidValueError("frame_guides applies to a quarter-car rig only")
 
     @property
     def is_axle(self) -> bool:

@@ -11,6 +11,8 @@
     # axle only:
     track_m = 1.5
     anti_roll_bar_stiffness_N_per_m = 18000   # absent = no bar
+    # quarter car only: a laboratory rig whose body and wheel ride on guides fixed to a frame
+    # frame_guides = true                      # absent = false (a vehicle on a plate)
 
 Only model and mass_kg (and track_m for an axle) are required. An unknown key is an error; a missing
 required key is an error that names it. ϑ is referred to 1 ms whatever the recording's sample time
@@ -35,7 +37,10 @@ OPTIONAL = (
     "tyre_viscoelastic_coefficient",
     "tyre_relaxation_time_s",
     "anti_roll_bar_stiffness_N_per_m",
+    "frame_guides",
 )
+FLAGS = ("frame_guides",)
+"""Keys that are true or false, not numbers."""
 
 
 class VehicleFileError(UserError, ValueError):
@@ -76,9 +81,15 @@ def parse_vehicle(text: str, source: str = "vehicle file") -> VehicleParameters:
     elif "track_m" in table or "anti_roll_bar_stiffness_N_per_m" in table:
         key = "track_m" if "track_m" in table else "anti_roll_bar_stiffness_N_per_m"
         raise VehicleFileError(f"{source}: key '{key}' applies to an axle only")
-    numbers = {}
+    numbers: dict[str, float] = {}
+    flags: dict[str, bool] = {}
     for key, value in table.items():
         if key == "model":
+            continue
+        if key in FLAGS:
+            if not isinstance(value, bool):
+                raise VehicleFileError(f"{source}: '{key}' must be true or false, got {value!r}")
+            flags[key] = value
             continue
         if isinstance(value, bool) or not isinstance(value, int | float):
             raise VehicleFileError(f"{source}: '{key}' must be a number, got {value!r}")
@@ -95,7 +106,7 @@ def parse_vehicle(text: str, source: str = "vehicle file") -> VehicleParameters:
         if not relaxation_time_s > 0:
             raise VehicleFileError(f"{source}: tyre_relaxation_time_s must be > 0, got {relaxation_time_s}")
     try:
-        vehicle = VehicleParameters(model=model, **numbers)
+        vehicle = VehicleParameters(model=model, **numbers, **flags)
         return vehicle.with_relaxation_time(relaxation_time_s) if relaxation_time_s is not None else vehicle
     except ValueError as exc:
         raise VehicleFileError(f"{source}: {exc}") from None
@@ -150,6 +161,8 @@ def format_vehicle(vehicle: VehicleParameters) -> str:
         lines.append(f"track_m = {vehicle.track_m!r}")
         if vehicle.anti_roll_bar_stiffness_N_per_m:
             lines.append(f"anti_roll_bar_stiffness_N_per_m = {vehicle.anti_roll_bar_stiffness_N_per_m!r}")
+    if vehicle.frame_guides:
+        lines.append("frame_guides = true")
     return "\n".join(lines) + "\n"
 
 

@@ -7,6 +7,7 @@ and renamed, so a reader never sees half a file."""
 from __future__ import annotations
 
 import os
+from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
@@ -31,10 +32,13 @@ def recording_csv_text(recording: WorldRecording) -> str:
     return "\n".join(lines) + "\n"
 
 
-def vehicle_toml_text(stated: dict[str, float | str]) -> str:
+def vehicle_toml_text(stated: Mapping[str, float | str | bool]) -> str:
     lines = ["[vehicle]"]
     for key, value in stated.items():
-        lines.append(f'{key} = "{value}"' if isinstance(value, str) else f"{key} = {float(value)!r}")
+        if isinstance(value, bool):
+            lines.append(f"{key} = {'true' if value else 'false'}")
+        else:
+            lines.append(f'{key} = "{value}"' if isinstance(value, str) else f"{key} = {float(value)!r}")
     return "\n".join(lines) + "\n"
 
 

@@ -63,7 +63,7 @@ class WorldRecording:
     contact_N: list[np.ndarray]
     states: np.ndarray
     """(samples, states) at the sample instants, noise-free, without delays."""
-    stated: dict[str, float | str]
+    stated: dict[str, float | str | bool]
     metadata: dict[str, str]
     solver_evaluations: int
 

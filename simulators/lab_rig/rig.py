@@ -143,11 +143,16 @@ class LabRig:
         body = wheel + self.spring_free_length_m - self.sprung_mass_kg * GRAVITY_M_S2 / self.spring_N_per_m
         return body, wheel
 
-    def stated(self, mass_only: bool = False) -> dict[str, float | str]:
-        """The vehicle file's [vehicle] keys: the true total mass, and (unless mass_only) the data sheet's
-        spring and tyre rates, as wrong as they are. ϑ is never stated: the pad's loss is not on the data
-        sheet (identify finds it)."""
-        stated: dict[str, float | str] = {"model": "quarter-car", "mass_kg": round(self.total_mass_kg, 4)}
+    def stated(self, mass_only: bool = False) -> dict[str, float | str | bool]:
+        """The vehicle file's [vehicle] keys: the true total mass, that the masses ride on the frame's
+        guides (the lab knows its rig is one), and (unless mass_only) the data sheet's spring and tyre
+        rates, as wrong as they are. ϑ is never stated: the pad's loss is not on the data sheet (identify
+        finds it)."""
+        stated: dict[str, float | str | bool] = {
+            "model": "quarter-car",
+            "mass_kg": round(self.total_mass_kg, 4),
+            "frame_guides": True,
+        }
         if not mass_only:
             stated["spring_stiffness_N_per_m"] = round(self.spring_N_per_m * self.stated_spring_factor, 1)
             stated["tyre_stiffness_N_per_m"] = round(self.tyre_N_per_m * self.stated_tyre_factor, 1)

@@ -14,6 +14,7 @@ from daq.formats.vehicle_file import VehicleFileError, parse_vehicle, read_vehic
 from estimator.recording import Recording
 from estimator.vehicle import PAPER_BENCH, ModelKind, VehicleParameters
 
+AXLE_VEHICLE = '[vehicle]\nmodel = "axle"\nmass_kg = 800\ntrack_m = 1.5\n'
 GOOD_VEHICLE = """[vehicle]
 model = "quarter-car"
 mass_kg = 420.0
@@ -105,7 +106,8 @@ def test_vehicle_round_trip(tmp_path: Path) -> None:
     axle = VehicleParameters(
         ModelKind.AXLE, 840.0, 26e3, 210e3, 0.97, track_m=1.5, anti_roll_bar_stiffness_N_per_m=18e3
     )
-    for vehicle in (PAPER_BENCH, axle):
+    rig = VehicleParameters(ModelKind.QUARTER_CAR, 4.5, 800.0, 3000.0, frame_guides=True)
+    for vehicle in (PAPER_BENCH, axle, rig):
         path = tmp_path / "v.toml"
         write_vehicle(path, vehicle)
         assert read_vehicle(path) == vehicle
@@ -124,6 +126,8 @@ def test_vehicle_round_trip(tmp_path: Path) -> None:
         (GOOD_VEHICLE.replace('"quarter-car"', '"bus"'), "model must be"),
         ("[vehicle\n", "not valid TOML"),
         (GOOD_VEHICLE + "[extra]\n", "unknown table or key 'extra'"),
+        (GOOD_VEHICLE + "frame_guides = 1\n", "'frame_guides' must be true or false"),
+        (AXLE_VEHICLE + "frame_guides = true\n", "quarter-car rig only"),
     ],
 )
 def test_bad_vehicle_files_name_the_key(text: str, message: str) -> None:

@@ -157,8 +157,14 @@ def test_the_files_state_wrong_rates_and_the_true_mass_and_nothing_of_the_unreco
         "mass_kg",
         "spring_stiffness_N_per_m",
         "tyre_stiffness_N_per_m",
+        "frame_guides",  # a fact of the rig the lab knows (its masses ride on guides), not of its forces
     }
-    assert set(tomllib.loads(files.mass_only_toml.read_text())["vehicle"]) == {"model", "mass_kg"}
+    assert set(tomllib.loads(files.mass_only_toml.read_text())["vehicle"]) == {
+        "model",
+        "mass_kg",
+        "frame_guides",
+    }
+    assert vehicle.frame_guides and mass_only.frame_guides
     recording = read_recording_csv(files.csv)
     assert sorted(recording.channels) == ["x_r", "x_s", "x_t"]
     expected_metadata = {"source", "run", "excitation", "seed", "sweep_start_Hz", "sweep_stop_Hz"}
