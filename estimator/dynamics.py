@@ -51,13 +51,19 @@ def decay_rate_per_s(
     unsprung_kg: float,
     stribeck_peak_N: float | np.ndarray = 0.0,
     stribeck_velocity_m_s: float | np.ndarray = 0.0,
+    guide_friction_N: tuple[float | np.ndarray, float | np.ndarray] = (0.0, 0.0),
 ) -> float:
     """The fastest decay (1/s) a corner's dashpot-like forces give: the damper's steepest segment and the
     smoothed friction's (friction_slope_Ns_per_m) act between the body's share `sprung_kg` and the wheel, a
-    tyre dashpot on the wheel alone."""
+    tyre dashpot on the wheel alone, the frame guides' smoothed friction (body, wheel) on each mass alone."""
     friction = friction_slope_Ns_per_m(coulomb_friction_N, stribeck_peak_N, stribeck_velocity_m_s)
     between = damper_slope_Ns_per_m + friction
-    return max(between * (1.0 / sprung_kg + 1.0 / unsprung_kg), wheel_dashpot_Ns_per_m / unsprung_kg)
+    body_guide, wheel_guide = (friction_slope_Ns_per_m(f) for f in guide_friction_N)
+    return max(
+        between * (1.0 / sprung_kg + 1.0 / unsprung_kg),
+        (wheel_dashpot_Ns_per_m + wheel_guide) / unsprung_kg,
+        body_guide / sprung_kg,
+    )
 
 
 def runge_kutta_substeps(decay_rate_per_s: float, sample_time_s: float) -> int:
@@ -91,12 +97,13 @@ def model_substeps(
     stribeck_peak_N: float | np.ndarray = 0.0,
     stribeck_velocity_m_s: float | np.ndarray = 0.0,
     hysteresis_rate_per_s: float = 0.0,
+    guide_friction_N: tuple[float | np.ndarray, float | np.ndarray] = (0.0, 0.0),
 ) -> int:
     """Runge-Kutta steps per sample for a model's fastest decay: the steepest segment of its curves (of
     every column of a population), its friction (Coulomb and Stribeck peak), its tyre dashpot, the body
     shared among `corners`; friction as arrays: one per column (and corner), the steepest counts.
     hysteresis_rate_per_s: the fastest decay of a hysteretic friction's Dahl state, |v|/z at the largest
-    suspension velocity expected (hysteresis_rate)."""
+    suspension velocity expected (hysteresis_rate). guide_friction_N: the frame guides' (body, wheel)."""
     slope = max(steepest_slope_Ns_per_m(c.velocity_m_s, c.force_N) for c in curves)
     rate = decay_rate_per_s(
         slope,
@@ -106,6 +113,7 @@ def model_substeps(
         unsprung_mass_kg,
         stribeck_peak_N,
         stribeck_velocity_m_s,
+        guide_friction_N,
     )
     return runge_kutta_substeps(max(rate, hysteresis_rate_per_s), sample_time_s)
 
@@ -153,6 +161,10 @@ class CornerPhysics:
     over a deflection of about z, tracing a loop in force against deflection, as seal friction does. h is
     one more state per corner (QuarterCarPhysics, AxlePhysics), carried where a column has z > 0.
 
+    Frame guides (a laboratory quarter-car rig whose body and wheel ride on guides fixed to a frame,
+    VehicleParameters.frame_guides): guide_body_friction_N and guide_wheel_friction_N, Coulomb friction
+    opposing each mass's own velocity against the frame (the smoothed sign, coulomb_sign); quarter car only.
+
     Every number (and tyre_liftoff) may also be an array of the state's trailing shape, one value per
     column, so that a population of different models is integrated at once (the model doctor does).
     """
@@ -173,6 +185,8 @@ class CornerPhysics:
     stribeck_peak_N: float | np.ndarray = 0.0
     stribeck_velocity_m_s: float | np.ndarray = 0.0
     presliding_m: float | np.ndarray = 0.0
+    guide_body_friction_N: float | np.ndarray = 0.0
+    guide_wheel_friction_N: float | np.ndarray = 0.0
     _friction: bool = field(init=False, repr=False, compare=False, default=False)
     _cubic: bool = field(init=False, repr=False, compare=False, default=False)
     _dashpot: bool = field(init=False, repr=False, compare=False, default=False)
@@ -184,6 +198,8 @@ class CornerPhysics:
     )
     hysteretic: bool = field(init=False, repr=False, compare=False, default=False)
     """Some column has hysteretic friction: the corner carries Dahl's state h."""
+    guided: bool = field(init=False, repr=False, compare=False, default=False)
+    """Some column has friction in the frame guides."""
 
     def __post_init__(self) -> None:
         # which optional terms are present, decided once (the derivatives are evaluated millions of times)
@@ -196,6 +212,7 @@ class CornerPhysics:
             "_hinges": self._hinge_terms(),
             "_stribeck": self._stribeck_terms(),
             "hysteretic": bool(np.any(np.asarray(self.presliding_m) > 0.0)),
+            "guided": bool(np.any(self.guide_body_friction_N) or np.any(self.guide_wheel_friction_N)),
         }
         for name, value in flags.items():
             object.__setattr__(self, name, value)
@@ -332,6 +349,9 @@ class QuarterCarPhysics:
         rates[1] = -q / self.sprung_mass_kg
         rates[2] = v_t
         rates[3] = (q + tyre) / self.unsprung_mass_kg
+        if self.corner.guided:  # the frame guides' friction, each mass against the frame
+            rates[1] -= self.corner.guide_body_friction_N * coulomb_sign(v_s) / self.sprung_mass_kg
+            rates[3] -= self.corner.guide_wheel_friction_N * coulomb_sign(v_t) / self.unsprung_mass_kg
         rates[4] = self.corner.maxwell_rate(v_t - plate_rate_m_s, f_v, tyre)
         if self.corner.hysteretic:
             rates[5] = self.corner.hysteresis_rate(v_s - v_t, h)
@@ -365,6 +385,10 @@ class AxlePhysics:
     anti_roll_bar_N_per_m: float = 0.0
 
     output_names = ("x_s_l", "x_s_r", "x_t_l", "x_t_r")
+
+    def __post_init__(self) -> None:
+        if self.left.guided or self.right.guided:
+            raise ValueError("frame guides' friction is a quarter-car rig's: an axle has none")
 
     @property
     def hysteretic(self) -> bool:

@@ -17,13 +17,15 @@ empty: none) and simulated by estimator.validation, nothing left out:
     "effects": {"coulomb_friction_N": F_c, "cubic_spring_N_per_m3": k3, "tyre_dashpot_Ns_per_m": c,
                 "stribeck_peak_N": F_s, "stribeck_velocity_m_s": v_s, "presliding_m": z,
                 "spring_hinges": [{"knot_m": 0.02, "rate_N_per_m": 1e5}], "tyre_liftoff": true,
+                "guide_body_friction_N": 0.1, "guide_wheel_friction_N": 0.1,
                 "channel_delay_s": {"x_t": 0.002}, "sensor_offset_m": {"x_r": 1e-4},
                 "sensor_lag_s": {"x_s": 0.004}, "sensor_average_s": {"x_s": 0.01},
                 "sensor_gain_error": {"x_t": 0.03}}
 
 (the forces act at every corner, as the doctor fits them, with estimator.dynamics.CornerPhysics's meaning:
 the Stribeck peak and its velocity come together; a presliding displacement z makes the friction
-hysteretic (Dahl); at most HINGES spring hinges. A delayed channel reads
+hysteretic (Dahl); at most HINGES spring hinges; a quarter-car rig's frame guides hold its body and
+wheel by a friction against the frame. A delayed channel reads
 the true motion `delay` later, an offset channel reads it plus the offset, a lagging one through a
 first-order lag of that time constant, an averaging one its mean over that window, one with a gain error
 ε reads (1 + ε) times it: estimator.laser_channels.ChannelCorrections). An effect name this module does not
@@ -58,6 +60,8 @@ class ModelFormatError(UserError, ValueError):
     """The model dict lacks a key or holds a value the model cannot be built from (one line, names it)."""
 
 
+GUIDE_EFFECTS = ("guide_body_friction_N", "guide_wheel_friction_N")
+"""A lab rig's frame guides: friction of the body and of the wheel against the frame (quarter car only)."""
 STRIBECK_EFFECTS = ("stribeck_peak_N", "stribeck_velocity_m_s")
 """The Stribeck friction's two numbers: given together or not at all."""
 FORCE_EFFECTS = (
@@ -66,6 +70,7 @@ FORCE_EFFECTS = (
     "tyre_dashpot_Ns_per_m",
     *STRIBECK_EFFECTS,
     "presliding_m",
+    *GUIDE_EFFECTS,
 )
 """The `effects` keys that are forces at every corner, as estimator.dynamics.CornerPhysics names them."""
 CHANNEL_EFFECTS = (
@@ -104,6 +109,8 @@ class ModelEffects:
     stribeck_peak_N: float = 0.0
     stribeck_velocity_m_s: float = 0.0
     presliding_m: float = 0.0
+    guide_body_friction_N: float = 0.0
+    guide_wheel_friction_N: float = 0.0
     spring_hinges: tuple[SpringHinge, ...] = ()
     tyre_liftoff: bool = False
     channel_delay_s: Mapping[str, float] = field(default_factory=dict)
@@ -144,6 +151,8 @@ class ModelEffects:
             stribeck_peak_N=self.stribeck_peak_N if stribeck else 0.0,
             stribeck_velocity_m_s=self.stribeck_velocity_m_s if stribeck else 0.0,
             presliding_m=self.presliding_m,
+            guide_body_friction_N=self.guide_body_friction_N,
+            guide_wheel_friction_N=self.guide_wheel_friction_N,
             tyre_liftoff=self.tyre_liftoff,
             static_wheel_load_N=static_wheel_load_N,
         )
@@ -304,6 +313,11 @@ def _effects(data: Any, axle: bool) -> ModelEffects:
         raise ModelFormatError("model: 'effects.stribeck_velocity_m_s' must be > 0")
     if values.get("presliding_m", 0.0) < 0:
         raise ModelFormatError("model: 'effects.presliding_m' must be >= 0 (0: no hysteresis)")
+    guides = [key for key in GUIDE_EFFECTS if key in values]
+    if guides and axle:  # (any sign, as coulomb_friction_N: a fit may leave one a little below zero)
+        raise ModelFormatError(
+            f"model: 'effects.{guides[0]}' is a quarter-car rig's frame guides, not an axle's"
+        )
     if "spring_hinges" in data:
         values["spring_hinges"] = _spring_hinges(data["spring_hinges"])
     if "tyre_liftoff" in data:

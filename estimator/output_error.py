@@ -148,7 +148,8 @@ def _substeps(
     """Runge-Kutta steps per sample for the model's fastest decay (estimator.dynamics.RK4_STABLE_STEP): its
     steepest damper segment (over every column of a population), a Kelvin-Voigt tyre's damping, and the
     force effects its physics carries (a model with effects, estimator.model_io): the smoothed friction
-    step and a tyre dashpot, as the doctor counts them (estimator.doctor.simulation.substeps). Without the
+    step, a tyre dashpot and a rig's frame guides, as the doctor counts them
+    (estimator.doctor.simulation.substeps). Without the
     friction, validate simulated a doctor's model with 461 N of friction on a car at 2 ms at one step per
     sample, and its gap was 338 µm against the doctor's 89 µm for the same model (independent pair 111).
     A hysteretic friction's Dahl state decays at |v|/z, v the measured suspension's fastest (kinematics)."""
@@ -181,6 +182,7 @@ def _substeps(
         stribeck_peak_N=stribeck,
         stribeck_velocity_m_s=stribeck_velocity,
         hysteresis_rate_per_s=hysteresis_rate_per_s,
+        guide_friction_N=(corners[0].guide_body_friction_N, corners[0].guide_wheel_friction_N),
     )
 
 

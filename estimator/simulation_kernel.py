@@ -61,7 +61,9 @@ HINGED = 11  # 1.0 where a hinge has a rate (the kernel skips the hinges where n
 HINGE_KNOT_M = 12  # HINGES rows: the knots of CornerPhysics.hinge_table
 HINGE_RATE_N_PER_M = HINGE_KNOT_M + HINGES  # HINGES rows: their rates
 PRESLIDING_M = HINGE_RATE_N_PER_M + HINGES  # hysteretic friction's z: the sign is Dahl's h where > 0
-CORNER_ROWS = PRESLIDING_M + 1
+GUIDE_BODY_FRICTION_N = PRESLIDING_M + 1  # the frame guides' friction on the body (a quarter-car rig)
+GUIDE_WHEEL_FRICTION_N = PRESLIDING_M + 2  # ... and on the wheel
+CORNER_ROWS = GUIDE_WHEEL_FRICTION_N + 1
 
 # rows of the per-column body table, shape (BODY_ROWS, columns)
 SPRUNG_KG = 0
@@ -204,6 +206,8 @@ def _corner_rows(corner: CornerPhysics, columns: int) -> np.ndarray:
     rows[STRIBECK_PEAK_N] = _per_column(corner.stribeck_peak_N, columns)
     rows[STRIBECK_VELOCITY_M_S] = _per_column(corner.stribeck_velocity_m_s, columns)
     rows[PRESLIDING_M] = _per_column(corner.presliding_m, columns)
+    rows[GUIDE_BODY_FRICTION_N] = _per_column(corner.guide_body_friction_N, columns)
+    rows[GUIDE_WHEEL_FRICTION_N] = _per_column(corner.guide_wheel_friction_N, columns)
     for first, values in zip((HINGE_KNOT_M, HINGE_RATE_N_PER_M), corner.hinge_table(), strict=True):
         rows[first : first + HINGES] = values if values.ndim == 2 else values[:, None]
     rows[HINGED] = np.any(rows[HINGE_RATE_N_PER_M : HINGE_RATE_N_PER_M + HINGES] != 0.0, axis=0)

@@ -1,7 +1,7 @@
 """The output-error simulation's kernel for numba: the fixed-step Runge-Kutta of estimator.dynamics (quarter
 car or axle, piecewise-linear dampers, Maxwell / Kelvin-Voigt / spring tyre with a parallel dashpot,
-Coulomb, Stribeck and hysteretic friction, cubic spring, spring hinges, tyre lift-off) for a population of
-models, one column each.
+Coulomb, Stribeck and hysteretic friction, cubic spring, spring hinges, tyre lift-off, a rig's frame
+guides) for a population of models, one column each.
 
 Callers use estimator.simulation_kernel (integrate_compiled), which lays the models out in the tables this
 kernel reads and runs it either as built ahead of time into a Python extension (service/kernel_build.py,
@@ -22,6 +22,8 @@ from estimator.simulation_kernel import (
     CORNER_ROWS,
     COULOMB_FRICTION_N,
     CUBIC_SPRING_N_PER_M3,
+    GUIDE_BODY_FRICTION_N,
+    GUIDE_WHEEL_FRICTION_N,
     HINGE_KNOT_M,
     HINGE_RATE_N_PER_M,
     HINGED,
@@ -44,9 +46,9 @@ from estimator.simulation_kernel import (
 
 _MAXWELL, _KELVIN_VOIGT = 0, 1  # estimator.simulation_kernel.TYRE_CODES
 
-if HINGES != 4 or CORNER_ROWS != 21 or STATE_SLOTS != 12:  # spelled out one by one below
+if HINGES != 4 or CORNER_ROWS != 23 or STATE_SLOTS != 12:  # spelled out one by one below
     raise ImportError(
-        f"the kernel is written for 4 hinges, 21 corner rows, 12 state slots, not {HINGES}, {CORNER_ROWS},"
+        f"the kernel is written for 4 hinges, 23 corner rows, 12 state slots, not {HINGES}, {CORNER_ROWS},"
         f" {STATE_SLOTS}"
     )
 
@@ -163,11 +165,16 @@ def _quarter_car_rates(state, plate_m, plate_rate_m_s, body, corner, code, grid,
     x_s, v_s, x_t, v_t, f_v, h = state[0], state[1], state[2], state[3], state[4], state[5]
     q = _suspension_N(x_s - x_t, v_s - v_t, h, corner, grid, force, slope, knots)
     tyre = _tyre_N(x_t - plate_m, v_t - plate_rate_m_s, f_v, corner, code)
+    on_body, on_wheel = q, q + tyre
+    guide_body, guide_wheel = corner[GUIDE_BODY_FRICTION_N], corner[GUIDE_WHEEL_FRICTION_N]
+    if guide_body != 0.0 or guide_wheel != 0.0:  # the frame guides' friction, each mass against the frame
+        on_body = on_body + guide_body * np.tanh(v_s / COULOMB_SMOOTHING_M_S)
+        on_wheel = on_wheel - guide_wheel * np.tanh(v_t / COULOMB_SMOOTHING_M_S)
     return (
         v_s,
-        -q / body[SPRUNG_KG],
+        -on_body / body[SPRUNG_KG],
         v_t,
-        (q + tyre) / body[UNSPRUNG_KG],
+        on_wheel / body[UNSPRUNG_KG],
         _maxwell_rate(v_t - plate_rate_m_s, f_v, corner, code, tyre),
         _hysteresis_rate(v_s - v_t, h, corner),
         0.0,
@@ -264,6 +271,7 @@ def _row(table, corner: int, column: int):
         table[corner, 12, column], table[corner, 13, column], table[corner, 14, column],
         table[corner, 15, column], table[corner, 16, column], table[corner, 17, column],
         table[corner, 18, column], table[corner, 19, column], table[corner, 20, column],
+        table[corner, 21, column], table[corner, 22, column],
     )  # fmt: skip
 
 

@@ -252,6 +252,8 @@ class ModelEffectsOut(ResultPart):
     spring_hinges: list[SpringHingeOut] | None = Field(None, description="the spring curve's extra rates")
     tyre_dashpot_Ns_per_m: float | None = Field(None, description="tyre dashpot beside the Maxwell element")
     tyre_liftoff: bool | None = Field(None, description="the tyre can leave the plate")
+    guide_body_friction_N: float | None = Field(None, description="a rig's frame guides: on the body (N)")
+    guide_wheel_friction_N: float | None = Field(None, description="a rig's frame guides: on the wheel (N)")
     channel_delay_s: dict[str, float] | None = Field(None, description="channel -> how much it lags (s)")
     sensor_offset_m: dict[str, float] | None = Field(None, description="channel -> its zero error (m)")
     sensor_lag_s: dict[str, float] | None = Field(None, description="channel -> first-order lag τ (s)")

@@ -102,6 +102,7 @@ def test_the_model_form_carries_the_effects_and_validate_simulates_them(fitted) 
         ({"channel_delay_s": {"x_t": -0.001}}, "must be >= 0"),
         ({"tyre_liftoff": 1}, "'effects.tyre_liftoff' must be true or false"),
         ({"coulomb_friction_N": 50.0, "presliding_m": -1e-4}, "'effects.presliding_m' must be >= 0"),
+        ({"guide_body_friction_N": "some"}, "'effects.guide_body_friction_N' must be a finite number"),
         ([], "'effects' must be an object"),
     ],
 )
