@@ -136,3 +136,28 @@ class CurveBatch:
             self.force_N[seg, self._columns]
             + (velocity_m_s - self.velocity_m_s[seg]) * self._slopes[seg, self._columns]
         )
+
+
+LOW_SPEED_CLEARANCE = 0.5
+"""A uniform knot closer to a low-speed knot than this share of the low-speed knots' spacing gives way."""
+
+
+def low_speed_grids(grids: list[np.ndarray], knots_m_s: tuple[float, ...]) -> list[np.ndarray]:
+    """Damper grids with knots at ±knots_m_s added (those inside; the model doctor resolves its curve near
+    zero velocity so), the uniform knots too close to them dropped (not the end knots), then made the same
+    size (an axle's two curves must be)."""
+    extra = np.unique(np.concatenate([-np.asarray(knots_m_s), knots_m_s]))
+    clearance = LOW_SPEED_CLEARANCE * float(np.min(np.diff(extra)))
+    changed = []
+    for grid in grids:
+        inside = extra[(extra > grid[0]) & (extra < grid[-1])]
+        distance = np.min(np.abs(grid[:, None] - inside[None, :]), axis=1, initial=np.inf)
+        ends = (grid == grid[0]) | (grid == grid[-1])
+        changed.append(np.unique(np.concatenate([grid[(distance >= clearance) | ends], inside])))
+    size = max(g.size for g in changed)
+    for k, grid in enumerate(changed):
+        while grid.size < size:  # the widest interval halved
+            widest = int(np.argmax(np.diff(grid)))
+            grid = np.insert(grid, widest + 1, 0.5 * (grid[widest] + grid[widest + 1]))
+        changed[k] = grid
+    return changed

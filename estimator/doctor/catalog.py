@@ -33,6 +33,7 @@ class EffectName(StrEnum):
     SENSOR_GAIN = "sensor_gain"
     SENSOR_OFFSET = "sensor_offset"
     TYRE_STIFFNESS = "tyre_stiffness"
+    GUIDE_FRICTION = "guide_friction"
 
 
 @dataclass(frozen=True, order=True)
@@ -61,6 +62,7 @@ over the presliding displacement z (Dahl's state, estimator.friction)."""
 PRESLIDING = "presliding "
 
 FRICTION_UNKNOWNS = ("friction_sliding_N", "friction_static_excess_N")
+GUIDE_UNKNOWNS = ("guide_body_friction_N", "guide_wheel_friction_N")
 SPRING_RATE_UNKNOWN = "spring_rate_change_N_per_m"
 TYRE_RATE_UNKNOWN = "tyre_stiffness_change_N_per_m"
 CHANNEL_PARAMETERS = {
@@ -272,6 +274,8 @@ class Effect:
             return [EffectInstance(self.name)] if vehicle.is_axle and not known else []
         if self.name is EffectName.LOW_SPEED_FRICTION:
             return [EffectInstance(self.name, None, v) for v in (STRIBECK, HYSTERETIC)]
+        if self.name is EffectName.GUIDE_FRICTION:  # only a rig whose masses ride on a frame's guides
+            return [EffectInstance(self.name)] if vehicle.frame_guides else []
         if not any(self.name is n for n, _ in CHANNEL_PARAMETERS):  # a force family
             return [EffectInstance(self.name)]
         names = sorted(recording.channels)
@@ -323,6 +327,11 @@ class Effect:
             return {"anti_roll_bar_N_per_m": signals.suspension_column([roll, -roll])}
         if self.name is EffectName.TYRE_STIFFNESS:
             return {TYRE_RATE_UNKNOWN: signals.tyre_column([c.tyre_deflection_m * k for c, k in contact])}
+        if self.name is EffectName.GUIDE_FRICTION:  # each mass's own equation (a quarter-car rig's only)
+            own = (signals.system.kinematics[x].velocity_m_s for x in ("x_s", "x_t"))  # each mass's velocity
+            body, wheel = (signals.eq(interval_mean(coulomb_sign, v)) for v in own)
+            zero = np.zeros_like(body)
+            return dict(zip(GUIDE_UNKNOWNS, (np.stack([body, zero]), np.stack([zero, wheel])), strict=True))
         return {}
 
     def offset_change(self, signals: EquationSignals, airborne: list[np.ndarray]) -> np.ndarray | None:
@@ -377,6 +386,10 @@ _DESCRIPTIONS = {
     EffectName.SENSOR_OFFSET: (
         "a channel's zero is off",
         "a constant residual in the wheel equation and a constant output-error offset",
+    ),
+    EffectName.GUIDE_FRICTION: (
+        "a lab rig's body and wheel rub on the frame's guides: a friction against each mass's own motion",
+        "body- and wheel-equation residuals that step where that mass's own velocity changes sign",
     ),
 }
 CATALOG: dict[EffectName, Effect] = {name: Effect(name, *texts) for name, texts in _DESCRIPTIONS.items()}

@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from estimator.damper import PiecewiseLinearCurve
+from estimator.damper import PiecewiseLinearCurve, low_speed_grids
 from estimator.doctor.catalog import (
     CATALOG,
     CHANNEL_PARAMETERS,
@@ -224,32 +224,6 @@ class Reference:
         """The Reference of another recording (a bootstrap draw): these settings, hinge knots, constants."""
         on = Reference.of(recording, self.vehicle, self.settings, self.identified)
         return replace(on, knots_m=self.knots_m)
-
-
-LOW_SPEED_CLEARANCE = 0.5
-"""A uniform knot closer to a low-speed knot than this share of the low-speed knots' spacing gives way."""
-
-
-def low_speed_grids(
-    grids: list[np.ndarray], knots_m_s: tuple[float, ...] = LOW_SPEED_KNOTS_M_S
-) -> list[np.ndarray]:
-    """The grids with knots at ±knots_m_s added (those inside), the uniform knots too close to them
-    dropped (not the end knots), then made the same size (an axle's two curves must be)."""
-    extra = np.unique(np.concatenate([-np.asarray(knots_m_s), knots_m_s]))
-    clearance = LOW_SPEED_CLEARANCE * float(np.min(np.diff(extra)))
-    changed = []
-    for grid in grids:
-        inside = extra[(extra > grid[0]) & (extra < grid[-1])]
-        distance = np.min(np.abs(grid[:, None] - inside[None, :]), axis=1, initial=np.inf)
-        ends = (grid == grid[0]) | (grid == grid[-1])
-        changed.append(np.unique(np.concatenate([grid[(distance >= clearance) | ends], inside])))
-    size = max(g.size for g in changed)
-    for k, grid in enumerate(changed):
-        while grid.size < size:  # the widest interval halved
-            widest = int(np.argmax(np.diff(grid)))
-            grid = np.insert(grid, widest + 1, 0.5 * (grid[widest] + grid[widest + 1]))
-        changed[k] = grid
-    return changed
 
 
 def _airborne(

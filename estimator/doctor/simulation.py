@@ -9,7 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from estimator.damper import CurveBatch
-from estimator.doctor.catalog import FRICTION_UNKNOWNS, EffectName
+from estimator.doctor.catalog import FRICTION_UNKNOWNS, GUIDE_UNKNOWNS, EffectName
 from estimator.doctor.model import FittedModel
 from estimator.dynamics import AxlePhysics, CornerPhysics, QuarterCarPhysics, model_substeps
 from estimator.output_error import DIVERGED_GAP_M, measured_drive, sampled_states
@@ -82,12 +82,14 @@ def _corner(models: list[FittedModel], side: int, sample_time_s: float) -> Corne
         tyre_liftoff=np.array([m.structure.has(EffectName.TYRE_LIFTOFF) for m in models]),
         static_wheel_load_N=vehicle.static_wheel_load_N,
         tyre_dashpot_Ns_per_m=each("tyre_dashpot_Ns_per_m"),
+        guide_body_friction_N=each(GUIDE_UNKNOWNS[0]),
+        guide_wheel_friction_N=each(GUIDE_UNKNOWNS[1]),
     )
 
 
 def substeps(model: FittedModel, sample_time_s: float) -> int:
     """Runge-Kutta steps per sample for the model's fastest decay: its steepest damper segment, its friction
-    (near zero velocity a steep dashpot on the wheel), its tyre dashpot and a Dahl state's |v|/z."""
+    (near zero velocity a steep dashpot on the wheel), its tyre dashpot, frame guides, Dahl's |v|/z."""
     z, corners = model.presliding_m, model.signals.corners
     speed_m_s = max(float(np.max(np.abs(c.velocity_m_s))) for c in corners) if z else 0.0
     return model_substeps(
@@ -101,6 +103,7 @@ def substeps(model: FittedModel, sample_time_s: float) -> int:
         stribeck_peak_N=model.value(FRICTION_UNKNOWNS[1]),
         stribeck_velocity_m_s=model.stribeck_velocity_m_s,
         hysteresis_rate_per_s=speed_m_s / z if z else 0.0,
+        guide_friction_N=(model.value(GUIDE_UNKNOWNS[0]), model.value(GUIDE_UNKNOWNS[1])),
     )
 
 

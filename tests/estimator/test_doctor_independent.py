@@ -107,7 +107,7 @@ def test_clean_recordings_leave_nothing_missing(hit_rate, tmp_path: Path) -> Non
 
 def test_a_damper_dead_band_gets_low_speed_knots(hit_rate, tmp_path: Path) -> None:
     """Benchmark draw clean 24 (motorcycle, FSAE s5 dyno table: a few newtons up to 4 mm/s, 350 N at
-    23 mm/s): the starting model's curve has knots at 0 and ±10 mm/s (estimator.doctor.model.low_speed_grids)
+    23 mm/s): the starting model's curve has knots at 0 and ±10 mm/s (estimator.damper.low_speed_grids)
     and follows the dead band, so no friction or sensor family stands in for it: nothing named, nothing
     unexplained. (With identify's uniform knots alone a 0.2 ms delay of the wheel channel was named.)"""
     case, recording, vehicle = _recorded("clean", DEAD_BAND_SEED, tmp_path)

@@ -35,6 +35,9 @@ from simulators.lab_rig.draws import draw_rig
 from simulators.lab_rig.world import write_run
 
 LAB_RIGS = (8, 12)
+GUIDED_RIG = 54
+"""A dev rig whose frame bearings (sliding 0.20 N on the body, 0.16 N on the wheel) are most of its damping:
+with both rates right and no guide friction the doctor's model predicted run B at 48% of the response."""
 INTERACTING_RIG = 8  # where neither rate alone can be named in the first round
 RATE_TOLERANCE = 0.1  # the rates named within 10% of the rig's (the unrecorded force biases them a little)
 
@@ -119,3 +122,28 @@ def test_a_final_model_with_a_rate_below_zero_is_handed_out_unrefined() -> None:
         model_from_json(model_json(broken.final_model))
     assert refined(broken, a) is None
     assert refined(result, a) is not None  # the same diagnosis with its fitted rate is refined
+
+
+def test_a_rig_s_frame_guides_are_named_and_the_held_out_gap_falls() -> None:
+    """A rig whose vehicle file says its masses ride on a frame's guides (frame_guides) is offered
+    guide_friction: a friction of each mass against the frame, which no quarter-car term can take. Named, it
+    comes out near the bearings' own friction and the held-out run is predicted far better; the same run
+    with the key left out is never offered the family (a vehicle on a plate has no guides)."""
+    a, b, vehicle = runs(GUIDED_RIG)
+    assert vehicle.frame_guides
+    bearings = draw_rig(GUIDED_RIG).rig
+    guided = diagnose(a, vehicle, DiagnoseOptions(workers=1))
+    plain = diagnose(a, replace(vehicle, frame_guides=False), DiagnoseOptions(workers=1))
+    print(f"rig {GUIDED_RIG}, guided: {guided.conclusion}\nplain: {plain.conclusion}")
+    assert "guide_friction" in guided.effects_named
+    assert all("guide_friction" not in s.effect for round_ in plain.rounds for s in round_)
+    named = {k: v for s in guided.steps for k, v in s.parameters.items()}
+    for side, friction in (("body", bearings.body_bearing), ("wheel", bearings.wheel_bearing)):
+        # plain Coulomb against the bearings' Stribeck law: between half the sliding level and the breakaway
+        assert 0.5 * friction.sliding_N <= named[f"{side}_guide_friction_N"] <= friction.breakaway_N
+    held_out = {
+        name: validate(model_from_json(result.to_json()), b).gap_ratio
+        for name, result in (("guided", guided), ("plain", plain))
+    }
+    print(f"held-out gap: {held_out}")
+    assert held_out["guided"] < 0.75 * held_out["plain"]

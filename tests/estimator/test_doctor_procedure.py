@@ -21,10 +21,11 @@ from daq.formats.recording_csv import read_recording_csv
 from daq.formats.vehicle_file import read_vehicle
 from estimator.autocorrelation import effective_samples, ljung_box
 from estimator.binned_rms import Profile
+from estimator.damper import low_speed_grids
 from estimator.doctor import DiagnoseOptions, DiagnosisResult, diagnose
 from estimator.doctor.catalog import CATALOG, EffectName
 from estimator.doctor.diagnose import gap_words
-from estimator.doctor.model import LOW_SPEED_KNOTS_M_S, low_speed_grids
+from estimator.doctor.model import LOW_SPEED_KNOTS_M_S
 from estimator.doctor.residuals import WHITENESS_LEVEL, Localisation
 from estimator.friction import interval_mean
 from estimator.recording import Recording
@@ -61,8 +62,23 @@ def test_the_catalog_has_stable_names() -> None:
         "sensor_dynamics",
         "sensor_gain",
         "sensor_offset",
+        "guide_friction",
     }
     assert all(CATALOG[name].summary and CATALOG[name].signature for name in EffectName)
+
+
+def test_only_a_rig_on_a_frame_s_guides_is_offered_guide_friction() -> None:
+    """A vehicle file without frame_guides (every vehicle on a plate, the whole foreign world) gets the
+    catalogue it had before the family existed; one with it gets guide_friction besides, and nothing else
+    changes."""
+    recording, vehicle = soft_spring()
+    rig = replace(vehicle, frame_guides=True)
+
+    def offered(v: VehicleParameters) -> list[str]:
+        return sorted(i.label for effect in CATALOG.values() for i in effect.instances(v, recording))
+
+    assert "guide_friction" not in offered(vehicle)
+    assert offered(rig) == sorted([*offered(vehicle), "guide_friction"])
 
 
 def test_a_round_judges_every_candidate_and_names_one() -> None:
@@ -118,14 +134,14 @@ def test_a_vehicle_file_of_the_wrong_kind_is_an_error() -> None:
 
 
 def test_low_speed_knots_join_the_uniform_ones() -> None:
-    """model.low_speed_grids: knots at 0 and ± LOW_SPEED_KNOTS_M_S; a uniform knot too close to one gives
-    way; the ends stay; an axle's two grids keep one size."""
+    """damper.low_speed_grids with the doctor's LOW_SPEED_KNOTS_M_S: knots at 0 and ± those; a uniform knot
+    too close to one gives way; the ends stay; an axle's two grids keep one size."""
     quarter = np.linspace(-0.3, 0.5, 30)
-    (grid,) = low_speed_grids([quarter])
+    (grid,) = low_speed_grids([quarter], LOW_SPEED_KNOTS_M_S)
     low = {round(s * v, 9) for v in LOW_SPEED_KNOTS_M_S for s in (-1.0, 1.0)}
     assert low <= {round(float(v), 9) for v in grid}
     assert grid[0] == quarter[0] and grid[-1] == quarter[-1] and np.all(np.diff(grid) > 0)
-    axle = low_speed_grids([np.linspace(-0.3, 0.5, 15), np.linspace(-0.0012, 0.6, 15)])
+    axle = low_speed_grids([np.linspace(-0.3, 0.5, 15), np.linspace(-0.0012, 0.6, 15)], LOW_SPEED_KNOTS_M_S)
     assert axle[0].size == axle[1].size
     assert all(np.all(np.diff(g) > 0) for g in axle)
 
