@@ -18,16 +18,9 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from estimator.damper import CurveBatch, PiecewiseLinearCurve
-from estimator.dynamics import (
-    MAX_SUBSTEPS,
-    AxlePhysics,
-    CornerPhysics,
-    QuarterCarPhysics,
-    model_substeps,
-    sample_substeps,
-    start_state,
-)
+from estimator.dynamics import AxlePhysics, CornerPhysics, QuarterCarPhysics, start_state
 from estimator.recording import Recording
+from estimator.runge_kutta_steps import MAX_SUBSTEPS, model_substeps, sample_substeps
 from estimator.signals import Kinematics, initial_state
 from estimator.simulation_kernel import integrate_compiled
 from estimator.solvers.differential_evolution import DEProgress, DESettings, DifferentialEvolution
@@ -145,7 +138,7 @@ def _substeps(
     physics: QuarterCarPhysics | AxlePhysics,
     kinematics: Mapping[str, Kinematics],
 ) -> int:
-    """Runge-Kutta steps per sample for the model's fastest decay (estimator.dynamics.RK4_STABLE_STEP): its
+    """Runge-Kutta steps per sample for the model's fastest decay (runge_kutta_steps.RK4_STABLE_STEP): its
     steepest damper segment (over every column of a population), a Kelvin-Voigt tyre's damping, and the
     force effects its physics carries (a model with effects, estimator.model_io): the smoothed friction
     step, a tyre dashpot and a rig's frame guides, as the doctor counts them

@@ -11,9 +11,10 @@ import numpy as np
 from estimator.damper import CurveBatch
 from estimator.doctor.catalog import FRICTION_UNKNOWNS, GUIDE_UNKNOWNS, EffectName
 from estimator.doctor.model import FittedModel
-from estimator.dynamics import AxlePhysics, CornerPhysics, QuarterCarPhysics, model_substeps
+from estimator.dynamics import AxlePhysics, CornerPhysics, QuarterCarPhysics
 from estimator.output_error import DIVERGED_GAP_M, measured_drive, sampled_states
 from estimator.recording import Recording
+from estimator.runge_kutta_steps import model_substeps
 from estimator.vehicle import TyreModel
 
 RUNAWAY_GAP_RATIO = 3.0

@@ -19,15 +19,10 @@ import numpy as np
 import pytest
 
 from estimator.damper import PiecewiseLinearCurve
-from estimator.dynamics import (
-    HINGES,
-    CornerPhysics,
-    QuarterCarPhysics,
-    model_substeps,
-    sample_substeps,
-)
+from estimator.dynamics import HINGES, CornerPhysics, QuarterCarPhysics
 from estimator.friction import COULOMB_SMOOTHING_M_S, coulomb_sign, friction_peak_N, friction_slope_Ns_per_m
 from estimator.model_io import ModelFormatError, SpringHinge, model_from_json
+from estimator.runge_kutta_steps import model_substeps, sample_substeps
 from estimator.simulation_kernel import integrate_compiled
 
 SPRING_N_PER_M = 20e3

@@ -31,9 +31,9 @@ from estimator.doctor.simulation import (
     simulate_models,
     substeps,
 )
-from estimator.dynamics import MAX_SUBSTEPS
 from estimator.model_io import ModelFormatError, model_from_json
 from estimator.output_error import IdentifiedModel
+from estimator.runge_kutta_steps import MAX_SUBSTEPS
 from estimator.sweep import SweepSettings
 from estimator.validation import refined_on, validate
 from estimator.vehicle import TyreModel

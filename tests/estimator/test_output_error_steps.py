@@ -2,7 +2,7 @@
 by the same sweep of the independent world sampled at 1 kHz and at 500 Hz, leaves the same gap.
 
 Before the simulation took Runge-Kutta steps per sample for the model's fastest decay
-(estimator.dynamics.runge_kutta_substeps), a motorcycle whose identified curve is steep near zero velocity
+(estimator.runge_kutta_steps), a motorcycle whose identified curve is steep near zero velocity
 (a dyno table's knee) left 896 µm at 1 kHz and 1879 µm at 500 Hz, against 951 µm at any finer step: at 2 ms
 one step per sample is beyond RK4's stability for that decay. A bench at 500 Hz then saw twice the gap.
 """
@@ -16,8 +16,8 @@ import pytest
 
 from daq.formats.recording_csv import read_recording_csv
 from daq.formats.vehicle_file import read_vehicle
-from estimator.dynamics import RK4_STABLE_STEP, decay_rate_per_s, runge_kutta_substeps
 from estimator.identify import IdentifyOptions, identify
+from estimator.runge_kutta_steps import RK4_STABLE_STEP, decay_rate_per_s, runge_kutta_substeps
 from estimator.validation import validate
 from simulators.independent.dampers import DYNO_LOGS, dyno_table
 from simulators.independent.excitation import Chirp

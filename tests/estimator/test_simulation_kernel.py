@@ -24,8 +24,8 @@ from estimator.dynamics import (
     CornerPhysics,
     QuarterCarPhysics,
     integrate_rk4,
-    sample_substeps,
 )
+from estimator.runge_kutta_steps import sample_substeps
 from estimator.simulation_kernel import integrate_compiled
 from estimator.vehicle import TyreModel
 from service.kernel_build import compile_ahead
@@ -494,29 +494,3 @@ def test_axle_population_with_hysteretic_friction_on_one_side() -> None:
     dahl = np.asarray(physics.left.presliding_m) > 0.0
     assert np.all(np.max(np.abs(reference[:, 10][:, dahl]), axis=0) > 0.99)
     assert np.all(reference[:, 11] == 0.0)
-
-
-def test_quarter_car_population_with_frame_guide_friction() -> None:
-    """A lab rig's frame guides (friction of the body and of the wheel against the frame, in some columns
-    and not in others, beside the other effects): the compiled kernel follows the reference, the guides
-    change the motion only where a column has them, and an axle refuses them."""
-    columns = 6
-    base = _quarter_car(12, columns, TyreModel.MAXWELL, effects=True)
-    rng = np.random.default_rng(612)
-    guided = np.array([True, True, False, True, False, True])
-    body = np.where(guided, rng.uniform(20.0, 200.0, columns), 0.0)
-    wheel = np.where(guided & (rng.random(columns) < 0.7), rng.uniform(20.0, 200.0, columns), 0.0)
-    physics = replace(
-        base, corner=replace(base.corner, guide_body_friction_N=body, guide_wheel_friction_N=wheel)
-    )
-    plate, rate, state0 = _quarter_car_drive(612, columns)
-    reference, compiled = _both(physics, state0, plate, rate)
-    assert np.all(np.isfinite(reference))
-    assert_same_trajectories(reference, compiled)
-    plain, _ = _both(base, state0, plate, rate)
-    moved = np.max(np.abs(plain[:, 0] - reference[:, 0]), axis=0)
-    print(f"body motion changed by the guides: {moved * 1e6} µm")
-    assert np.all(moved[guided] > 1e-6) and np.all(moved[~guided] == 0.0)
-    with pytest.raises(ValueError, match="frame guides"):
-        axle = _axle(21, 2)
-        replace(axle, left=replace(axle.left, guide_body_friction_N=10.0))
