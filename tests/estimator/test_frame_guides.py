@@ -1,6 +1,6 @@
 """A laboratory rig's frame guides (estimator.dynamics.CornerPhysics: friction of the body and of the wheel
-against the frame) in the compiled simulation kernel, against the reference dynamics, on the models of
-test_simulation_kernel."""
+against the frame) in the compiled simulation kernel, built ahead of time and just in time (the fixtures of
+test_simulation_kernel), against the reference dynamics, on the models of test_simulation_kernel."""
 
 from __future__ import annotations
 
@@ -8,7 +8,15 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from test_simulation_kernel import _axle, _both, _quarter_car, _quarter_car_drive, assert_same_trajectories
+from test_simulation_kernel import (  # kernel: each test with the extension, then with numba's kernel
+    _axle,
+    _both,
+    _quarter_car,
+    _quarter_car_drive,
+    assert_same_trajectories,
+    extension_kernel,  # noqa: F401 (the fixture `kernel` uses)
+    kernel,  # noqa: F401 (autouse)
+)
 
 from estimator.vehicle import TyreModel
 
