@@ -126,8 +126,11 @@ class Selection:
 
     alpha: float = ALPHA
 
+    def bound(self, tested: int) -> float:  # α/m: the level each of a round's m candidates is held to
+        return self.alpha / max(tested, 1)
+
     def waiting(self, log_p: dict[tuple, float], tested: int) -> list[tuple]:  # the smaller first
-        bound = math.log(self.alpha / max(tested, 1))
+        bound = math.log(self.bound(tested))
         return [c for c in log_p if len(c) > 1 and any(log_p.get((m,), 0.0) <= bound for m in c)]
 
     def choose(self, log_p: dict[tuple, float], tested: int, gap_m: dict | None = None) -> tuple | None:
@@ -136,7 +139,7 @@ class Selection:
         for c in sorted(waiting, key=rank):  # (best is one of their members at the least)
             if rank(c) < rank(best) and best[0] not in c and gap.get(c, math.inf) < gap.get(best, math.inf):
                 best = min(((m,) for m in c if (m,) in log_p), key=rank)
-        return best if best is not None and log_p[best] <= math.log(self.alpha / max(tested, 1)) else None
+        return best if best is not None and log_p[best] <= math.log(self.bound(tested)) else None
 
 
 @dataclass(frozen=True)

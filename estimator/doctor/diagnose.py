@@ -145,7 +145,7 @@ class _Doctor:
             log_p = {
                 c: log_p_value(s) for c, s in zip(candidates, scores, strict=True) if s.verdict == "tested"
             }
-            bound = options.alpha / max(len(log_p), 1)
+            bound = (selection := Selection(options.alpha)).bound(len(log_p))
             # step 4: calibration can only raise a p-value (its scales are at least 1): only the candidates
             # significant uncalibrated need the bootstrap
             significant = [c for c in log_p if log_p[c] <= math.log(bound)]
@@ -163,7 +163,7 @@ class _Doctor:
                     if scores[k].verdict == "tested":  # (a profiled form: both its tests must reject)
                         scores[k] = calibrated(scores[k], *scales)
                         log_p[candidates[k]] = max(screened, log_p_value(scores[k], *scales))
-            left, selection = dict(log_p), Selection(options.alpha)
+            left = dict(log_p)
             gaps = {c: s.gap_m for c, s in zip(candidates, scores, strict=True) if s.gap_m is not None}
             while (chosen := selection.choose(left, len(log_p), gaps)) is not None:
                 self.report(step, f"fitting {label(chosen)}")
