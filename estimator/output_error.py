@@ -142,9 +142,9 @@ def _substeps(
     steepest damper segment (over every column of a population), a Kelvin-Voigt tyre's damping, and the
     force effects its physics carries (a model with effects, estimator.model_io): the smoothed friction
     step, a tyre dashpot and a rig's frame guides, as the doctor counts them
-    (estimator.doctor.simulation.substeps). Without the
-    friction, validate simulated a doctor's model with 461 N of friction on a car at 2 ms at one step per
-    sample, and its gap was 338 µm against the doctor's 89 µm for the same model (independent pair 111).
+    (estimator.doctor.simulation.substeps). Without the friction, validate simulated a doctor's model with
+    461 N of friction on a car at 2 ms at one step per sample, and its gap was 338 µm against the doctor's
+    89 µm for the same model (independent pair 111).
     A hysteretic friction's Dahl state decays at |v|/z, v the measured suspension's fastest (kinematics)."""
     kelvin_voigt = model.tyre_model is TyreModel.KELVIN_VOIGT
     # a population (the output-error refinement) carries one tyre damping per column
