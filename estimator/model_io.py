@@ -44,6 +44,7 @@ import numpy as np
 from estimator.damper import PiecewiseLinearCurve
 from estimator.dynamics import HINGES, AxlePhysics, CornerPhysics, QuarterCarPhysics
 from estimator.errors import UserError
+from estimator.frame_guides import GUIDE_FRICTION_NAMES
 from estimator.laser_channels import ChannelCorrections
 from estimator.output_error import IdentifiedModel
 from estimator.recording import AXLE_CHANNELS, QUARTER_CAR_CHANNELS
@@ -60,7 +61,7 @@ class ModelFormatError(UserError, ValueError):
     """The model dict lacks a key or holds a value the model cannot be built from (one line, names it)."""
 
 
-GUIDE_EFFECTS = ("guide_body_friction_N", "guide_wheel_friction_N")
+GUIDE_EFFECTS = GUIDE_FRICTION_NAMES
 """A lab rig's frame guides: friction of the body and of the wheel against the frame (quarter car only)."""
 STRIBECK_EFFECTS = ("stribeck_peak_N", "stribeck_velocity_m_s")
 """The Stribeck friction's two numbers: given together or not at all."""

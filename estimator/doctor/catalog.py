@@ -16,6 +16,7 @@ import numpy as np
 
 from estimator.digital_filters import first_order_filter
 from estimator.equations import LinearResiduals
+from estimator.frame_guides import GUIDE_FRICTION_NAMES, guide_columns
 from estimator.friction import coulomb_sign, friction_force_N, hysteresis_interval_mean, interval_mean
 from estimator.recording import Recording
 from estimator.signals import lowpass
@@ -62,7 +63,7 @@ over the presliding displacement z (Dahl's state, estimator.friction)."""
 PRESLIDING = "presliding "
 
 FRICTION_UNKNOWNS = ("friction_sliding_N", "friction_static_excess_N")
-GUIDE_UNKNOWNS = ("guide_body_friction_N", "guide_wheel_friction_N")
+GUIDE_UNKNOWNS = GUIDE_FRICTION_NAMES
 SPRING_RATE_UNKNOWN = "spring_rate_change_N_per_m"
 TYRE_RATE_UNKNOWN = "tyre_stiffness_change_N_per_m"
 CHANNEL_PARAMETERS = {
@@ -329,9 +330,7 @@ class Effect:
             return {TYRE_RATE_UNKNOWN: signals.tyre_column([c.tyre_deflection_m * k for c, k in contact])}
         if self.name is EffectName.GUIDE_FRICTION:  # each mass's own equation (a quarter-car rig's only)
             own = (signals.system.kinematics[x].velocity_m_s for x in ("x_s", "x_t"))  # each mass's velocity
-            body, wheel = (signals.eq(interval_mean(coulomb_sign, v)) for v in own)
-            zero = np.zeros_like(body)
-            return dict(zip(GUIDE_UNKNOWNS, (np.stack([body, zero]), np.stack([zero, wheel])), strict=True))
+            return dict(zip(GUIDE_UNKNOWNS, guide_columns(*own, signals.eq), strict=True))
         return {}
 
     def offset_change(self, signals: EquationSignals, airborne: list[np.ndarray]) -> np.ndarray | None:
