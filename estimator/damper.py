@@ -12,6 +12,22 @@ from dataclasses import dataclass
 import numpy as np
 
 from estimator.errors import InvalidValueError
+from estimator.order_statistics import quantile
+
+GRID_QUANTILE = 0.002
+"""The damper velocity grid spans the measured suspension velocities from this quantile to 1 − it; the end
+segments extend linearly beyond, so the few samples outside still count."""
+
+
+def velocity_grid(velocity_m_s: np.ndarray, points: int) -> np.ndarray:
+    """`points` evenly spaced knots over the suspension velocities measured (GRID_QUANTILE each end): the
+    grid the damper curve is identified on."""
+    lo, hi = quantile(velocity_m_s, [GRID_QUANTILE, 1.0 - GRID_QUANTILE])
+    if not hi > lo:
+        raise InvalidValueError(
+            "the suspension barely moved: no velocity range to identify a damper curve on"
+        )
+    return np.linspace(lo, hi, points)
 
 
 def hat_basis(velocity_m_s: np.ndarray, grid_m_s: np.ndarray) -> np.ndarray:

@@ -30,8 +30,8 @@ DAMPER_FORCE_MARGIN = 1.5
 
 
 def de_bounds(system: LinearResiduals, vehicle: VehicleParameters) -> np.ndarray:
-    """Physical search box, by unknown: sprung mass fraction, roll inertia, tyre damping, damper forces,
-    free stiffnesses."""
+    """Physical search box, by unknown: sprung mass fraction, roll inertia, tyre damping, free stiffnesses,
+    and the damper forces' box for the damper points and a rig's frame guides' frictions (forces too)."""
     mass = vehicle.mass_kg
     stiffness_of = {name: constant for constant, name in STIFFNESS_NAMES.items()}
     body_equation = 2 if vehicle.is_axle else 0  # heave, or the quarter car's body

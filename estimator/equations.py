@@ -3,11 +3,12 @@ the quarter car and f1..f4 (eqs 11-14, with the anti-roll bar made physically co
 
 With ϑ known, every residual at sample i is r_ei = A[e, i, :] @ θ + c[e, i], where θ is the vector of
 unknowns. The mass constraint of eq (9) (M_s + M_u = M_1/4; axle: M_s + 2·M_u = M_1/2 with M_u^l = M_u^r) is
-substituted, so θ = [M_s, (I,) C, C_a^1..C_a^N (, right curve's points), free stiffnesses]. A stiffness the
-vehicle file states goes into c (its force is known); one that is free (not stated, or `identify --free`)
-is one more unknown whose column is its force per unit stiffness, like a damper basis function: the spring
-K_s·ζ in the suspension, the tyre K_t·δ in the wheel equation(s), the axle's bar K_e·(ζ_l − ζ_r). An axle
-has one K_s and one K_t for both sides.
+substituted, so θ = [M_s, (I,) C, C_a^1..C_a^N (, right curve's points), free stiffnesses (, a lab rig's
+frame guides' frictions, estimator.frame_guides)]. A stiffness the vehicle file states goes into c (its
+force is known); one that is free (not stated, or `identify --free`) is one more unknown whose column is
+its force per unit stiffness, like a damper basis function: the spring K_s·ζ in the suspension, the tyre
+K_t·δ in the wheel equation(s), the axle's bar K_e·(ζ_l − ζ_r). An axle has one K_s and one K_t for both
+sides.
 
 The tyre term C_d·g: the viscous force of the tyre is C_d (the unknown tyre damping) times a regressor g
 made from the tyre deflection rate δ̇. Kelvin-Voigt: g = δ̇. Constant stiffness: no term. Maxwell (eq 3,
@@ -27,19 +28,16 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from estimator.damper import hat_basis
+from estimator.damper import hat_basis, velocity_grid
 from estimator.digital_filters import first_order_filter
 from estimator.errors import InvalidValueError
-from estimator.order_statistics import quantile
+from estimator.frame_guides import GUIDE_FRICTION_NAMES, guide_columns
 from estimator.recording import AXLE_CHANNELS, QUARTER_CAR_CHANNELS, Recording
 from estimator.signals import FilterChoice, Kinematics, choose_filters, derivative, kinematics, lowpass
 from estimator.vehicle import TyreModel, VehicleConstant, VehicleParameters
 
 EDGE_TRIM_S = 0.25
 """Samples this close to either end are left out of the objective (filter start-up transients)."""
-GRID_QUANTILE = 0.002
-"""The damper velocity grid spans the measured suspension velocities from this quantile to 1 − it; the end
-segments extend linearly beyond, so the few samples outside still count."""
 STIFFNESS_NAMES = {
     VehicleConstant.SPRING: "spring_stiffness_N_per_m",
     VehicleConstant.TYRE: "tyre_stiffness_N_per_m",
@@ -198,15 +196,6 @@ def select_samples(n: int, sample_time_s: float, nsample: int | None) -> np.ndar
     return usable[np.linspace(0, usable.size - 1, nsample).round().astype(int)]
 
 
-def velocity_grid(velocity_m_s: np.ndarray, points: int) -> np.ndarray:
-    lo, hi = quantile(velocity_m_s, [GRID_QUANTILE, 1.0 - GRID_QUANTILE])
-    if not hi > lo:
-        raise InvalidValueError(
-            "the suspension barely moved: no velocity range to identify a damper curve on"
-        )
-    return np.linspace(lo, hi, points)
-
-
 class _Columns:
     """Builds equation-filtered columns of the recording."""
 
@@ -292,12 +281,15 @@ def build_quarter_car(
     filters: FilterChoice | None = None,
     grids: list[np.ndarray] | None = None,
     free: frozenset[VehicleConstant] = frozenset(),
+    guides: bool = True,
 ) -> LinearResiduals:
     """f1 = M_s·ẍ_s + F_d(v) + K_s·ζ ; f2 = (M − M_s)·ẍ_t − F_d(v) − K_s·ζ + C·g + K_t·δ (paper eqs 6-7).
 
     grids: the damper velocity grid to use instead of one spanning the measured velocities (so that systems
     built from corrected versions of one recording share their unknowns). free: stiffnesses to identify
-    although the vehicle states them (see free_stiffnesses)."""
+    although the vehicle states them (see free_stiffnesses). A rig whose vehicle states frame guides has
+    their friction, each mass's against the frame, as two more unknowns (estimator.frame_guides), unless
+    `guides` is False (the model doctor starts without them and tests them)."""
     recording.require(QUARTER_CAR_CHANNELS)
     free = free_stiffnesses(vehicle, free)
     filters = filters or choose_filters(recording.channels, recording.sample_time_s)
@@ -328,16 +320,18 @@ def build_quarter_car(
     )
     f1 = np.hstack([a_s[:, None], *tyre_zero, phi])
     f2 = np.hstack([-a_t[:, None], *tyre_col, -phi])
+    guided = guides and vehicle.frame_guides
+    guide_cols = guide_columns(cols.velocity("x_s"), cols.velocity("x_t"), cols.eq) if guided else ()
     names = [
         "sprung_mass_kg",
         *([TYRE_DAMPING] if g is not None else []),
         *[f"C_a{j + 1}" for j in range(points)],
         *stiffness_names,
+        *(GUIDE_FRICTION_NAMES if guided else ()),
     ]
     start = 1 + len(tyre_col)
-    matrix = np.stack([f1, f2])
-    if stiffness_cols:
-        matrix = np.concatenate([matrix, *stiffness_cols], axis=2)
+    guide_unknowns = [column[:, :, None] for column in guide_cols]
+    matrix = np.concatenate([np.stack([f1, f2]), *stiffness_cols, *guide_unknowns], axis=2)
     return LinearResiduals(
         matrix=matrix,
         offset=np.stack([np.zeros(n), vehicle.mass_kg * a_t]) + known_force,
@@ -490,11 +484,13 @@ def build(
     filters: FilterChoice | None = None,
     grids: list[np.ndarray] | None = None,
     free: frozenset[VehicleConstant] = frozenset(),
+    guides: bool = True,
 ) -> LinearResiduals:
     """The residual system for the vehicle's model (default points: default_points).
     filters and grids, when given, are used instead of being chosen from the recording; the stiffnesses the
-    vehicle does not state, and those in `free`, are unknowns (free_stiffnesses)."""
+    vehicle does not state, and those in `free`, are unknowns (free_stiffnesses); a rig's frame guides too,
+    unless `guides` is False (build_quarter_car)."""
     points = points or default_points(vehicle)
     if vehicle.is_axle:
         return build_axle(recording, vehicle, tyre, points, nsample, filters, grids, free)
-    return build_quarter_car(recording, vehicle, tyre, points, nsample, filters, grids, free)
+    return build_quarter_car(recording, vehicle, tyre, points, nsample, filters, grids, free, guides)

@@ -10,8 +10,10 @@ import numpy as np
 
 from estimator.damper import PiecewiseLinearCurve
 from estimator.equations import STIFFNESS_NAMES, TYRE_DAMPING, LinearResiduals
+from estimator.frame_guides import GUIDE_FRICTION_NAMES
 from estimator.identify_options import Solver
 from estimator.inspection import CornerInspection
+from estimator.model_io import ModelWithEffects
 from estimator.output_error import IdentifiedModel
 from estimator.tanh_fit import TanhFit
 from estimator.uncertainty import Intervals
@@ -81,6 +83,9 @@ class IdentificationResult:
         inertia = self.intervals.interval("roll_inertia_kg_m2")
         if inertia is not None:
             out["roll_inertia_kg_m2_interval"] = list(inertia)
+        guides = {name: list(i) for name in GUIDE_FRICTION_NAMES if (i := self.intervals.interval(name))}
+        if guides:  # a lab rig's frame guides (the refinement leaves them as the equations found them)
+            out["effects_interval"] = guides
         return out
 
     def to_json(self) -> dict[str, object]:
@@ -113,6 +118,7 @@ class IdentificationResult:
             "tyre_viscoelastic_identified": VehicleConstant.THETA in self.identified,
             "tyre_damping_Ns_per_m": m.tyre_damping_Ns_per_m,
             "tyre_model": m.tyre_model.value,
+            **self.effects_json(),
             "objective": self.objective,
             "solver": self.solver.value,
             "certified_gap": self.certified_gap,
@@ -134,6 +140,13 @@ class IdentificationResult:
         out |= self.intervals_json()
         out["warnings"] = list(self.warnings)
         return out
+
+    def effects_json(self) -> dict[str, object]:
+        """{"effects": {...}} for a model that has effects beyond identify's form (a lab rig's frame guides'
+        frictions, estimator.frame_guides), in the model file's keys, so `validate` simulates them; {}
+        otherwise (every vehicle on a plate)."""
+        m = self.model
+        return {"effects": m.effects.to_json()} if isinstance(m, ModelWithEffects) and m.effects.names else {}
 
     def stiffness_json(self) -> dict[str, object]:
         """{spring, tyre, (anti_roll_bar,) identified: [names]} in N/m; ϑ is reported beside it."""

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import threading
 from collections.abc import Callable
-from dataclasses import replace
+from dataclasses import fields, replace
 
 import numpy as np
 
@@ -35,9 +35,11 @@ from estimator.de_search import (
 )
 from estimator.equations import STIFFNESS_NAMES, TYRE_DAMPING, LinearResiduals, build, tyre_regressor
 from estimator.errors import InvalidValueError
+from estimator.frame_guides import GUIDE_FRICTION_NAMES
 from estimator.identification_result import STIFFNESS_JSON_KEYS, CornerCurve, IdentificationResult
 from estimator.identify_options import Coordinates, IdentifyOptions, Solver, check_curve_points
 from estimator.inspection import CornerInspection, corner_inspection, imbalance
+from estimator.model_io import ModelEffects, ModelWithEffects
 from estimator.newton_refit import newton_refit
 from estimator.output_error import IdentifiedModel, refine_on_output_error, simulate_identified
 from estimator.recording import Recording
@@ -142,6 +144,17 @@ def _resolved(
     return resolved.with_relaxation_time(relaxation_time_s) if relaxation_time_s is not None else resolved
 
 
+def _with_frame_guides(model: IdentifiedModel, system: LinearResiduals, theta: np.ndarray) -> IdentifiedModel:
+    """The model with a rig's frame guides' frictions as found (estimator.frame_guides), held as the model
+    file's effects so that its physics, its JSON and `validate` carry them; the model as it is where the
+    system has no guides (every vehicle on a plate)."""
+    if GUIDE_FRICTION_NAMES[0] not in system.parameter_names:
+        return model
+    frictions = {name: float(system.value(theta, name) or 0.0) for name in GUIDE_FRICTION_NAMES}
+    same = {f.name: getattr(model, f.name) for f in fields(model)}
+    return ModelWithEffects(**same, effects=ModelEffects(**frictions))
+
+
 def _edge_warning(relaxation_time_s: float) -> list[str]:
     low, high = RELAXATION_TIME_BOUNDS_S
     if relaxation_time_s < low * 1.02 or relaxation_time_s > high / 1.02:
@@ -209,13 +222,17 @@ def identify(
         intervals = identification_intervals(
             system, theta, recording.sample_time_s, search_theta, rebuild, refit
         )
-    model = IdentifiedModel(
-        vehicle=resolved,
-        tyre_model=options.tyre,
-        curves=curves,
-        sprung_mass_kg=float(theta[0]),
-        tyre_damping_Ns_per_m=system.value(theta, TYRE_DAMPING) or 0.0,
-        roll_inertia_kg_m2=float(theta[1]) if vehicle.is_axle else None,
+    model = _with_frame_guides(
+        IdentifiedModel(
+            vehicle=resolved,
+            tyre_model=options.tyre,
+            curves=curves,
+            sprung_mass_kg=float(theta[0]),
+            tyre_damping_Ns_per_m=system.value(theta, TYRE_DAMPING) or 0.0,
+            roll_inertia_kg_m2=float(theta[1]) if vehicle.is_axle else None,
+        ),
+        system,
+        theta,
     )
     noise_m = system.filters.noise_floor_m
     gap = (
@@ -269,11 +286,15 @@ def identify_unstated(
     `also_free` it states identified beside them and then put back as stated. The model doctor starts so:
     an identified ϑ must not absorb a wrong stated rate that it will test (a Maxwell element relaxing more
     slowly than the sweep's periods acts as a spring). Where the recording does not determine `also_free`
-    (one comes out not positive), they are held as stated throughout."""
+    (one comes out not positive), they are held as stated throughout. A rig's frame guides are left out of
+    this fit, as out of the doctor's starting model, which tests them as a family: its ϑ is fitted in the
+    form the doctor starts from (fitted with the guides, it changed the doctor's path on DEV lab rigs for no
+    gain: docs/doctor-v2-notes.md)."""
     options = IdentifyOptions(points=points, output_error=False, intervals=False)
+    unguided, guides = replace(vehicle, frame_guides=False), {"frame_guides": vehicle.frame_guides}
     try:
-        found = identify(recording, vehicle, replace(options, free=also_free)).model.vehicle
+        found = identify(recording, unguided, replace(options, free=also_free)).model.vehicle
     except InvalidValueError:
-        return identify(recording, vehicle, options).model.vehicle
+        return replace(identify(recording, unguided, options).model.vehicle, **guides)
     stated = {STIFFNESS_NAMES[c]: getattr(vehicle, STIFFNESS_NAMES[c]) for c in also_free - vehicle.unknown}
-    return replace(found, **stated)
+    return replace(found, **stated, **guides)

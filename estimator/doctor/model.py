@@ -283,7 +283,8 @@ def _base_system(
 
     def make() -> tuple[LinearResiduals, EquationSignals]:
         recording, r, s = corrections.apply(reference.recording), reference, reference.settings
-        base = build(recording, r.vehicle, TyreModel.SPRING, s.points, s.nsample, r.filters, r.grids)
+        known = (s.points, s.nsample, r.filters, r.grids)  # no tyre terms, no rig's guides: families it tests
+        base = build(recording, r.vehicle, TyreModel.SPRING, *known, guides=False)
         return base, EquationSignals(recording, r.vehicle, base)
 
     base, signals = _cached(reference.built, reference.lock, key, make, BUILD_CACHE_ENTRIES)

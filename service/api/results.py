@@ -136,6 +136,36 @@ class FiltersOut(ResultPart):
     noise_floor_m: MaybeNumber = Field(description="estimated sensor noise (m rms)")
 
 
+class SpringHingeOut(ResultPart):
+    knot_m: float = Field(description="suspension deflection where the extra rate starts (m, extension > 0)")
+    rate_N_per_m: float = Field(description="extra rate beyond the knot (N/m)")
+
+
+class ModelEffectsOut(ResultPart):
+    """A model's effects beyond the curve, masses and tyre: the doctor's final model's, or a lab rig's frame
+    guides that identify fits (absent: not in the model; estimator.model_io's docstring)."""
+
+    coulomb_friction_N: float | None = Field(None, description="sliding friction at every corner (N)")
+    stribeck_peak_N: float | None = Field(None, description="static peak above the sliding level (N)")
+    stribeck_velocity_m_s: float | None = Field(None, description="over which the peak decays (m/s)")
+    presliding_m: float | None = Field(
+        None, description="hysteretic (Dahl) friction: the displacement over which it builds up (m)"
+    )
+    cubic_spring_N_per_m3: float | None = Field(None, description="progressive spring k3 (N/m³)")
+    spring_hinges: list[SpringHingeOut] | None = Field(None, description="the spring curve's extra rates")
+    tyre_dashpot_Ns_per_m: float | None = Field(None, description="tyre dashpot beside the Maxwell element")
+    tyre_liftoff: bool | None = Field(None, description="the tyre can leave the plate")
+    guide_body_friction_N: float | None = Field(None, description="a rig's frame guides: on the body (N)")
+    guide_wheel_friction_N: float | None = Field(None, description="a rig's frame guides: on the wheel (N)")
+    channel_delay_s: dict[str, float] | None = Field(None, description="channel -> how much it lags (s)")
+    sensor_offset_m: dict[str, float] | None = Field(None, description="channel -> its zero error (m)")
+    sensor_lag_s: dict[str, float] | None = Field(None, description="channel -> first-order lag τ (s)")
+    sensor_average_s: dict[str, float] | None = Field(None, description="channel -> averaging window (s)")
+    sensor_gain_error: dict[str, float] | None = Field(
+        None, description="channel -> scale error ε: it reads (1 + ε)·x"
+    )
+
+
 class IdentifyResult(ResultPart):
     """The result of an identification (`shockbench identify --json`)."""
 
@@ -149,6 +179,9 @@ class IdentifyResult(ResultPart):
     tyre_viscoelastic_identified: bool | None = Field(None, description="ϑ was found from the recording")
     tyre_damping_Ns_per_m: MaybeNumber = Field(description="identified tyre damping (N·s/m)")
     tyre_model: TyreModel
+    effects: ModelEffectsOut | None = Field(
+        None, description="a lab rig's frame guides' friction (vehicle file: frame_guides = true)"
+    )
     objective: MaybeNumber = Field(description="the paper's objective GF at the solution")
     solver: Solver
     certified_gap: MaybeNumber = Field(
@@ -171,6 +204,9 @@ class IdentifyResult(ResultPart):
         None, description="95% interval of the tyre damping (N·s/m); null for the spring tyre model"
     )
     roll_inertia_kg_m2_interval: Interval | None = Field(None, description="axle: 95% interval (kg·m²)")
+    effects_interval: dict[str, Interval] | None = Field(
+        None, description="effect key -> 95% interval (a lab rig's frame guides' friction, N)"
+    )
     warnings: list[str] = Field(default_factory=list, description="what the identification warns about")
     verdict: VerdictOut | None = Field(
         None, description="service only: the lane figures judged against its configured thresholds"
@@ -231,36 +267,6 @@ class ModelCurveOut(ResultPart):
     corner: str = Field(description="single (quarter car), or left / right (axle)")
     velocity_m_s: list[float] = Field(description="damper velocity of each point (m/s), ascending")
     force_N: list[float] = Field(description="damper force at each point (N)")
-
-
-class SpringHingeOut(ResultPart):
-    knot_m: float = Field(description="suspension deflection where the extra rate starts (m, extension > 0)")
-    rate_N_per_m: float = Field(description="extra rate beyond the knot (N/m)")
-
-
-class ModelEffectsOut(ResultPart):
-    """The final model's effects that identify's form has no key for (absent: not in the model;
-    estimator.model_io's docstring)."""
-
-    coulomb_friction_N: float | None = Field(None, description="sliding friction at every corner (N)")
-    stribeck_peak_N: float | None = Field(None, description="static peak above the sliding level (N)")
-    stribeck_velocity_m_s: float | None = Field(None, description="over which the peak decays (m/s)")
-    presliding_m: float | None = Field(
-        None, description="hysteretic (Dahl) friction: the displacement over which it builds up (m)"
-    )
-    cubic_spring_N_per_m3: float | None = Field(None, description="progressive spring k3 (N/m³)")
-    spring_hinges: list[SpringHingeOut] | None = Field(None, description="the spring curve's extra rates")
-    tyre_dashpot_Ns_per_m: float | None = Field(None, description="tyre dashpot beside the Maxwell element")
-    tyre_liftoff: bool | None = Field(None, description="the tyre can leave the plate")
-    guide_body_friction_N: float | None = Field(None, description="a rig's frame guides: on the body (N)")
-    guide_wheel_friction_N: float | None = Field(None, description="a rig's frame guides: on the wheel (N)")
-    channel_delay_s: dict[str, float] | None = Field(None, description="channel -> how much it lags (s)")
-    sensor_offset_m: dict[str, float] | None = Field(None, description="channel -> its zero error (m)")
-    sensor_lag_s: dict[str, float] | None = Field(None, description="channel -> first-order lag τ (s)")
-    sensor_average_s: dict[str, float] | None = Field(None, description="channel -> averaging window (s)")
-    sensor_gain_error: dict[str, float] | None = Field(
-        None, description="channel -> scale error ε: it reads (1 + ε)·x"
-    )
 
 
 class LocalisationOut(ResultPart):

@@ -56,7 +56,7 @@ def test_does_not_import_numpy_ma() -> None:
 
 @pytest.mark.parametrize("seed", range(20))
 def test_quantile_equals_numpy_bit_for_bit(seed: int) -> None:
-    """Including the velocity grid's quantiles (estimator.equations.velocity_grid: 1% and 99%)."""
+    """Including the velocity grid's quantiles (estimator.damper.velocity_grid: 1% and 99%)."""
     rng = np.random.default_rng(100 + seed)
     for size in (1, 2, 3, 100, int(rng.integers(101, 20000))):
         values = rng.standard_normal(size) * 10.0 ** rng.uniform(-6, 6)
