@@ -155,6 +155,17 @@ def _with_frame_guides(model: IdentifiedModel, system: LinearResiduals, theta: n
     return ModelWithEffects(**same, effects=ModelEffects(**frictions))
 
 
+def _guide_warnings(model: IdentifiedModel) -> list[str]:
+    """A frame guide's friction fitted below zero would feed energy in: say so, with what it means."""
+    effects = model.effects if isinstance(model, ModelWithEffects) else ModelEffects()
+    below = [(name, value) for name in GUIDE_FRICTION_NAMES if (value := getattr(effects, name)) < 0]
+    return [
+        f"the frame guides' {name.split('_')[1]} friction came out below zero ({value:.3g} N): a friction "
+        "cannot feed energy in; the recording does not determine it, or a force the model lacks acts there"
+        for name, value in below
+    ]
+
+
 def _edge_warning(relaxation_time_s: float) -> list[str]:
     low, high = RELAXATION_TIME_BOUNDS_S
     if relaxation_time_s < low * 1.02 or relaxation_time_s > high / 1.02:
@@ -234,6 +245,7 @@ def identify(
         system,
         theta,
     )
+    warnings += _guide_warnings(model)
     noise_m = system.filters.noise_floor_m
     gap = (
         simulate_identified(model, recording, system.kinematics, noise_m).gap_m

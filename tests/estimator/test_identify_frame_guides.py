@@ -19,8 +19,8 @@ from daq.formats.recording_csv import read_recording_csv
 from daq.formats.vehicle_file import read_vehicle
 from estimator.equations import build
 from estimator.frame_guides import GUIDE_FRICTION_NAMES
-from estimator.identify import IdentifyOptions, identify
-from estimator.model_io import model_from_json
+from estimator.identify import IdentifyOptions, _guide_warnings, identify
+from estimator.model_io import ModelWithEffects, model_from_json
 from estimator.recording import Recording
 from estimator.validation import validate
 from estimator.vehicle import TyreModel, VehicleParameters
@@ -71,7 +71,8 @@ def test_the_guided_rig_s_frictions_come_near_its_bearings_and_its_json_carries_
     """Mass-only, rig GUIDED_RIG (bearings sliding at 0.20 N on the body and 0.16 N on the wheel, with a
     breakaway peak above): each friction between half the sliding level and the breakaway, inside its 95%
     interval; the JSON (the service's schema) and the CLI's summary carry them, and validate simulates
-    them: the gap it computes on run A is identify's own output-error gap."""
+    them: the gap it computes on run A is identify's own output-error gap. A friction fitted below zero
+    is warned of."""
     a, _, vehicle = mass_only_runs(GUIDED_RIG, tmp_root)
     result = identify(a, vehicle, IdentifyOptions())
     out = json.loads(json.dumps(result.to_json()))
@@ -84,6 +85,12 @@ def test_the_guided_rig_s_frictions_come_near_its_bearings_and_its_json_carries_
         assert low < friction < high
     assert validate(model_from_json(out), a).gap_m == pytest.approx(result.gap_m, rel=1e-6)
     assert "frame guides' friction (identified): body 0.1" in summary(result)  # `shockbench identify`
+    # a friction fitted below zero would feed energy in: the result says so (not here, where both are > 0)
+    assert not any("below zero" in w for w in out["warnings"])
+    assert isinstance(result.model, ModelWithEffects)
+    pushing = replace(result.model, effects=replace(result.model.effects, guide_wheel_friction_N=-0.1))
+    (warning,) = _guide_warnings(pushing)
+    assert warning.startswith("the frame guides' wheel friction came out below zero (-0.1 N)")
 
 
 def test_mass_only_identify_predicts_held_out_runs_better_with_the_guides(tmp_root: str) -> None:
