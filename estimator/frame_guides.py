@@ -18,6 +18,8 @@ from estimator.friction import coulomb_sign, interval_mean
 GUIDE_FRICTION_NAMES = ("guide_body_friction_N", "guide_wheel_friction_N")
 """The body's and the wheel's friction against the frame (N): unknowns of the equations, effect keys of the
 model file."""
+GUIDED_MASSES = ("body", "wheel")
+"""The mass each of GUIDE_FRICTION_NAMES acts on, in their order (what a report calls them)."""
 
 
 def guide_columns(

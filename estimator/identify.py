@@ -35,7 +35,7 @@ from estimator.de_search import (
 )
 from estimator.equations import STIFFNESS_NAMES, TYRE_DAMPING, LinearResiduals, build, tyre_regressor
 from estimator.errors import InvalidValueError
-from estimator.frame_guides import GUIDE_FRICTION_NAMES
+from estimator.frame_guides import GUIDE_FRICTION_NAMES, GUIDED_MASSES
 from estimator.identification_result import STIFFNESS_JSON_KEYS, CornerCurve, IdentificationResult
 from estimator.identify_options import Coordinates, IdentifyOptions, Solver, check_curve_points
 from estimator.inspection import CornerInspection, corner_inspection, imbalance
@@ -148,9 +148,9 @@ def _with_frame_guides(model: IdentifiedModel, system: LinearResiduals, theta: n
     """The model with a rig's frame guides' frictions as found (estimator.frame_guides), held as the model
     file's effects so that its physics, its JSON and `validate` carry them; the model as it is where the
     system has no guides (every vehicle on a plate)."""
-    if GUIDE_FRICTION_NAMES[0] not in system.parameter_names:
+    frictions = {name: system.value(theta, name) for name in GUIDE_FRICTION_NAMES}
+    if None in frictions.values():
         return model
-    frictions = {name: float(system.value(theta, name) or 0.0) for name in GUIDE_FRICTION_NAMES}
     same = {f.name: getattr(model, f.name) for f in fields(model)}
     return ModelWithEffects(**same, effects=ModelEffects(**frictions))
 
@@ -158,11 +158,12 @@ def _with_frame_guides(model: IdentifiedModel, system: LinearResiduals, theta: n
 def _guide_warnings(model: IdentifiedModel) -> list[str]:
     """A frame guide's friction fitted below zero would feed energy in: say so, with what it means."""
     effects = model.effects if isinstance(model, ModelWithEffects) else ModelEffects()
-    below = [(name, value) for name in GUIDE_FRICTION_NAMES if (value := getattr(effects, name)) < 0]
+    frictions = (getattr(effects, name) for name in GUIDE_FRICTION_NAMES)
+    below = [(mass, value) for mass, value in zip(GUIDED_MASSES, frictions, strict=True) if value < 0]
     return [
-        f"the frame guides' {name.split('_')[1]} friction came out below zero ({value:.3g} N): a friction "
+        f"the frame guides' {mass} friction came out below zero ({value:.3g} N): a friction "
         "cannot feed energy in; the recording does not determine it, or a force the model lacks acts there"
-        for name, value in below
+        for mass, value in below
     ]
 
 

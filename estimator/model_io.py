@@ -61,8 +61,6 @@ class ModelFormatError(UserError, ValueError):
     """The model dict lacks a key or holds a value the model cannot be built from (one line, names it)."""
 
 
-GUIDE_EFFECTS = GUIDE_FRICTION_NAMES
-"""A lab rig's frame guides: friction of the body and of the wheel against the frame (quarter car only)."""
 STRIBECK_EFFECTS = ("stribeck_peak_N", "stribeck_velocity_m_s")
 """The Stribeck friction's two numbers: given together or not at all."""
 FORCE_EFFECTS = (
@@ -71,7 +69,7 @@ FORCE_EFFECTS = (
     "tyre_dashpot_Ns_per_m",
     *STRIBECK_EFFECTS,
     "presliding_m",
-    *GUIDE_EFFECTS,
+    *GUIDE_FRICTION_NAMES,  # a lab rig's frame guides (quarter car only)
 )
 """The `effects` keys that are forces at every corner, as estimator.dynamics.CornerPhysics names them."""
 CHANNEL_EFFECTS = (
@@ -314,7 +312,7 @@ def _effects(data: Any, axle: bool) -> ModelEffects:
         raise ModelFormatError("model: 'effects.stribeck_velocity_m_s' must be > 0")
     if values.get("presliding_m", 0.0) < 0:
         raise ModelFormatError("model: 'effects.presliding_m' must be >= 0 (0: no hysteresis)")
-    guides = [key for key in GUIDE_EFFECTS if key in values]
+    guides = [key for key in GUIDE_FRICTION_NAMES if key in values]
     if guides and axle:  # (any sign, as coulomb_friction_N: a fit may leave one a little below zero)
         raise ModelFormatError(
             f"model: 'effects.{guides[0]}' is a quarter-car rig's frame guides, not an axle's"

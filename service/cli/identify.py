@@ -144,10 +144,11 @@ def _constants_lines(result: IdentificationResult) -> list[str]:
     guides = result.effects_json().get("effects", {})
     bands = result.intervals_json().get("effects_interval", {})
     if guides:  # a lab rig's (vehicle file: frame_guides = true)
-        from estimator.frame_guides import GUIDE_FRICTION_NAMES  # here: `shockbench --help` imports no numpy
+        # imported here: `shockbench --help` imports no numpy
+        from estimator.frame_guides import GUIDE_FRICTION_NAMES, GUIDED_MASSES
 
         each = []
-        for part, key in zip(("body", "wheel"), GUIDE_FRICTION_NAMES, strict=True):
+        for part, key in zip(GUIDED_MASSES, GUIDE_FRICTION_NAMES, strict=True):
             band = f" (95% {bands[key][0]:.3g} to {bands[key][1]:.3g})" if key in bands else ""
             each.append(f"{part} {guides[key]:.3g} N{band}")
         lines.append(f"frame guides' friction (identified): {', '.join(each)}")

@@ -37,8 +37,10 @@ def vehicle_toml_text(stated: Mapping[str, float | str | bool]) -> str:
     for key, value in stated.items():
         if isinstance(value, bool):
             lines.append(f"{key} = {'true' if value else 'false'}")
+        elif isinstance(value, str):
+            lines.append(f'{key} = "{value}"')
         else:
-            lines.append(f'{key} = "{value}"' if isinstance(value, str) else f"{key} = {float(value)!r}")
+            lines.append(f"{key} = {float(value)!r}")
     return "\n".join(lines) + "\n"
 
 
