@@ -5,9 +5,9 @@ verdict per corner with the thresholds that judged it (their version and limits)
 angle and the damping ratio per corner, with the left/right imbalance on an axle; the damper curve with
 its 95% band (left and right overlaid on an axle); the sweep over time (plate, wheel, body) and the
 transmissibility over frequency when the recording is at hand; the masses and stiffnesses with their 95%
-intervals; the model doctor's summary when it was run; and the result's hash-chain record (lane and
-sequence), so that a printed sheet can be traced to the stored result. A field the test did not record
-says "not recorded".
+intervals (and a lab rig's frame guides' friction); the model doctor's summary when it was run; and the
+result's hash-chain record (lane and sequence), so that a printed sheet can be traced to the stored
+result. A field the test did not record says "not recorded".
 
 Rendering: `report_html` (service.report.html: one self-contained page, style inline, plots as SVG data:
 URIs, no script and no external request) and `report_pdf` (service.report.pdf). The PDF is drawn with

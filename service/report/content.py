@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING, Any, Literal
 from pydantic import ValidationError
 
 from estimator.errors import UserError
+from estimator.frame_guides import GUIDE_FRICTION_NAMES, GUIDED_MASSES
 from estimator.verdict import (
     ThresholdsError,
     VerdictThresholds,
@@ -267,7 +268,8 @@ def _origin(name: str, stiffness: Any) -> str:
 
 
 def estimates_section(result: IdentifyResult) -> Section:
-    """The masses, stiffnesses and tyre damping with their 95% intervals and where each comes from."""
+    """The masses, stiffnesses, tyre damping (and a lab rig's frame guides' friction) with their 95% intervals
+    and where each comes from."""
     masses, spread = result.masses_kg, result.masses_kg_interval
     stiffness, stiffness_spread = result.stiffness_N_per_m, result.stiffness_N_per_m_interval
     rows = [
@@ -306,6 +308,14 @@ def estimates_section(result: IdentifyResult) -> Section:
             "identified",
         )
     )
+    effects, effects_spread = result.effects, result.effects_interval or {}
+    for name, mass in zip(GUIDE_FRICTION_NAMES, GUIDED_MASSES, strict=True):
+        value = getattr(effects, name, None) if effects is not None else None
+        if value is not None:  # a lab rig's frame guides (its vehicle file says so)
+            pair = effects_spread.get(name)
+            rows.append(
+                (f"frame guides' friction, {mass}", number(value, "N"), interval(pair, 1, "N"), "identified")
+            )
     if result.roll_inertia_kg_m2 is not None:
         rows.append(
             (

@@ -8,8 +8,10 @@ than by the same identification without the guides."""
 from __future__ import annotations
 
 import json
+import re
 from dataclasses import replace
 from functools import cache
+from html import unescape
 
 import numpy as np
 import pytest
@@ -26,6 +28,7 @@ from estimator.validation import validate
 from estimator.vehicle import TyreModel, VehicleParameters
 from service.api.results import IdentifyResult
 from service.cli.identify import summary
+from service.report import ReportInput, report_html
 from simulators.lab_rig.draws import draw_rig
 from simulators.lab_rig.world import write_run
 
@@ -85,6 +88,14 @@ def test_the_guided_rig_s_frictions_come_near_its_bearings_and_its_json_carries_
         assert low < friction < high
     assert validate(model_from_json(out), a).gap_m == pytest.approx(result.gap_m, rel=1e-6)
     assert "frame guides' friction (identified): body 0.1" in summary(result)  # `shockbench identify`
+    # the printable report (HTML; the PDF is drawn from the same content)
+    page = " ".join(unescape(re.sub(r"<[^>]+>", " ", report_html(ReportInput(result=out)))).split())
+    for name, mass in zip(GUIDE_FRICTION_NAMES, ("body", "wheel"), strict=True):
+        low, high = out["effects_interval"][name]
+        row = (
+            f"frame guides' friction, {mass} {out['effects'][name]:.3f} N {low:.4f} – {high:.4f} N identified"
+        )
+        assert row in page, row
     # a friction fitted below zero would feed energy in: the result says so (not here, where both are > 0)
     assert not any("below zero" in w for w in out["warnings"])
     assert isinstance(result.model, ModelWithEffects)
