@@ -50,6 +50,7 @@ function modelFigures(result) {
   entries.push(
     ["Tyre damping", fmt(result.tyre_damping_Ns_per_m, "N·s/m") +
       interval(result.tyre_damping_Ns_per_m_interval, 1, "N·s/m")],
+    ...guideFigures(result),
     ["Tyre model", result.tyre_model],
     ["Output-error gap", result.gap_diverged ? "model diverged when simulated" : fmt(result.gap_m * 1000, "mm rms")],
   );
@@ -57,6 +58,17 @@ function modelFigures(result) {
     entries.push(["Certified optimality gap", fmt(result.certified_gap * 100, "%", 2)]);
   }
   return entries;
+}
+
+/** A lab rig's frame guides' friction on the body and on the wheel, where identify fitted it (its vehicle
+ * file says `frame_guides = true`; the result's `effects` then holds both). */
+function guideFigures(result) {
+  const effects = result.effects ?? {};
+  const spread = result.effects_interval ?? {};
+  return [["body", "guide_body_friction_N"], ["wheel", "guide_wheel_friction_N"]]
+    .filter(([, key]) => effects[key] !== undefined && effects[key] !== null)
+    .map(([mass, key]) => [`Frame guides' friction, ${mass}`,
+      fmt(effects[key], "N") + " (identified)" + interval(spread[key], 1, "N")]);
 }
 
 function laneFigures(inspection) {

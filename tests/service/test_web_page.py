@@ -377,6 +377,42 @@ def test_an_axle_result_shows_left_and_right_curves_and_figures(page: Page) -> N
     assert page.testid("result-verdict").get_attribute("data-outcome") == "fail"
     assert "37.5%" in page.testid("result-verdict").text
     assert "Anti-roll bar 18 kN/m" in page.by_id("model-figures").text
+    assert "Frame guides" not in page.by_id("model-figures").text  # a vehicle on a plate has none
+
+
+def test_a_lab_rig_s_result_shows_its_frame_guides_friction(page: Page) -> None:
+    """identify fits the friction of a lab rig's frame guides where its vehicle file states them: the model
+    figures show both with their 95% intervals."""
+    page.sign_in(VIEWER)
+    curve = {
+        "velocity_m_s": [-0.1, 0.0, 0.1],
+        "force_N": [-1.2, 0.0, 1.5],
+        "force_N_low": [-1.3, -0.1, 1.4],
+        "force_N_high": [-1.1, 0.1, 1.6],
+        "tanh": {"c_s": 12.0, "kappa": 0.2, "mu": 0.3, "beta": 0.01},
+        "outliers": [],
+    }
+    result = {
+        "curves": [curve],
+        "masses_kg": {"sprung": 2.6, "unsprung": 0.9},
+        "stiffness_N_per_m": {"spring": 950.0, "tyre": 3100.0, "identified": ["spring", "tyre"]},
+        "tyre_damping_Ns_per_m": 4.0,
+        "tyre_model": "maxwell",
+        "gap_m": 0.0002,
+        "gap_diverged": False,
+        "effects": {"guide_body_friction_N": 0.167, "guide_wheel_friction_N": 0.164},
+        "effects_interval": {
+            "guide_body_friction_N": [0.134, 0.201],
+            "guide_wheel_friction_N": [0.112, 0.216],
+        },
+        "inspection": {"eusama_percent": 55.0, "phase_shift_min_deg": 38.0, "damping_ratio": 0.2},
+    }
+    sweep = {"id": 97, "test": {"vehicle_id": "LAB-RIG"}, "links": {"self": "/api/v1/sweeps/97"}}
+    job = {"id": 96, "links": {"self": "/api/v1/jobs/96"}}
+    run_module(page, f"web.result.showResult({json.dumps(sweep)}, {json.dumps({**job, 'result': result})});")
+    figures = page.by_id("model-figures").text
+    assert "Frame guides' friction, body 0.167 N (identified) (95%: 0.134–0.201 N)" in figures
+    assert "Frame guides' friction, wheel 0.164 N (identified) (95%: 0.112–0.216 N)" in figures
 
 
 def test_without_chromium_the_tests_skip_except_in_ci(monkeypatch: pytest.MonkeyPatch) -> None:
