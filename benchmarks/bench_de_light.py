@@ -18,6 +18,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from bench_lab_rig import rig_files  # the lab rig's runs, written and cached as that benchmark does
 
 from daq.formats.recording_csv import read_recording_csv
 from daq.formats.vehicle_file import read_vehicle
@@ -28,21 +29,17 @@ from estimator.model_io import model_from_json
 from estimator.recording import Recording
 from estimator.validation import validate
 from estimator.vehicle import VehicleParameters
-from simulators.lab_rig.draws import draw_rig
-from simulators.lab_rig.world import write_run
 
 WITHIN = 0.01  # a certified gap counted as "at the optimum"
+RUN_S = 16.0  # input length of each run (s), bench_lab_rig's default
 
 
 def runs(seed: int, folder: Path) -> tuple[Recording, Recording, VehicleParameters]:
-    """Runs A and B of lab rig `seed` (simulated once, kept in `folder`) and its mass-only vehicle file."""
-    stem = folder / f"lab_rig_{seed}"
-    if not Path(f"{stem}_B.csv").exists():
-        draw = draw_rig(seed)
-        for run in "AB":
-            write_run(draw.simulate(run), draw.rig, folder, f"lab_rig_{seed}_{run}")
-    a, b = (read_recording_csv(f"{stem}_{run}.csv") for run in "AB")
-    return a, b, read_vehicle(f"{stem}_A.mass-only.toml")
+    """Runs A and B of lab rig `seed` (bench_lab_rig's files: simulated once, kept in `folder`, which a
+    bench_lab_rig --cache folder can be) and its mass-only vehicle file."""
+    _, files, _ = rig_files(seed, str(folder), RUN_S)
+    a, b = (read_recording_csv(files[run].csv) for run in "AB")
+    return a, b, read_vehicle(files["A"].mass_only_toml)
 
 
 def de_outcome(a: Recording, b: Recording, vehicle: VehicleParameters) -> tuple[float, float, float]:

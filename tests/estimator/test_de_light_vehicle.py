@@ -7,36 +7,24 @@ from __future__ import annotations
 
 import json
 from dataclasses import replace
-from functools import cache
 
 import numpy as np
 import pytest
+from test_identify_frame_guides import mass_only_runs  # a lab rig's runs A and B and its mass-only file
 
-from daq.formats.recording_csv import read_recording_csv
-from daq.formats.vehicle_file import read_vehicle
 from estimator.de_search import LIGHTEST_WHEEL_LOAD_KG, STIFFNESS_BOUNDS_N_PER_M, de_bounds
 from estimator.equations import STIFFNESS_NAMES, TYRE_DAMPING, build
 from estimator.identify import IdentifyOptions, identify
 from estimator.identify_options import Solver
-from estimator.recording import Recording
-from estimator.vehicle import TyreModel, VehicleConstant, VehicleParameters
+from estimator.vehicle import TyreModel, VehicleConstant
 from simulators.lab_rig.draws import draw_rig
-from simulators.lab_rig.world import write_run
 
 DRAWS = 3
 """Dev lab rigs drawn at random (benchmarks/bench_lab_rig.py's DEV_SEEDS, 0-999)."""
 SEEDS = sorted(int(s) for s in np.random.default_rng(3127).choice(1000, DRAWS, replace=False))
 CERTIFIED_GAP = 0.01
 """DE's objective at most this fraction above the exact solver's lower bound (the box as drawn for cars
-left it 0.3-31% above on 9 of 10 dev lab rigs, BENCHMARKS.md)."""
-
-
-@cache
-def run_a(seed: int, folder: str) -> tuple[Recording, VehicleParameters]:
-    """Run A (the chirp) of lab rig `seed`, written as the rig's files and read back; its mass-only file."""
-    draw = draw_rig(seed)
-    files = write_run(draw.simulate("A"), draw.rig, folder, f"rig_{seed}_A")
-    return read_recording_csv(files.csv), read_vehicle(files.mass_only_toml)
+left it more than 1% above on 9 of 10 dev lab rigs, up to 20%: BENCHMARKS.md, bench_de_light.py)."""
 
 
 @pytest.fixture(scope="module")
@@ -50,7 +38,7 @@ def _boxes(bounds: np.ndarray, names: list[str]) -> dict[str, tuple[float, float
 
 def test_the_box_is_the_motorcycle_s_from_its_mass_up_and_scaled_below(folder: str) -> None:
     seed = SEEDS[0]
-    recording, vehicle = run_a(seed, folder)
+    recording, _, vehicle = mass_only_runs(seed, folder)
     system = build(recording, vehicle, TyreModel.KELVIN_VOIGT)
     names = system.parameter_names
     spring, tyre = STIFFNESS_NAMES[VehicleConstant.SPRING], STIFFNESS_NAMES[VehicleConstant.TYRE]
@@ -74,7 +62,7 @@ def test_de_ends_at_the_exact_optimum_on_lab_rigs(folder: str) -> None:
     within CERTIFIED_GAP of the exact solver's bound on each (the hit rate is printed)."""
     gaps = []
     for seed in SEEDS:
-        recording, vehicle = run_a(seed, folder)
+        recording, _, vehicle = mass_only_runs(seed, folder)
         result = identify(recording, vehicle, IdentifyOptions(solver=Solver.DE, intervals=False))
         out = json.loads(json.dumps(result.to_json()))
         gaps.append(out["certified_gap"])
