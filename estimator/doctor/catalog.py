@@ -63,7 +63,6 @@ over the presliding displacement z (Dahl's state, estimator.friction)."""
 PRESLIDING = "presliding "
 
 FRICTION_UNKNOWNS = ("friction_sliding_N", "friction_static_excess_N")
-GUIDE_UNKNOWNS = GUIDE_FRICTION_NAMES
 SPRING_RATE_UNKNOWN = "spring_rate_change_N_per_m"
 TYRE_RATE_UNKNOWN = "tyre_stiffness_change_N_per_m"
 CHANNEL_PARAMETERS = {
@@ -330,7 +329,7 @@ class Effect:
             return {TYRE_RATE_UNKNOWN: signals.tyre_column([c.tyre_deflection_m * k for c, k in contact])}
         if self.name is EffectName.GUIDE_FRICTION:  # each mass's own equation (a quarter-car rig's only)
             own = (signals.system.kinematics[x].velocity_m_s for x in ("x_s", "x_t"))  # each mass's velocity
-            return dict(zip(GUIDE_UNKNOWNS, guide_columns(*own, signals.eq), strict=True))
+            return dict(zip(GUIDE_FRICTION_NAMES, guide_columns(*own, signals.eq), strict=True))
         return {}
 
     def offset_change(self, signals: EquationSignals, airborne: list[np.ndarray]) -> np.ndarray | None:

@@ -10,7 +10,7 @@ import numpy as np
 from estimator.distributions import chi_square_survival
 from estimator.doctor.catalog import (
     FRICTION_UNKNOWNS,
-    GUIDE_UNKNOWNS,
+    GUIDE_FRICTION_NAMES,
     SPRING_RATE_UNKNOWN,
     TYRE_RATE_UNKNOWN,
     EffectInstance,
@@ -83,7 +83,7 @@ def report(effect: EffectInstance, model: FittedModel) -> dict[str, float | str]
     if name is EffectName.ANTI_ROLL_BAR:
         return {"anti_roll_bar_stiffness_N_per_m": model.value("anti_roll_bar_N_per_m")}
     if name is EffectName.GUIDE_FRICTION:
-        return {f"{n.split('_')[1]}_guide_friction_N": model.value(n) for n in GUIDE_UNKNOWNS}
+        return {name: model.value(name) for name in GUIDE_FRICTION_NAMES}  # the model file's keys
     channel = str(effect.channel)
     if name is EffectName.SENSOR_DYNAMICS:
         kind = str(effect.variant)
@@ -115,8 +115,9 @@ def implausible(effect: EffectInstance, model: FittedModel) -> str | None:
                 f"the force would rise with velocity (static {sliding + excess:.0f} N below sliding "
                 f"{sliding:.0f} N): a damper's, not friction"
             )
-    elif name is EffectName.GUIDE_FRICTION and _below_zero(model, [({n: 1.0}, 0.0) for n in GUIDE_UNKNOWNS]):
-        return "a guide's friction would feed energy in"
+    elif name is EffectName.GUIDE_FRICTION:
+        if _below_zero(model, [({n: 1.0}, 0.0) for n in GUIDE_FRICTION_NAMES]):
+            return "a guide's friction would feed energy in"
     elif name is EffectName.TYRE_DAMPING and model.value("tyre_dashpot_Ns_per_m") < 0.0:
         return "the tyre dashpot would feed energy in"
     elif name is EffectName.ANTI_ROLL_BAR and model.value("anti_roll_bar_N_per_m") < 0.0:

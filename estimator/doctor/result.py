@@ -7,7 +7,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from estimator.doctor.catalog import FRICTION_UNKNOWNS, GUIDE_UNKNOWNS, EffectName, labels_in
+from estimator.doctor.catalog import FRICTION_UNKNOWNS, GUIDE_FRICTION_NAMES, EffectName, labels_in
 from estimator.doctor.residuals import Localisation
 from estimator.model_io import with_curves_of
 from estimator.vehicle import TyreModel
@@ -184,7 +184,7 @@ def model_json(model: FittedModel) -> dict[str, object]:
         "presliding_m": model.presliding_m,
         "spring_hinges": [{"knot_m": float(k), "rate_N_per_m": float(r)} for k, r in hinges if r],
         "tyre_liftoff": structure.has(EffectName.TYRE_LIFTOFF),
-        **{name: model.value(name) for name in GUIDE_UNKNOWNS},
+        **{name: model.value(name) for name in GUIDE_FRICTION_NAMES},
     }
     tables = ("channel_delay_s", "sensor_offset_m", "sensor_lag_s", "sensor_average_s", "sensor_gain_error")
     for key, table in zip(tables, fields(corrections), strict=True):

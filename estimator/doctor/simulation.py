@@ -9,7 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from estimator.damper import CurveBatch
-from estimator.doctor.catalog import FRICTION_UNKNOWNS, GUIDE_UNKNOWNS, EffectName
+from estimator.doctor.catalog import FRICTION_UNKNOWNS, GUIDE_FRICTION_NAMES, EffectName
 from estimator.doctor.model import FittedModel
 from estimator.dynamics import AxlePhysics, CornerPhysics, QuarterCarPhysics
 from estimator.output_error import DIVERGED_GAP_M, measured_drive, sampled_states
@@ -83,8 +83,8 @@ def _corner(models: list[FittedModel], side: int, sample_time_s: float) -> Corne
         tyre_liftoff=np.array([m.structure.has(EffectName.TYRE_LIFTOFF) for m in models]),
         static_wheel_load_N=vehicle.static_wheel_load_N,
         tyre_dashpot_Ns_per_m=each("tyre_dashpot_Ns_per_m"),
-        guide_body_friction_N=each(GUIDE_UNKNOWNS[0]),
-        guide_wheel_friction_N=each(GUIDE_UNKNOWNS[1]),
+        guide_body_friction_N=each(GUIDE_FRICTION_NAMES[0]),
+        guide_wheel_friction_N=each(GUIDE_FRICTION_NAMES[1]),
     )
 
 
@@ -104,7 +104,7 @@ def substeps(model: FittedModel, sample_time_s: float) -> int:
         stribeck_peak_N=model.value(FRICTION_UNKNOWNS[1]),
         stribeck_velocity_m_s=model.stribeck_velocity_m_s,
         hysteresis_rate_per_s=speed_m_s / z if z else 0.0,
-        guide_friction_N=(model.value(GUIDE_UNKNOWNS[0]), model.value(GUIDE_UNKNOWNS[1])),
+        guide_friction_N=(model.value(GUIDE_FRICTION_NAMES[0]), model.value(GUIDE_FRICTION_NAMES[1])),
     )
 
 

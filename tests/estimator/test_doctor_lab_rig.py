@@ -140,7 +140,7 @@ def test_a_rig_s_frame_guides_are_named_and_the_held_out_gap_falls() -> None:
     named = {k: v for s in guided.steps for k, v in s.parameters.items()}
     for side, friction in (("body", bearings.body_bearing), ("wheel", bearings.wheel_bearing)):
         # plain Coulomb against the bearings' Stribeck law: between half the sliding level and the breakaway
-        assert 0.5 * friction.sliding_N <= named[f"{side}_guide_friction_N"] <= friction.breakaway_N
+        assert 0.5 * friction.sliding_N <= named[f"guide_{side}_friction_N"] <= friction.breakaway_N
     held_out = {
         name: validate(model_from_json(result.to_json()), b).gap_ratio
         for name, result in (("guided", guided), ("plain", plain))
