@@ -10,7 +10,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from test_identify_frame_guides import mass_only_runs  # a lab rig's runs A and B and its mass-only file
+from lab_rig_runs import lab_rig_runs
 
 from estimator.de_search import LIGHTEST_WHEEL_LOAD_KG, STIFFNESS_BOUNDS_N_PER_M, de_bounds
 from estimator.equations import STIFFNESS_NAMES, TYRE_DAMPING, build
@@ -27,18 +27,13 @@ CERTIFIED_GAP = 0.01
 left it more than 1% above on 9 of 10 dev lab rigs, up to 20%: BENCHMARKS.md, bench_de_light.py)."""
 
 
-@pytest.fixture(scope="module")
-def folder(tmp_path_factory: pytest.TempPathFactory) -> str:
-    return str(tmp_path_factory.mktemp("de_light"))
-
-
 def _boxes(bounds: np.ndarray, names: list[str]) -> dict[str, tuple[float, float]]:
     return {name: (float(low), float(high)) for name, (low, high) in zip(names, bounds, strict=True)}
 
 
-def test_the_box_is_the_motorcycle_s_from_its_mass_up_and_scaled_below(folder: str) -> None:
+def test_the_box_is_the_motorcycle_s_from_its_mass_up_and_scaled_below() -> None:
     seed = SEEDS[0]
-    recording, _, vehicle = mass_only_runs(seed, folder)
+    recording, _, vehicle = lab_rig_runs(seed, mass_only=True)
     system = build(recording, vehicle, TyreModel.KELVIN_VOIGT)
     names = system.parameter_names
     spring, tyre = STIFFNESS_NAMES[VehicleConstant.SPRING], STIFFNESS_NAMES[VehicleConstant.TYRE]
@@ -57,12 +52,12 @@ def test_the_box_is_the_motorcycle_s_from_its_mass_up_and_scaled_below(folder: s
     assert not motorcycle[tyre][0] < rig.tyre_N_per_m  # the motorcycle's box would miss the rig's tyre
 
 
-def test_de_ends_at_the_exact_optimum_on_lab_rigs(folder: str) -> None:
+def test_de_ends_at_the_exact_optimum_on_lab_rigs() -> None:
     """DRAWS dev rigs drawn at random, mass-only (every rate free), `identify --solver de`: its objective
     within CERTIFIED_GAP of the exact solver's bound on each (the hit rate is printed)."""
     gaps = []
     for seed in SEEDS:
-        recording, _, vehicle = mass_only_runs(seed, folder)
+        recording, _, vehicle = lab_rig_runs(seed, mass_only=True)
         result = identify(recording, vehicle, IdentifyOptions(solver=Solver.DE, intervals=False))
         out = json.loads(json.dumps(result.to_json()))
         gaps.append(out["certified_gap"])

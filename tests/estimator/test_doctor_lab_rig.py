@@ -17,22 +17,17 @@ from __future__ import annotations
 import json
 from dataclasses import replace
 from functools import cache
-from tempfile import TemporaryDirectory
 
 import pytest
+from lab_rig_runs import lab_rig_runs
 
-from daq.formats.recording_csv import read_recording_csv
-from daq.formats.vehicle_file import read_vehicle
 from estimator.doctor import DiagnoseOptions, DiagnosisResult, diagnose
 from estimator.doctor.catalog import TYRE_RATE_UNKNOWN
 from estimator.doctor.diagnose import refined
 from estimator.doctor.result import model_json
 from estimator.model_io import ModelFormatError, model_from_json
-from estimator.recording import Recording
 from estimator.validation import validate
-from estimator.vehicle import VehicleParameters
 from simulators.lab_rig.draws import draw_rig
-from simulators.lab_rig.world import write_run
 
 LAB_RIGS = (8, 12)
 GUIDED_RIG = 54
@@ -43,20 +38,9 @@ RATE_TOLERANCE = 0.1  # the rates named within 10% of the rig's (the unrecorded 
 
 
 @cache
-def runs(seed: int) -> tuple[Recording, Recording, VehicleParameters]:
-    """Runs A (the chirp) and B (the random road) of rig `seed`, written as the rig's files and read back,
-    and the vehicle file stating the wrong rates."""
-    draw = draw_rig(seed)
-    with TemporaryDirectory() as folder:
-        files = [write_run(draw.simulate(run), draw.rig, folder, f"rig_{seed}_{run}") for run in "AB"]
-        a, b = (read_recording_csv(f.csv) for f in files)
-        return a, b, read_vehicle(files[0].vehicle_toml)
-
-
-@cache
 def diagnosed(seed: int) -> DiagnosisResult:
     """The doctor on run A of rig `seed` (once for every test)."""
-    a, _, vehicle = runs(seed)
+    a, _, vehicle = lab_rig_runs(seed)
     return diagnose(a, vehicle, DiagnoseOptions(workers=1))
 
 
@@ -92,7 +76,7 @@ def test_an_unexplained_model_is_handed_out_refined_on_the_free_simulation(seed:
     validate takes) has its curve refined on the free-simulation gap (estimator.validation.refined_on):
     validate gives it model_gap_m on run A, below the final model's gap, and on these rigs it predicts run B
     better (on 20 held-out rigs: better on 18, a little worse on 2, BENCHMARKS.md)."""
-    a, b, _ = runs(seed)
+    a, b, _ = lab_rig_runs(seed)
     result = diagnosed(seed)
     out = json.loads(json.dumps(result.to_json()))
     assert result.unexplained and out["model_refined"] is True
@@ -110,7 +94,7 @@ def test_an_unexplained_model_is_handed_out_refined_on_the_free_simulation(seed:
 def test_a_final_model_with_a_rate_below_zero_is_handed_out_unrefined() -> None:
     """A final model whose tyre rate was fitted below zero (as on DEV draw outside/4 before d106a50) has
     no model file to round-trip through: the diagnosis ends with it unrefined, not with ModelFormatError."""
-    a, _, _ = runs(INTERACTING_RIG)
+    a, _, _ = lab_rig_runs(INTERACTING_RIG)
     result = diagnosed(INTERACTING_RIG)
     final = result.final_model
     names = final.system.parameter_names
@@ -129,7 +113,7 @@ def test_a_rig_s_frame_guides_are_named_and_the_held_out_gap_falls() -> None:
     guide_friction: a friction of each mass against the frame, which no quarter-car term can take. Named, it
     comes out near the bearings' own friction and the held-out run is predicted far better; the same run
     with the key left out is never offered the family (a vehicle on a plate has no guides)."""
-    a, b, vehicle = runs(GUIDED_RIG)
+    a, b, vehicle = lab_rig_runs(GUIDED_RIG)
     assert vehicle.frame_guides
     bearings = draw_rig(GUIDED_RIG).rig
     guided = diagnose(a, vehicle, DiagnoseOptions(workers=1))

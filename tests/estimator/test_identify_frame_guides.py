@@ -10,15 +10,13 @@ from __future__ import annotations
 import json
 import re
 from dataclasses import replace
-from functools import cache
 from html import unescape
 
 import numpy as np
 import pytest
+from lab_rig_runs import lab_rig_runs
 from test_doctor_lab_rig import GUIDED_RIG
 
-from daq.formats.recording_csv import read_recording_csv
-from daq.formats.vehicle_file import read_vehicle
 from estimator.equations import build
 from estimator.frame_guides import GUIDE_FRICTION_NAMES
 from estimator.identify import IdentifyOptions, _guide_warnings, identify
@@ -30,25 +28,10 @@ from service.api.results import IdentifyResult
 from service.cli.identify import summary
 from service.report import ReportInput, report_html
 from simulators.lab_rig.draws import draw_rig
-from simulators.lab_rig.world import write_run
 
 DRAWS = 6
 """Dev rigs drawn at random (benchmarks/bench_lab_rig.py's DEV_SEEDS, 0-999) for the hit rate."""
 HELD_OUT_BOUND = 0.40  # issue 29 item 5: mass-only identify's held-out gap at most 40% of the response RMS
-
-
-@cache
-def mass_only_runs(seed: int, tmp_root: str) -> tuple[Recording, Recording, VehicleParameters]:
-    """Runs A and B of lab rig `seed`, written as the rig's files and read back, and its mass-only file."""
-    draw = draw_rig(seed)
-    files = [write_run(draw.simulate(run), draw.rig, tmp_root, f"rig_{seed}_{run}") for run in "AB"]
-    a, b = (read_recording_csv(f.csv) for f in files)
-    return a, b, read_vehicle(files[0].mass_only_toml)
-
-
-@pytest.fixture(scope="module")
-def tmp_root(tmp_path_factory: pytest.TempPathFactory) -> str:
-    return str(tmp_path_factory.mktemp("lab_rigs"))
 
 
 def held_out_gap(recording: Recording, held_out: Recording, vehicle: VehicleParameters) -> float:
@@ -57,8 +40,8 @@ def held_out_gap(recording: Recording, held_out: Recording, vehicle: VehiclePara
     return validate(model_from_json(json.loads(json.dumps(result.to_json()))), held_out).gap_ratio
 
 
-def test_guides_are_unknowns_only_where_the_vehicle_file_states_them(tmp_root: str) -> None:
-    a, _, vehicle = mass_only_runs(GUIDED_RIG, tmp_root)
+def test_guides_are_unknowns_only_where_the_vehicle_file_states_them() -> None:
+    a, _, vehicle = lab_rig_runs(GUIDED_RIG, mass_only=True)
     assert vehicle.frame_guides
     names = build(a, vehicle, TyreModel.KELVIN_VOIGT).parameter_names
     assert names[-2:] == list(GUIDE_FRICTION_NAMES)
@@ -70,13 +53,13 @@ def test_guides_are_unknowns_only_where_the_vehicle_file_states_them(tmp_root: s
     assert "effects" not in plain and "effects_interval" not in plain
 
 
-def test_the_guided_rig_s_frictions_come_near_its_bearings_and_its_json_carries_them(tmp_root: str) -> None:
+def test_the_guided_rig_s_frictions_come_near_its_bearings_and_its_json_carries_them() -> None:
     """Mass-only, rig GUIDED_RIG (bearings sliding at 0.20 N on the body and 0.16 N on the wheel, with a
     breakaway peak above): each friction between half the sliding level and the breakaway, inside its 95%
     interval; the JSON (the service's schema) and the CLI's summary carry them, and validate simulates
     them: the gap it computes on run A is identify's own output-error gap. A friction fitted below zero
     is warned of."""
-    a, _, vehicle = mass_only_runs(GUIDED_RIG, tmp_root)
+    a, _, vehicle = lab_rig_runs(GUIDED_RIG, mass_only=True)
     result = identify(a, vehicle, IdentifyOptions())
     out = json.loads(json.dumps(result.to_json()))
     IdentifyResult.model_validate(out)
@@ -104,14 +87,14 @@ def test_the_guided_rig_s_frictions_come_near_its_bearings_and_its_json_carries_
     assert warning.startswith("the frame guides' wheel friction came out below zero (-0.1 N)")
 
 
-def test_mass_only_identify_predicts_held_out_runs_better_with_the_guides(tmp_root: str) -> None:
+def test_mass_only_identify_predicts_held_out_runs_better_with_the_guides() -> None:
     """DRAWS dev rigs drawn at random: mass-only identify with the guides (the rig's file) and without (the
     key left out), each validated on run B. The guided model is better on at least all but one, and its
     hit rate under item 5's bound is reported (the figures are BENCHMARKS.md's, on held-out rigs)."""
     seeds = sorted(int(s) for s in np.random.default_rng(2911).choice(1000, DRAWS, replace=False))
     rows = []
     for seed in seeds:
-        a, b, vehicle = mass_only_runs(seed, tmp_root)
+        a, b, vehicle = lab_rig_runs(seed, mass_only=True)
         guided = held_out_gap(a, b, vehicle)
         plain = held_out_gap(a, b, replace(vehicle, frame_guides=False))
         rows.append((seed, guided, plain))
