@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import math
 import threading
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -33,6 +34,7 @@ from estimator.output_error import (
 )
 from estimator.recording import Recording
 from estimator.signals import Kinematics, choose_filters, kinematics
+from estimator.solvers.differential_evolution import DEProgress
 
 
 @dataclass(frozen=True)
@@ -115,7 +117,10 @@ def _compared(model: IdentifiedModel, recording: Recording, start: _Driven) -> V
 
 
 def refined_on(
-    model: IdentifiedModel, recording: Recording, cancel: threading.Event | None = None
+    model: IdentifiedModel,
+    recording: Recording,
+    cancel: threading.Event | None = None,
+    progress: Callable[[str], object] | None = None,
 ) -> tuple[IdentifiedModel, float] | None:
     """The model with its damper curve(s) and tyre damping refined on its free-simulation gap on
     `recording` (estimator.output_error.refine_on_output_error: a short DE within ±15% of each value, the
@@ -124,12 +129,18 @@ def refined_on(
     motions they are built from), a fit of the simulated motion to the measured one is not by the part of it
     the plate does not cause. A model to predict with: the part that depends on the motion both fits take
     up into the curve, this one more, so the refined curve is no truer a damper curve (docs/method.md).
-    InterruptedError when `cancel` is set meanwhile."""
+    InterruptedError when `cancel` is set meanwhile. `progress` hears of every generation: on a model with a
+    sharp friction step the refinement's simulations take many Runge-Kutta steps a sample, and minutes."""
     check_model_fits(model, recording)
     start = _driven(model, recording)  # the refined model keeps the effects: the same start
     before = _compared(model, recording, start).gap_m
     driven, kin, noise_m = start.recording, start.kinematics, start.noise_m
-    refined, _ = refine_on_output_error(model, driven, kin, noise_m, cancel=cancel)
+
+    def generation(p: DEProgress) -> None:  # a report, never a request to stop
+        if progress is not None:
+            progress(f"refining the curve on the simulation gap: generation {p.generation}/{p.generations}")
+
+    refined, _ = refine_on_output_error(model, driven, kin, noise_m, callback=generation, cancel=cancel)
     if cancel is not None and cancel.is_set():  # the DE stopped early: not a refined model
         raise InterruptedError("refinement cancelled")
     after = _compared(refined, recording, start).gap_m

@@ -146,8 +146,7 @@ class _Doctor:
                 c: log_p_value(s) for c, s in zip(candidates, scores, strict=True) if s.verdict == "tested"
             }
             bound = (selection := Selection(options.alpha)).bound(len(log_p))
-            # step 4: calibration can only raise a p-value (its scales are at least 1): only the candidates
-            # significant uncalibrated need the bootstrap
+            # step 4: calibration only raises p-values (scales ≥ 1): the bootstrap for the significant only
             significant = [c for c in log_p if log_p[c] <= math.log(bound)]
             if significant:
                 self.report(step, "calibrating the significant candidates by a bootstrap of the model")
@@ -202,8 +201,7 @@ class _Doctor:
             left_out = f"; left out {', '.join(s.effect for s in steps[best:])}: the gap rose with them"
             steps, (current, simulated) = steps[:best], path[best]
         self.report(len(steps), "testing the final model against its own noise")
-        # step 5: the final structure re-identified on synthetic recordings of its plausible truth (started
-        # from the final model: each is its response plus noise)
+        # step 5: the structure re-identified (from the final model) on its plausible truth's response + noise
         final, synthetic = current, self.synthetic(current, simulated)
         refits = self.map(lambda s: self.refit(final, s), synthetic)
         objectives, gaps = [o for o, _ in refits], [g for _, g in refits]
@@ -377,12 +375,15 @@ def diagnose(
     points = options.points or DEFAULT_POINTS[vehicle.model.value]
     reference = Reference.of(recording, vehicle, FitSettings(points, options.nsample), identified)
     result = _Doctor(reference, options, progress, cancel).diagnose()
-    result.refit = refined(result, recording, cancel)
+    result.refit = refined(result, recording, cancel, progress)
     return result
 
 
 def refined(
-    result: DiagnosisResult, recording: Recording, cancel: threading.Event | None = None
+    result: DiagnosisResult,
+    recording: Recording,
+    cancel: threading.Event | None = None,
+    progress: Callable[[DiagnoseProgress], object] | None = None,
 ) -> tuple[IdentifiedModel, float] | None:
     """Step 5's model for prediction: an unexplained final model refined on the free-simulation gap (None
     when explained, or when the final model has a rate fitted below zero, which no model file holds)."""
@@ -392,4 +393,5 @@ def refined(
         start = model_from_json(model_json(result.final_model))
     except ModelFormatError:
         return None
-    return refined_on(start, recording, cancel)
+    step = len(result.steps)
+    return refined_on(start, recording, cancel, progress and (lambda s: progress(DiagnoseProgress(step, s))))

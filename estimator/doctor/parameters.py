@@ -106,15 +106,12 @@ def implausible(effect: EffectInstance, model: FittedModel) -> str | None:
     name = effect.name
     if name is EffectName.LOW_SPEED_FRICTION:
         sliding, excess = (model.value(n) for n in FRICTION_UNKNOWNS)
-        if sliding < 0.0 or sliding + excess < 0.0:
-            static = sliding + excess
+        static = sliding + excess
+        if sliding < 0.0 or static < 0.0:
             return f"the friction would feed energy in (sliding {sliding:.0f} N, static {static:.0f} N)"
         if excess < 0.0 and _below_zero(model, [({FRICTION_UNKNOWNS[1]: 1.0}, 0.0)]):
-            # Stribeck's law falls from the breakaway level to the sliding one; a law that rises is viscous
-            return (
-                f"the force would rise with velocity (static {sliding + excess:.0f} N below sliding "
-                f"{sliding:.0f} N): a damper's, not friction"
-            )
+            # Stribeck's law falls from the breakaway level to the sliding one; a law that rises is a damper's
+            return f"the force would rise with velocity (static {static:.0f} N < sliding {sliding:.0f} N)"
     elif name is EffectName.GUIDE_FRICTION:
         if _below_zero(model, [({n: 1.0}, 0.0) for n in GUIDE_FRICTION_NAMES]):
             return "a guide's friction would feed energy in"

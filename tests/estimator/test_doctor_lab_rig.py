@@ -15,6 +15,7 @@ then named one after the other, and the outcome asked of both rigs is the same.
 from __future__ import annotations
 
 import json
+import re
 from dataclasses import replace
 from functools import cache
 
@@ -23,7 +24,7 @@ from lab_rig_runs import lab_rig_runs
 
 from estimator.doctor import DiagnoseOptions, DiagnosisResult, diagnose
 from estimator.doctor.catalog import TYRE_RATE_UNKNOWN
-from estimator.doctor.diagnose import refined
+from estimator.doctor.diagnose import DiagnoseProgress, refined
 from estimator.doctor.result import model_json
 from estimator.model_io import ModelFormatError, model_from_json
 from estimator.validation import validate
@@ -106,6 +107,20 @@ def test_a_final_model_with_a_rate_below_zero_is_handed_out_unrefined() -> None:
         model_from_json(model_json(broken.final_model))
     assert refined(broken, a) is None
     assert refined(result, a) is not None  # the same diagnosis with its fitted rate is refined
+
+
+def test_the_refinement_reports_each_generation() -> None:
+    """The model handed out is refined by a DE whose simulations can take minutes (a sharp friction step
+    needs many Runge-Kutta steps a sample): its generations reach the user as progress, at the last step's
+    number, and the model refined is the same as without a listener."""
+    a, _, _ = lab_rig_runs(INTERACTING_RIG)
+    result = diagnosed(INTERACTING_RIG)
+    heard: list[DiagnoseProgress] = []
+    with_progress = refined(result, a, progress=heard.append)
+    generations = [int(re.search(r"generation (\d+)/(\d+)", p.stage)[1]) for p in heard]
+    assert generations == list(range(1, len(heard) + 1)) and len(heard) > 1
+    assert {p.step for p in heard} == {len(result.steps)}
+    assert with_progress is not None and with_progress[1] == refined(result, a)[1]
 
 
 def test_a_rig_s_frame_guides_are_named_and_the_held_out_gap_falls() -> None:
