@@ -83,7 +83,7 @@ def report(effect: EffectInstance, model: FittedModel) -> dict[str, float | str]
     if name is EffectName.ANTI_ROLL_BAR:
         return {"anti_roll_bar_stiffness_N_per_m": model.value("anti_roll_bar_N_per_m")}
     if name is EffectName.GUIDE_FRICTION:
-        return {name: model.value(name) for name in GUIDE_FRICTION_NAMES}  # the model file's keys
+        return {key: model.value(key) for key in GUIDE_FRICTION_NAMES}  # the model file's keys
     channel = str(effect.channel)
     if name is EffectName.SENSOR_DYNAMICS:
         kind = str(effect.variant)
