@@ -120,7 +120,7 @@ def refined_on(
     model: IdentifiedModel,
     recording: Recording,
     cancel: threading.Event | None = None,
-    progress: Callable[[str], object] | None = None,
+    progress: Callable[[DEProgress], object] | None = None,
 ) -> tuple[IdentifiedModel, float] | None:
     """The model with its damper curve(s) and tyre damping refined on its free-simulation gap on
     `recording` (estimator.output_error.refine_on_output_error: a short DE within ±15% of each value, the
@@ -138,7 +138,7 @@ def refined_on(
 
     def generation(p: DEProgress) -> None:  # a report, never a request to stop
         if progress is not None:
-            progress(f"refining the curve on the simulation gap: generation {p.generation}/{p.generations}")
+            progress(p)
 
     refined, _ = refine_on_output_error(model, driven, kin, noise_m, callback=generation, cancel=cancel)
     if cancel is not None and cancel.is_set():  # the DE stopped early: not a refined model

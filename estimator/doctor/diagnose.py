@@ -62,6 +62,7 @@ from estimator.model_io import ModelFormatError, model_from_json
 from estimator.output_error import IdentifiedModel
 from estimator.recording import Recording
 from estimator.signals import sweep_frequency_Hz
+from estimator.solvers.differential_evolution import DEProgress
 from estimator.validation import refined_on
 from estimator.vehicle import TyreModel, VehicleConstant, VehicleParameters
 
@@ -91,6 +92,7 @@ class DiagnoseOptions:
 class DiagnoseProgress:
     step: int
     stage: str
+    generation: DEProgress | None = None  # within the stage, a DE's (the final model's refinement)
 
 
 @dataclass
@@ -194,8 +196,7 @@ class _Doctor:
             )
             current, simulated = model, outcome
             path.append((model, outcome))
-        # each step is named on its one-step model's evidence; where full fits together end above a model
-        # on the path, the doctor stands by the one that simulates the recording best (the first of equals)
+        # steps are named on one-step evidence; the path's model that simulates best is kept (first of equals)
         best, left_out = int(np.argmin([s.gap_m for _, s in path])), ""
         if best < len(steps):
             left_out = f"; left out {', '.join(s.effect for s in steps[best:])}: the gap rose with them"
@@ -393,5 +394,5 @@ def refined(
         start = model_from_json(model_json(result.final_model))
     except ModelFormatError:
         return None
-    step = len(result.steps)
-    return refined_on(start, recording, cancel, progress and (lambda s: progress(DiagnoseProgress(step, s))))
+    at = DiagnoseProgress(len(result.steps), "refining the curve on its free-simulation gap")  # the stage
+    return refined_on(start, recording, cancel, progress and (lambda p: progress(replace(at, generation=p))))

@@ -5,16 +5,13 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
-import re
 import sys
-import time
-from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 from estimator.vehicle import TyreModel
 from service.cli.errors import CliError
+from service.cli.progress import de_progress_line
 from service.cli.recording_input import RECORDING_HELP, VEHICLE_HELP, read_recording_and_vehicle
 from service.doctor_words import fit_verdict, micrometres, shape
 
@@ -55,26 +52,14 @@ def summary(result: DiagnosisResult) -> str:
     return "\n".join(lines)
 
 
-REPEAT_EVERY_S = 5.0
-"""A stage that repeats with new counts (the refinement's generations) is shown at most this often."""
-
-
-@dataclass
-class _ProgressLines:
-    """The diagnosis's stages on stderr, one line each; a stage whose words repeat with new numbers (a DE's
-    generations: 40 a refinement, seconds on most recordings, minutes on a sharp friction step) once every
-    REPEAT_EVERY_S, so a slow stage shows that it moves without a screenful on a quick one."""
-
-    words: str = ""
-    shown_at_s: float = -math.inf
-
-    def __call__(self, p: DiagnoseProgress) -> None:
-        words, now_s = re.sub(r"\d+", "#", p.stage), time.monotonic()
-        if words == self.words and now_s - self.shown_at_s < REPEAT_EVERY_S:
-            return
-        self.words, self.shown_at_s = words, now_s
-        sys.stderr.write(f"diagnose: step {p.step}: {p.stage}\n")
-        sys.stderr.flush()
+def _progress(p: DiagnoseProgress) -> None:
+    """Each stage on a line of its own; a DE's generations within a stage (the refinement that ends a
+    diagnosis: seconds on most recordings, minutes on a sharp friction step) on one line, redrawn."""
+    if p.generation is not None:
+        de_progress_line(f"diagnose: step {p.step}: {p.stage}", p.generation)
+        return
+    sys.stderr.write(f"diagnose: step {p.step}: {p.stage}\n")
+    sys.stderr.flush()
 
 
 def run_diagnose(args: argparse.Namespace) -> int:
@@ -89,7 +74,7 @@ def run_diagnose(args: argparse.Namespace) -> int:
     check_curve_points(args.points, "--points")  # identify's limits, as the diagnose job's options
     options = DiagnoseOptions(tyre=TyreModel(args.tyre), points=args.points)
     # the job's submit check first (bad input: one line, exit 2)
-    result = diagnose_recording(recording, vehicle, options, progress=None if args.json else _ProgressLines())
+    result = diagnose_recording(recording, vehicle, options, progress=None if args.json else _progress)
     if report is not None:
         from service.doctor_report import write_report  # matplotlib: only for a report (0.3-1 s to import)
 

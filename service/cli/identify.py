@@ -6,6 +6,7 @@ import argparse
 import csv
 import json
 import sys
+from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -13,6 +14,7 @@ from estimator.solvers.de_settings import DESettings
 from estimator.vehicle import TyreModel, VehicleConstant, VehicleParameters
 from service.cli.declared import add_options, options, values
 from service.cli.errors import CliError
+from service.cli.progress import de_progress_line
 from service.cli.recording_input import RECORDING_HELP, VEHICLE_HELP, read_recording_and_vehicle
 
 SOLVERS = ("exact", "de")
@@ -26,28 +28,6 @@ if TYPE_CHECKING:
     import numpy as np
 
     from estimator.identify import IdentificationResult, IdentifyOptions
-    from estimator.solvers.differential_evolution import DEProgress
-
-
-class _ProgressLine:
-    """DE progress on one terminal line (stderr), at most ~50 updates per run."""
-
-    def __init__(self) -> None:
-        self.last = -1
-
-    def __call__(self, p: DEProgress) -> None:
-        step = max(1, p.generations // 50)
-        if p.generation % step and p.generation != p.generations:
-            return
-        width = 30
-        done = int(width * p.generation / p.generations)
-        sys.stderr.write(
-            f"\rDE [{'#' * done}{'.' * (width - done)}] generation {p.generation}/{p.generations}"
-            f"  best objective {p.best_objective:.6g}"
-        )
-        if p.generation == p.generations:
-            sys.stderr.write("\n")
-        sys.stderr.flush()
 
 
 def summary(result: IdentificationResult) -> str:
@@ -203,7 +183,7 @@ def run_identify(args: argparse.Namespace) -> int:
 
     recording, vehicle = read_recording_and_vehicle("identify", args.recording, args.vehicle)
     options = options_from_args(args, vehicle)
-    progress = _ProgressLine() if options.solver is Solver.DE and not args.json else None
+    progress = partial(de_progress_line, "DE") if options.solver is Solver.DE and not args.json else None
     result = identify_recording(recording, vehicle, options, progress=progress)  # the service's checks first
     for warning in result.warnings:
         print(f"shockbench identify: warning: {warning}", file=sys.stderr)

@@ -1,5 +1,6 @@
-"""A text progress bar for long CLI runs (sweeps): one line redrawn in place on a terminal; on a pipe or a
-log file, a plain line at each phase change and every tenth of the run, so logs stay readable."""
+"""Text progress for long CLI runs. Sweeps: one line redrawn in place on a terminal; on a pipe or a log
+file, a plain line at each phase change and every tenth of the run, so logs stay readable. A DE's
+generations (identify's DE, the refinement that ends a diagnosis): one line redrawn at most ~50 times."""
 
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ from typing import TYPE_CHECKING, TextIO
 
 if TYPE_CHECKING:
     from daq.sweep.model import SweepProgress
+    from estimator.solvers.differential_evolution import DEProgress
 
 
 BAR_WIDTH = 30
@@ -49,3 +51,19 @@ class SweepProgressBar:
             self.stream.write("\n")
             self.stream.flush()
             self._drawn = False
+
+
+def de_progress_line(label: str, p: DEProgress) -> None:
+    """A DE's progress after generation p on one stderr line after `label`, redrawn at most ~50 times a run
+    and ended with its last generation."""
+    step = max(1, p.generations // 50)
+    if p.generation % step and p.generation != p.generations:
+        return
+    done = int(BAR_WIDTH * p.generation / p.generations)
+    sys.stderr.write(
+        f"\r{label} [{'#' * done}{'.' * (BAR_WIDTH - done)}] generation {p.generation}/{p.generations}"
+        f"  best objective {p.best_objective:.6g}"
+    )
+    if p.generation == p.generations:
+        sys.stderr.write("\n")
+    sys.stderr.flush()

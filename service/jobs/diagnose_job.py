@@ -52,7 +52,12 @@ def run(job: JobContext) -> JobOutcome:
     options = job.options_as(DiagnoseJobOptions)
 
     def progress(p: DiagnoseProgress) -> None:
-        job.progress.stage(f"step {p.step}: {p.stage}")
+        """Each stage as it comes; a DE's generations within one (the final refinement's) after it, through
+        the reporter that throttles them and estimates the time left."""
+        if p.generation is None or p.generation.generation == 1:
+            job.progress.stage(f"step {p.step}: {p.stage}")
+        if p.generation is not None:
+            job.progress.generation(p.generation)
 
     result = diagnose(
         job.recording,

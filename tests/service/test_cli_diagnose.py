@@ -95,26 +95,21 @@ def test_bad_input_is_one_line_and_exit_code_2(
     assert len(lines) == 1 and message in lines[0] and lines[0].startswith("shockbench diagnose: error:")
 
 
-def test_a_repeating_stage_is_shown_once_every_few_seconds(
-    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
-) -> None:
-    """The refinement's 40 generations: on a quick recording its first only, on a slow one one line every
-    REPEAT_EVERY_S (the clock is the test's: simulated time); a new stage is always shown."""
+def test_a_stage_s_de_generations_are_one_line_redrawn(capsys: pytest.CaptureFixture[str]) -> None:
+    """The refinement's 40 generations: one line redrawn (as identify's DE), ended with the last; a stage
+    without generations keeps a line of its own."""
     from estimator.doctor.diagnose import DiagnoseProgress
-    from service.cli import diagnose as cli_diagnose
+    from estimator.solvers.differential_evolution import DEProgress
+    from service.cli.diagnose import _progress
 
-    repeat_s = cli_diagnose.REPEAT_EVERY_S
-    clock = iter([0.0, 0.1, 0.2, 0.3, 0.3 + repeat_s, 0.4 + repeat_s])
-    monkeypatch.setattr(cli_diagnose.time, "monotonic", lambda: next(clock))
-    lines = cli_diagnose._ProgressLines()
-    lines(DiagnoseProgress(1, "testing the final model against its own noise"))
-    for generation in range(1, 5):
-        lines(DiagnoseProgress(1, f"refining the curve on the simulation gap: generation {generation}/40"))
-    lines(DiagnoseProgress(2, "writing"))
-    shown = capsys.readouterr().err.splitlines()
-    assert shown == [
-        "diagnose: step 1: testing the final model against its own noise",
-        "diagnose: step 1: refining the curve on the simulation gap: generation 1/40",
-        "diagnose: step 1: refining the curve on the simulation gap: generation 4/40",
-        "diagnose: step 2: writing",
-    ]
+    _progress(DiagnoseProgress(1, "testing the final model against its own noise"))
+    for generation in range(1, 41):
+        best = 1e-3 / generation
+        _progress(DiagnoseProgress(1, "refining", DEProgress(generation, 40, best, 24 * generation)))
+    _progress(DiagnoseProgress(2, "writing"))
+    lines = capsys.readouterr().err.split("\n")
+    assert lines[0] == "diagnose: step 1: testing the final model against its own noise"
+    redrawn = lines[1].split("\r")[1:]
+    assert len(redrawn) == 40 and all(r.startswith("diagnose: step 1: refining [") for r in redrawn)
+    assert redrawn[-1].endswith("generation 40/40  best objective 2.5e-05")
+    assert lines[2:] == ["diagnose: step 2: writing", ""]
