@@ -162,6 +162,7 @@ def run_rig(seed: int, folder: str, run_s: float) -> Outcome:
     doctor: dict[str, object] = {
         "named": (),
         "rates_named": {},
+        "rates_at_step": {},
         "unexplained": False,
         "conclusion": "",
         "located": "",
@@ -177,15 +178,21 @@ def run_rig(seed: int, folder: str, run_s: float) -> Outcome:
         doctor_model = model = model_from_json(data)
         in_sample, held_out = validate(model, run_a), validate(model, run_b)
         response = in_sample.response_rms_m
-        rates = {
+        at_step = {
             effect: float(step.parameters[RATE_EFFECTS[effect][1]])
             for step in result.steps
             for effect in labels_in(step.effect)  # the load path's families named together: each
             if effect in RATE_EFFECTS
         }
+        rates = {  # the corrections the model handed out (and validated on B) holds
+            effect: float(values[RATE_EFFECTS[effect][1]])
+            for effect, values in result.final_parameters.items()
+            if effect in RATE_EFFECTS
+        }
         doctor = {
             "named": tuple(result.effects_named),
             "rates_named": rates,
+            "rates_at_step": at_step,
             "unexplained": bool(result.unexplained),
             "conclusion": result.conclusion,
             "located": _where(result.located_after),

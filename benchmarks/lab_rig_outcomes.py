@@ -5,14 +5,14 @@ from __future__ import annotations
 
 import math
 import statistics
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 RATE_EFFECTS = {
     "spring_curve": ("spring_stiffness", "rate_at_static_load_N_per_m"),
     "tyre_stiffness": ("tyre_stiffness", "tyre_stiffness_N_per_m"),
 }
 """The doctor's families that correct a stated rate (estimator.doctor.catalog): family -> the rate's name
-here and the key of the rate it fitted in the step's parameters (estimator.doctor.parameters.report)."""
+here and the key of the rate it fitted in its parameters (estimator.doctor.parameters.report)."""
 LIMIT_PERCENT = 40.0
 
 
@@ -24,7 +24,8 @@ class Outcome:
     true_tyre_N_per_m: float
     named: tuple[str, ...]
     rates_named: dict[str, float]
-    """effect -> the rate the doctor corrected to (N/m)."""
+    """effect -> the rate the doctor corrected to (N/m), as its final model has it (DiagnosisResult's
+    final_parameters: the model validated on run B; results files before 2026-11-30 hold the step's)."""
     unexplained: bool
     conclusion: str
     located: str
@@ -51,6 +52,8 @@ class Outcome:
     """The doctor's final model's damper curve against the rig's own damper ((d) of the module docstring)."""
     mass_only_curve_percent: float | None = None
     mass_only_refined_curve_percent: float | None = None
+    rates_at_step: dict[str, float] = field(default_factory=dict)
+    """effect -> the rate as named at its step (results files before 2026-11-30: not recorded)."""
 
     @property
     def both_named(self) -> bool:
@@ -61,12 +64,20 @@ class Outcome:
     def rates_right(self) -> bool:
         """Both rates named, each corrected toward the truth: closer to it than the rate stated (a rig of a
         results file without the stated rates: named)."""
+        return self._closer(self.rates_named)
+
+    @property
+    def rates_right_at_step(self) -> bool | None:
+        """rates_right with the rates as named at their steps (None: not recorded)."""
+        return self._closer(self.rates_at_step) if self.rates_at_step or not self.both_named else None
+
+    def _closer(self, rates: dict[str, float]) -> bool:
         if not self.both_named or self.stated_spring_N_per_m is None or self.stated_tyre_N_per_m is None:
             return self.both_named
         truth = {"spring_stiffness": self.true_spring_N_per_m, "tyre_stiffness": self.true_tyre_N_per_m}
         stated = {"spring_stiffness": self.stated_spring_N_per_m, "tyre_stiffness": self.stated_tyre_N_per_m}
         return all(
-            abs(self.rates_named[family] - truth[rate]) < abs(stated[rate] - truth[rate])
+            abs(rates[family] - truth[rate]) < abs(stated[rate] - truth[rate])
             for family, (rate, _) in RATE_EFFECTS.items()
         )
 
@@ -173,7 +184,10 @@ def print_report(outcomes: list[Outcome]) -> None:
     limit = f"{LIMIT_PERCENT:.0f}%"
     counts = {
         "both rate families named": sum(o.both_named for o in outcomes),
-        "both rates named closer to the truth than stated": sum(o.rates_right for o in outcomes),
+        "both rates named closer to the truth than stated (in the final model)": sum(
+            o.rates_right for o in outcomes
+        ),
+        "(as named at their steps)": sum(bool(o.rates_right_at_step) for o in outcomes),
         "unexplained": sum(o.unexplained for o in outcomes),
         f"doctor held-out ≤ {limit}": held_within,
         f"doctor meets item 5 (rates named, held-out ≤ {limit}, unexplained)": sum(

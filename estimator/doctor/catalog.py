@@ -1,10 +1,8 @@
 """The catalogue of effect families, each a named extension of the model with a bounded number of unknowns
-(the names are what `shockbench diagnose --json` prints). Force families add unknowns that enter the
-equations of motion linearly (a column each), so the exact solver fits them with the damper curve; channel
-families correct a sensor channel before the equations are built, by Gauss-Newton (estimator.doctor.fitting).
-
-A force family's column is its force filtered by the equations' own low-pass (estimator.equations: per
-selected sample, residual forces in N), so that the equations still hold exactly."""
+(the names `shockbench diagnose --json` prints). A force family's unknowns enter the equations of motion
+linearly, a column each (its force filtered by the equations' own low-pass, estimator.equations, so that
+they still hold exactly), fitted by the exact solver with the damper curve; channel families correct a
+sensor channel before the equations are built, by Gauss-Newton (estimator.doctor.fitting)."""
 
 from __future__ import annotations
 
@@ -39,10 +37,9 @@ class EffectName(StrEnum):
 
 @dataclass(frozen=True, order=True)
 class EffectInstance:
-    """A family as added to a model; channel families name their channel, sensor_dynamics its variant
-    ("lag" or "average"), low_speed_friction its form with its fitted scale: the Stribeck velocity
-    ("5 mm/s") or, hysteretic, the presliding displacement ("presliding 0.1 mm"); before the fit only the
-    form (STRIBECK, HYSTERETIC)."""
+    """A family as added to a model: channel families name their channel, sensor_dynamics its variant ("lag",
+    "average"), low_speed_friction its form with its fitted scale, the Stribeck velocity ("5 mm/s") or the
+    presliding displacement ("presliding 0.1 mm"; before the fit the form only: STRIBECK, HYSTERETIC)."""
 
     name: EffectName
     channel: str | None = None

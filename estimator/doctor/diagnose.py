@@ -348,11 +348,8 @@ def gap_words(effects: str, before_m: float, after_m: float) -> str:
     """The conclusion's first half: what was named and how the gap moved (each effect was significant when
     named; together they may not help); a model without a finite gap diverges."""
     if not math.isfinite(after_m) and (not effects or not math.isfinite(before_m)):
-        return (
-            f"named {effects}: the model diverges before and after"
-            if effects
-            else "nothing named: the model diverges"
-        )
+        named = f"named {effects}" if effects else "nothing named"
+        return f"{named}: the model diverges" + (" before and after" if effects else "")
     before, after = (f"{m * 1e6:.1f} µm" if math.isfinite(m) else "diverged" for m in (before_m, after_m))
     if not effects:
         return f"nothing named: the gap is {after}"

@@ -5,18 +5,15 @@ noise like the measured one make synthetic recordings, on which the model's stru
 simulated again. Their gaps hold what a complete model still shows on this sweep (sensor noise, the curve's
 discretisation of a smooth damper, identification errors) and nothing a missing effect adds.
 
-The truth: the same structure identified at identify's finest resolution (truth_settings), its curve made
-smooth (a monotone cubic through the points, linear beyond them). At the doctor's own resolution the same
-knots would follow it almost exactly, and the bootstrap would miss what they miss of a real damper's knee,
-most of a complete model's gap. Its force rises with velocity (the points made non-decreasing first): a
-curve that falls somewhere stands in for something the structure lacks (a zig-zag for a compliant top
-mount), is not reproducible on its own response, and would excuse any gap. The hypothesis tested is "a
-vehicle of this structure with a damper identify can take", not "this fit, whatever its shape".
+The truth: the structure identified at identify's finest resolution (truth_settings), its curve a monotone
+cubic through the points (linear beyond): at the doctor's own resolution its knots would follow it almost
+exactly, missing what they miss of a real damper's knee. Its force rises with velocity: a curve that falls
+stands in for something the structure lacks (a zig-zag for a compliant top mount) and would excuse any gap.
+The hypothesis tested is "a vehicle of this structure with a damper identify can take", not "this fit".
 
-The noise, per channel: the law measured on the output residual (estimator.noise_law: AR(1), white and
-1/f parts and the readings' quantum), bounded by the measured reading's density (misfit and response are
-each independent of it), fitted above the equations' low-pass cutoff (identify's, estimator.signals: the
-band no fit sees, so its residual is not shrunk by the fit's unknowns), read at the measured resolution.
+The noise, per channel: the law of the output residual (estimator.noise_law: AR(1), white, 1/f, quantum),
+bounded by the measured reading's density, fitted above the equations' low-pass cutoff (the band no fit
+sees: its residual is not shrunk by the fit's unknowns), read at the measured resolution.
 """
 
 from __future__ import annotations

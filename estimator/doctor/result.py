@@ -8,6 +8,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from estimator.doctor.catalog import FRICTION_UNKNOWNS, GUIDE_FRICTION_NAMES, EffectName, labels_in
+from estimator.doctor.parameters import report
 from estimator.doctor.residuals import Localisation
 from estimator.model_io import with_curves_of
 from estimator.vehicle import TyreModel
@@ -128,6 +129,13 @@ class DiagnosisResult:
         return [name for s in self.steps for name in labels_in(s.effect)]
 
     @property
+    def final_parameters(self) -> dict[str, dict[str, float | str]]:
+        """Each family named as the final model has it, fitted beside the others (a step's: as named)."""
+        named, model = set(self.effects_named), self.final_model
+        effects = model.structure.effects if model else ()
+        return {e.label: report(e, model) for e in effects if e.label in named}  # type: ignore[arg-type]
+
+    @property
     def located_after(self) -> Localisation:
         return self.steps[-1].located_after if self.steps else self.located_before
 
@@ -142,6 +150,7 @@ class DiagnosisResult:
         return {
             "gap_before_m": _finite_or_none(self.gap_before_m),
             "steps": [s.to_json() for s in self.steps],
+            "final_parameters": self.final_parameters,
             "gap_after_m": _finite_or_none(self.gap_after_m),
             "unexplained": self.unexplained,
             "conclusion": self.conclusion,

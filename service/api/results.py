@@ -304,6 +304,11 @@ class DiagnoseResult(ResultPart):
 
     gap_before_m: MaybeNumber = Field(description="output-error gap of the starting model (m)")
     steps: list[DiagnosisStepOut] = Field(description="the effects added, in order")
+    final_parameters: dict[str, dict[str, ParameterValue]] = Field(
+        default_factory=dict,
+        description="each effect named, as the final model has it (fitted beside those named after it; a "
+        "step's parameters are those of the model it was named in)",
+    )
     gap_after_m: MaybeNumber = Field(description="output-error gap of the final model (m)")
     unexplained: bool = Field(
         description="the goodness-of-fit test rejects the final model: p_value < alpha (a false alarm in a "

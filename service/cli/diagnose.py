@@ -38,6 +38,9 @@ def summary(result: DiagnosisResult) -> str:
             f"  gap {micrometres(step.gap_before_m)} -> {micrometres(step.gap_after_m)}",
             f"  evidence: {step.evidence}",
         ]
+    if result.steps:  # a family named early is fitted again beside the later ones: its values may move
+        lines.append("\nthe final model, each family named fitted beside the others:")
+        lines += [f"  {name}: {shape(name, values)}" for name, values in result.final_parameters.items()]
     lines += [
         f"\ngap after: {micrometres(result.gap_after_m)}; the final model re-identified on synthetic "
         f"recordings of itself with this recording's noise reaches {micrometres(result.expected_gap_m)}",

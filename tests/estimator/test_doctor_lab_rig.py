@@ -71,6 +71,21 @@ def test_both_wrong_rates_are_named_and_what_remains_is_located(seed: int) -> No
 
 
 @pytest.mark.parametrize("seed", LAB_RIGS)
+def test_the_final_parameters_are_the_rates_the_model_handed_out_states(seed: int) -> None:
+    """A family named early is fitted again beside those named after it: `final_parameters` reports each
+    family named as the final model has it, so the rates there are the model file's (a step's parameters
+    are the model's it was named in)."""
+    result, rig = diagnosed(seed), draw_rig(seed).rig
+    out = json.loads(json.dumps(result.to_json()))
+    final, stiffness = out["final_parameters"], out["model"]["stiffness_N_per_m"]
+    assert list(final) == [e for e in result.final_effects if e in result.effects_named]
+    spring, tyre = final["spring_curve"]["rate_at_static_load_N_per_m"], final["tyre_stiffness"]
+    assert spring == pytest.approx(stiffness["spring"], rel=1e-12)
+    assert tyre["tyre_stiffness_N_per_m"] == pytest.approx(stiffness["tyre"], rel=1e-12)
+    assert spring == pytest.approx(rig.spring_N_per_m, rel=RATE_TOLERANCE)
+
+
+@pytest.mark.parametrize("seed", LAB_RIGS)
 def test_an_unexplained_model_is_handed_out_refined_on_the_free_simulation(seed: int) -> None:
     """The unrecorded force biases the equations' fit; the model the doctor hands out (`model`, what
     validate takes) has its curve refined on the free-simulation gap (estimator.validation.refined_on):

@@ -69,6 +69,8 @@ def test_readable_summary_and_progress(files: Path, cli, capsys: pytest.CaptureF
     assert code == 0, captured.err
     assert "step 1: sensor_offset(x_" in captured.out and "conclusion: named sensor_offset(x_" in captured.out
     assert "evidence:" in captured.out and "diagnose: step 0" in captured.err
+    final = "\nthe final model, each family named fitted beside the others:\n  sensor_offset(x_"
+    assert final in captured.out
     assert "goodness of fit: p = " in captured.out
     assert "nothing left that the noise does not explain" in captured.out
 
