@@ -228,6 +228,10 @@ def markdown(result: DiagnosisResult, title: str, images: dict[str, str]) -> str
         if rows
         else ["No effect named."]
     )
+    if rows:  # a family named early is fitted again beside the later ones: what the model handed out holds
+        final = [[name, shape(name, values)] for name, values in result.final_parameters.items()]
+        lines += ["", "In the final model, each effect fitted beside the others:", ""]
+        lines += _table(["effect", "fitted shape"], final)
     if "spring" in images:
         lines += ["", f"![spring curve]({images['spring']})"]
     lines += ["", "## Measured and simulated", "", f"![overlays]({images['overlay']})", ""]

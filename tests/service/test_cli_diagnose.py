@@ -54,6 +54,7 @@ def test_json_names_the_plate_offset_and_the_report_has_plots_and_tables(
     text = (report / "report.md").read_text()
     assert "| step | effect | fitted shape | gap before | gap after | p | evidence |" in text
     assert "sensor_offset" in text and "zero off by" in text
+    assert "In the final model, each effect fitted beside the others:\n\n| effect | fitted shape |" in text
     assert f"p = {out['p_value']:.2g}: nothing left that the noise does not explain" in text
     for image in ("gap_per_step.png", "measured_vs_simulated.png", "residual_spectra.png"):
         assert f"]({image})" in text
