@@ -4,6 +4,9 @@ PNG plots as artefacts)."""
 
 from __future__ import annotations
 
+from functools import partial
+from typing import TYPE_CHECKING
+
 from pydantic import BaseModel, Field
 
 from estimator.identify import IdentifyOptions
@@ -13,8 +16,12 @@ from service.jobs.bounds import check_physical_bounds, check_recording_fits
 from service.jobs.context import (
     JobContext,
     JobOutcome,
+    ProgressReporter,
     finite_json,
 )
+
+if TYPE_CHECKING:
+    from estimator.doctor.diagnose import DiagnoseProgress
 
 REPORT_FOLDER = "report"
 
@@ -46,24 +53,15 @@ def check_diagnose_inputs(options: BaseModel, recording: Recording, vehicle: Veh
 def run(job: JobContext) -> JobOutcome:
     """Runs in the worker process: diagnose, then write the report. Raises InterruptedError when
     cancelled."""
-    from estimator.doctor.diagnose import DiagnoseOptions, DiagnoseProgress, diagnose
+    from estimator.doctor.diagnose import DiagnoseOptions, diagnose
     from service.doctor_report import write_report  # matplotlib: loaded in the worker only
 
     options = job.options_as(DiagnoseJobOptions)
-
-    def progress(p: DiagnoseProgress) -> None:
-        """Each stage as it comes; a DE's generations within one (the final refinement's) after it, through
-        the reporter that throttles them and estimates the time left."""
-        if p.generation is None or p.generation.generation == 1:
-            job.progress.stage(f"step {p.step}: {p.stage}")
-        if p.generation is not None:
-            job.progress.generation(p.generation)
-
     result = diagnose(
         job.recording,
         job.vehicle,
         DiagnoseOptions(tyre=options.tyre, points=options.points, max_steps=options.max_steps),
-        progress=progress,
+        progress=partial(report_progress, job.progress),
         cancel=job.cancel,
     )
     if job.cancel.is_set():
@@ -73,3 +71,12 @@ def run(job: JobContext) -> JobOutcome:
     write_report(result, folder, title=f"job {job.job_id}")
     artefacts = {path.name: f"{REPORT_FOLDER}/{path.name}" for path in sorted(folder.iterdir())}
     return JobOutcome(finite_json(result.to_json()), artefacts)
+
+
+def report_progress(reporter: ProgressReporter, p: DiagnoseProgress) -> None:
+    """A diagnosis's progress as the job's: each stage as it comes; a DE's generations within one (the final
+    refinement's) after it, through the reporter that throttles them and estimates the time left."""
+    if p.generation is None or p.generation.generation == 1:
+        reporter.stage(f"step {p.step}: {p.stage}")
+    if p.generation is not None:
+        reporter.generation(p.generation)

@@ -98,3 +98,32 @@ def test_a_diagnosis_job_names_as_many_effects_as_the_command_line_by_default() 
     from service.jobs.diagnose_job import DiagnoseJobOptions
 
     assert DiagnoseJobOptions().max_steps == DiagnoseOptions().max_steps
+
+
+def test_the_final_refinement_s_generations_reach_the_job_as_one_stage_with_time_left() -> None:
+    """The doctor's last stage on an unexplained model (the refinement, minutes on a sharp friction step)
+    reaches the job's events as its stage, then its generations: throttled by the job's reporter, the first
+    and the last always sent, the time left from the generations done (a clock in steps of 1 s)."""
+    from estimator.doctor.diagnose import DiagnoseProgress
+    from estimator.solvers.differential_evolution import DEProgress
+    from service.jobs.context import ProgressReporter
+    from service.jobs.diagnose_job import report_progress
+
+    sent, now = [], iter(range(100))
+    reporter = ProgressReporter(sent.append, min_interval_s=2.5, clock=lambda: float(next(now)))
+    report_progress(reporter, DiagnoseProgress(2, "testing the final model against its own noise"))
+    stage = "refining the curve on its free-simulation gap"
+    for generation in range(1, 11):
+        report_progress(
+            reporter, DiagnoseProgress(2, stage, DEProgress(generation, 10, 1.0 / generation, 24))
+        )
+    report_progress(reporter, DiagnoseProgress(2, "writing"))
+    stages = [(p.stage, p.generation) for p in sent]
+    assert stages[:2] == [
+        ("step 2: testing the final model against its own noise", None),
+        (f"step 2: {stage}", None),
+    ]
+    heard = [p for p in sent if p.stage == f"step 2: {stage}" and p.generation is not None]
+    assert [p.generation for p in heard] == [1, 4, 7, 10]  # every 3 s of the clock's 1 s a call, and the last
+    assert heard[0].eta_s is None and heard[-1].eta_s == 0.0 and heard[1].eta_s == pytest.approx(6.0)
+    assert sent[-1].stage == "step 2: writing" and sent[-1].generation == 10  # how far the refinement went
